@@ -1,0 +1,116 @@
+# Build, install and test the LinuxCNC side of nurbs-motion.
+#
+#   make               realtime module nurbs_interp.so + userspace planner (needs linuxcnc-uspace-dev)
+#   make install       module into $(MODULE_DIR), planner into $(BINDIR)
+#   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
+#   make headers       cbindgen -> include/nurbs_rt.h   (committed)
+#   make bindings      bindgen  -> hal/src/bindings.rs (committed; a normal build needs no libclang)
+#   make check-generated   fail if the committed header or bindings are stale
+#   make tools         install the generator versions the committed files were made with
+#
+# The module is this workspace's nurbs-hal staticlib linked whole into a shared object. Only the
+# RTAPI entry points are exported (hal/module.ver) and -Bsymbolic binds our own references
+# inside the module, so two Rust modules loaded into the same rtapi_app never share globals.
+# hal_* resolve from hal_lib.so and rtapi_* from rtapi_app at dlopen time: never link
+# liblinuxcnchal into the module.
+
+CARGO       ?= cargo
+CC          ?= gcc
+BINDGEN     ?= bindgen
+CBINDGEN    ?= cbindgen
+TARGET_DIR  ?= $(or $(CARGO_TARGET_DIR),target)
+OUT         := $(TARGET_DIR)/release
+MODULE      := $(OUT)/nurbs_interp.so
+STATICLIB   := $(OUT)/libnurbs_hal.a
+BINS        := nurbs-planner nurbs-hal-record
+LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
+MODULE_DIR  ?= /usr/lib/linuxcnc/modules
+PREFIX      ?= /usr/local
+BINDIR      ?= $(PREFIX)/bin
+# Generators pinned to Debian bookworm's packages: their output is committed, so every machine
+# must produce the same bytes.
+BINDGEN_VERSION  := 0.60.1
+CBINDGEN_VERSION := 0.24.3
+
+# What Rust's std needs from the C side (rustc --print native-static-libs for a staticlib).
+NATIVE_LIBS := -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc
+
+BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc-comments \
+	--default-enum-style=consts \
+	--raw-line '\#![allow(non_camel_case_types, non_upper_case_globals, non_snake_case, dead_code)]' \
+	--allowlist-function 'hal_(init|ready|exit|malloc)' \
+	--allowlist-function 'hal_pin_(bit|float|u32|s32)_new' \
+	--allowlist-function 'hal_param_(bit|float|u32|s32)_new' \
+	--allowlist-function 'hal_export_funct' \
+	--allowlist-function 'hal_stream_.*' \
+	--allowlist-function 'rtapi_(print_msg|shmem_new|shmem_delete|shmem_getptr|get_clocks|get_time)' \
+	--allowlist-var 'HAL_NAME_LEN|HAL_STREAM_MAX_PINS|RTAPI_NAME_LEN'
+
+.PHONY: all module planner install uninstall test test-cargo test-hal headers bindings \
+	check-generated tools clean FORCE
+
+all: module planner
+
+# One cargo invocation builds the staticlib and the binaries with the same features.
+$(STATICLIB) planner: FORCE
+	$(CARGO) build --release -p nurbs-hal --features linuxcnc --lib --bins
+
+module: $(MODULE)
+
+$(MODULE): $(STATICLIB) hal/module.ver
+	$(CC) -shared -o $@ -Wl,--whole-archive $(STATICLIB) -Wl,--no-whole-archive \
+		-Wl,-Bsymbolic -Wl,--version-script=hal/module.ver -Wl,--gc-sections $(NATIVE_LIBS)
+
+install: all
+	install -d $(DESTDIR)$(MODULE_DIR) $(DESTDIR)$(BINDIR)
+	install -m 0644 $(MODULE) $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so
+	for b in $(BINS); do install -m 0755 $(OUT)/$$b $(DESTDIR)$(BINDIR)/$$b; done
+
+uninstall:
+	rm -f $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so
+	for b in $(BINS); do rm -f $(DESTDIR)$(BINDIR)/$$b; done
+
+test: test-cargo test-hal
+
+test-cargo:
+	$(CARGO) test --workspace
+
+# Needs root (or the RTAPI_UID setup in tests/hal/lib.sh) and an installed module.
+test-hal: install
+	bash tests/hal/run.sh
+
+headers: include/nurbs_rt.h
+
+include/nurbs_rt.h: FORCE
+	@$(CBINDGEN) --version | grep -q ' $(CBINDGEN_VERSION)$$' || \
+		{ echo "need cbindgen $(CBINDGEN_VERSION) (make tools)"; exit 1; }
+	$(CBINDGEN) --quiet --config hal/cbindgen.toml --crate nurbs-hal --output $@ hal
+
+bindings: hal/src/bindings.rs
+
+hal/src/bindings.rs: FORCE
+	@$(BINDGEN) --version | grep -q ' $(BINDGEN_VERSION)$$' || \
+		{ echo "need bindgen $(BINDGEN_VERSION) (make tools)"; exit 1; }
+	$(BINDGEN) hal/wrapper.h $(BINDGEN_FLAGS) -o $@ -- -I$(LINUXCNC_INCLUDE) -DRTAPI -DUSPACE
+
+check-generated:
+	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
+	cp include/nurbs_rt.h hal/src/bindings.rs "$$tmp"/ && \
+	$(MAKE) --no-print-directory headers bindings >/dev/null && \
+	stale=0 && \
+	{ cmp -s "$$tmp"/nurbs_rt.h include/nurbs_rt.h || { echo "include/nurbs_rt.h is stale: run make headers"; stale=1; }; } && \
+	{ cmp -s "$$tmp"/bindings.rs hal/src/bindings.rs || { echo "hal/src/bindings.rs is stale: run make bindings"; stale=1; }; } && \
+	if [ $$stale = 1 ]; then \
+		git --no-pager diff --no-index "$$tmp"/nurbs_rt.h include/nurbs_rt.h || true; \
+		git --no-pager diff --no-index "$$tmp"/bindings.rs hal/src/bindings.rs || true; \
+		cp "$$tmp"/nurbs_rt.h include/nurbs_rt.h; cp "$$tmp"/bindings.rs hal/src/bindings.rs; exit 1; \
+	fi; echo "generated files are up to date"
+
+tools:
+	apt-get install -y --no-install-recommends bindgen=$(BINDGEN_VERSION)-\* cbindgen=$(CBINDGEN_VERSION)-\* libclang-dev
+
+clean:
+	$(CARGO) clean -p nurbs-hal
+	rm -f $(MODULE)
+
+FORCE:

@@ -1,0 +1,18 @@
+//! Realtime core of the NURBS motion product.
+//!
+//! Plain data and pure functions that run on the servo thread: NURBS evaluation, the S-curve
+//! feed of one planned segment, and the per-period interpolation step that turns a feed into a
+//! curve parameter. The crate is `no_std` and does not link `alloc`, so nothing here can
+//! allocate; it knows nothing of HAL, files or the planner.
+#![cfg_attr(not(test), no_std)]
+
+pub mod interp;
+pub mod math;
+pub mod nurbs;
+pub mod records;
+pub mod scurve;
+
+pub use math::Vector;
+pub use nurbs::{CurveView, GeometryError, MAX_DEGREE, MAX_DERIV, MAX_DIM};
+pub use records::{RecordError, SegmentRecord};
+pub use scurve::{SCurve, SCurveState};

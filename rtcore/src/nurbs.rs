@@ -1,0 +1,368 @@
+//! Allocation-free evaluation of rational B-spline curves (NURBS) and their first three
+//! parameter derivatives.
+//!
+//! Everything here works on borrowed slices and fixed-size stack arrays sized by
+//! [`MAX_DEGREE`] and [`MAX_DIM`], so the same code runs in the planner and on the servo thread.
+//! Algorithms: Piegl & Tiller, *The NURBS Book*, A2.1 (span search), A2.3 (basis functions and
+//! their derivatives), A4.2 (derivatives of the rational curve by the quotient rule).
+
+use crate::math::{binomial, norm, Vector};
+
+/// Highest supported degree (order 8).
+pub const MAX_DEGREE: usize = 7;
+/// Highest supported number of coordinates per control point (two 3-D curves for 5-axis).
+pub const MAX_DIM: usize = 6;
+/// Highest derivative order evaluated (third derivatives give axial jerk).
+pub const MAX_DERIV: usize = 3;
+
+const MAX_ORDER: usize = MAX_DEGREE + 1;
+
+/// Why a set of knots, control points and weights is not a usable curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GeometryError {
+    /// Degree outside 1..=7.
+    DegreeOutOfRange { degree: usize },
+    /// Coordinates per point outside 2..=6.
+    DimensionOutOfRange { dim: usize },
+    /// Fewer control points than degree + 1.
+    TooFewControlPoints { count: usize, needed: usize },
+    /// The flat coordinate array is not `count * dim` long.
+    PointDataMismatch { values: usize, dim: usize },
+    /// One weight per control point is required.
+    WeightCountMismatch { weights: usize, points: usize },
+    /// A clamped knot vector has control points + degree + 1 entries.
+    KnotCountMismatch { expected: usize, found: usize },
+    /// A knot is NaN or infinite.
+    NonFiniteKnot { index: usize },
+    /// `knots[index] < knots[index - 1]`.
+    KnotsDecreasing { index: usize },
+    /// The first and last `degree + 1` knots must be equal (clamped curve).
+    NotClamped,
+    /// An interior knot repeated more than `degree` times would break the curve apart.
+    InteriorKnotMultiplicity { index: usize, multiplicity: usize },
+    /// The parameter domain has zero length.
+    EmptyDomain,
+    /// A control-point coordinate is NaN or infinite.
+    NonFiniteCoordinate { point: usize, axis: usize },
+    /// Weights must be finite and strictly positive.
+    NonPositiveWeight { index: usize, value: f64 },
+}
+
+impl core::fmt::Display for GeometryError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use GeometryError::*;
+        match *self {
+            DegreeOutOfRange { degree } => write!(f, "degree {degree} is outside 1..={MAX_DEGREE}"),
+            DimensionOutOfRange { dim } => {
+                write!(f, "{dim} coordinates per control point; 2..={MAX_DIM} are supported")
+            }
+            TooFewControlPoints { count, needed } => {
+                write!(f, "{count} control points; degree needs at least {needed}")
+            }
+            PointDataMismatch { values, dim } => {
+                write!(f, "{values} coordinate values are not a whole number of {dim}-D points")
+            }
+            WeightCountMismatch { weights, points } => {
+                write!(f, "{weights} weights for {points} control points")
+            }
+            KnotCountMismatch { expected, found } => write!(
+                f,
+                "knot vector has {found} entries; control points + degree + 1 = {expected}"
+            ),
+            NonFiniteKnot { index } => write!(f, "knot {index} is not a finite number"),
+            KnotsDecreasing { index } => {
+                write!(f, "knots are not non-decreasing: knot {index} is less than knot {}", index - 1)
+            }
+            NotClamped => write!(
+                f,
+                "knot vector is not clamped: the first and last degree + 1 knots must be equal"
+            ),
+            InteriorKnotMultiplicity { index, multiplicity } => write!(
+                f,
+                "interior knot {index} repeats {multiplicity} times, more than the degree (curve would be discontinuous)"
+            ),
+            EmptyDomain => write!(f, "the parameter domain has zero length"),
+            NonFiniteCoordinate { point, axis } => {
+                write!(f, "control point {point}, coordinate {axis} is not a finite number")
+            }
+            NonPositiveWeight { index, value } => {
+                write!(f, "weight {index} is {value}; weights must be finite and > 0")
+            }
+        }
+    }
+}
+
+/// A validated NURBS curve borrowed from flat arrays.
+///
+/// `points` holds the control points one after another (`dim` values each); `weights` one
+/// weight per point. Constructed only through [`CurveView::new`], so every evaluation may rely on
+/// a well-formed, clamped knot vector.
+#[derive(Clone, Copy, Debug)]
+pub struct CurveView<'a> {
+    degree: usize,
+    dim: usize,
+    knots: &'a [f64],
+    points: &'a [f64],
+    weights: &'a [f64],
+}
+
+/// Curve point and derivatives with respect to the parameter: `d[0] = C(u)`, `d[1] = C'(u)`, ...
+pub type Derivatives = [Vector; MAX_DERIV + 1];
+
+impl<'a> CurveView<'a> {
+    /// Validates the data (degree, dimension, clamped non-decreasing finite knots, finite
+    /// coordinates, positive weights) and returns a view that can be evaluated.
+    pub fn new(
+        degree: usize,
+        dim: usize,
+        knots: &'a [f64],
+        points: &'a [f64],
+        weights: &'a [f64],
+    ) -> Result<Self, GeometryError> {
+        if !(1..=MAX_DEGREE).contains(&degree) {
+            return Err(GeometryError::DegreeOutOfRange { degree });
+        }
+        if !(2..=MAX_DIM).contains(&dim) {
+            return Err(GeometryError::DimensionOutOfRange { dim });
+        }
+        if points.len() % dim != 0 {
+            return Err(GeometryError::PointDataMismatch { values: points.len(), dim });
+        }
+        let count = points.len() / dim;
+        if count < degree + 1 {
+            return Err(GeometryError::TooFewControlPoints { count, needed: degree + 1 });
+        }
+        if weights.len() != count {
+            return Err(GeometryError::WeightCountMismatch { weights: weights.len(), points: count });
+        }
+        if knots.len() != count + degree + 1 {
+            return Err(GeometryError::KnotCountMismatch {
+                expected: count + degree + 1,
+                found: knots.len(),
+            });
+        }
+        for (index, k) in knots.iter().enumerate() {
+            if !k.is_finite() {
+                return Err(GeometryError::NonFiniteKnot { index });
+            }
+            if index > 0 && *k < knots[index - 1] {
+                return Err(GeometryError::KnotsDecreasing { index });
+            }
+        }
+        let first = knots[0];
+        let last = knots[knots.len() - 1];
+        if knots[..=degree].iter().any(|k| *k != first)
+            || knots[knots.len() - degree - 1..].iter().any(|k| *k != last)
+        {
+            return Err(GeometryError::NotClamped);
+        }
+        if last <= first {
+            return Err(GeometryError::EmptyDomain);
+        }
+        // Interior knots: multiplicity above the degree disconnects the curve.
+        let mut index = degree + 1;
+        while index < count {
+            let mut multiplicity = 1;
+            while index + multiplicity < count && knots[index + multiplicity] == knots[index] {
+                multiplicity += 1;
+            }
+            if multiplicity > degree {
+                return Err(GeometryError::InteriorKnotMultiplicity { index, multiplicity });
+            }
+            index += multiplicity;
+        }
+        for (i, c) in points.iter().enumerate() {
+            if !c.is_finite() {
+                return Err(GeometryError::NonFiniteCoordinate { point: i / dim, axis: i % dim });
+            }
+        }
+        for (index, w) in weights.iter().enumerate() {
+            if !(w.is_finite() && *w > 0.0) {
+                return Err(GeometryError::NonPositiveWeight { index, value: *w });
+            }
+        }
+        Ok(Self { degree, dim, knots, points, weights })
+    }
+
+    pub fn degree(&self) -> usize {
+        self.degree
+    }
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+    pub fn knots(&self) -> &'a [f64] {
+        self.knots
+    }
+    pub fn points(&self) -> &'a [f64] {
+        self.points
+    }
+    pub fn weights(&self) -> &'a [f64] {
+        self.weights
+    }
+    pub fn control_point_count(&self) -> usize {
+        self.weights.len()
+    }
+    /// First parameter value of the curve.
+    pub fn u_min(&self) -> f64 {
+        self.knots[self.degree]
+    }
+    /// Last parameter value of the curve.
+    pub fn u_max(&self) -> f64 {
+        self.knots[self.weights.len()]
+    }
+
+    /// Knot span index `i` with `knots[i] <= u < knots[i+1]` (A2.1); `u` is clamped to the domain
+    /// and the last non-empty span is used at `u_max`.
+    pub fn find_span(&self, u: f64) -> usize {
+        let n = self.weights.len() - 1;
+        if u >= self.knots[n + 1] {
+            // Last non-empty span: step back over the clamped end knots.
+            let mut i = n;
+            while i > self.degree && self.knots[i] >= self.knots[n + 1] {
+                i -= 1;
+            }
+            return i;
+        }
+        if u <= self.knots[self.degree] {
+            let mut i = self.degree;
+            while i < n && self.knots[i + 1] <= self.knots[self.degree] {
+                i += 1;
+            }
+            return i;
+        }
+        let (mut low, mut high) = (self.degree, n + 1);
+        let mut mid = (low + high) / 2;
+        while u < self.knots[mid] || u >= self.knots[mid + 1] {
+            if u < self.knots[mid] {
+                high = mid;
+            } else {
+                low = mid;
+            }
+            mid = (low + high) / 2;
+        }
+        mid
+    }
+
+    /// Non-zero basis functions and their derivatives up to `order` at `u` in `span` (A2.3).
+    /// `ders[k][j]` is the k-th derivative of N_{span-degree+j, degree}.
+    fn basis_derivatives(
+        &self,
+        span: usize,
+        u: f64,
+        order: usize,
+    ) -> [[f64; MAX_ORDER]; MAX_DERIV + 1] {
+        let p = self.degree;
+        let knots = self.knots;
+        let mut ndu = [[0.0f64; MAX_ORDER]; MAX_ORDER];
+        let mut left = [0.0f64; MAX_ORDER];
+        let mut right = [0.0f64; MAX_ORDER];
+        ndu[0][0] = 1.0;
+        for j in 1..=p {
+            left[j] = u - knots[span + 1 - j];
+            right[j] = knots[span + j] - u;
+            let mut saved = 0.0;
+            for r in 0..j {
+                // Lower triangle: knot differences; upper triangle: basis functions.
+                ndu[j][r] = right[r + 1] + left[j - r];
+                let temp = ndu[r][j - 1] / ndu[j][r];
+                ndu[r][j] = saved + right[r + 1] * temp;
+                saved = left[j - r] * temp;
+            }
+            ndu[j][j] = saved;
+        }
+        let mut ders = [[0.0f64; MAX_ORDER]; MAX_DERIV + 1];
+        for j in 0..=p {
+            ders[0][j] = ndu[j][p];
+        }
+        let order = order.min(p).min(MAX_DERIV);
+        let mut a = [[0.0f64; MAX_ORDER]; 2];
+        for r in 0..=p {
+            let (mut s1, mut s2) = (0usize, 1usize);
+            a[0][0] = 1.0;
+            for k in 1..=order {
+                let mut d = 0.0;
+                let rk = r as isize - k as isize;
+                let pk = p - k;
+                if r >= k {
+                    a[s2][0] = a[s1][0] / ndu[pk + 1][rk as usize];
+                    d = a[s2][0] * ndu[rk as usize][pk];
+                }
+                let j1 = if rk >= -1 { 1 } else { (-rk) as usize };
+                let j2 = if r as isize - 1 <= pk as isize { k - 1 } else { p - r };
+                for j in j1..=j2 {
+                    let idx = (rk + j as isize) as usize;
+                    a[s2][j] = (a[s1][j] - a[s1][j - 1]) / ndu[pk + 1][idx];
+                    d += a[s2][j] * ndu[idx][pk];
+                }
+                if r <= pk {
+                    a[s2][k] = -a[s1][k - 1] / ndu[pk + 1][r];
+                    d += a[s2][k] * ndu[r][pk];
+                }
+                ders[k][r] = d;
+                core::mem::swap(&mut s1, &mut s2);
+            }
+        }
+        // Multiply by p!/(p-k)!.
+        let mut factor = p as f64;
+        for (k, row) in ders.iter_mut().enumerate().take(order + 1).skip(1) {
+            for v in row.iter_mut().take(p + 1) {
+                *v *= factor;
+            }
+            factor *= (p - k) as f64;
+        }
+        ders
+    }
+
+    /// Point and derivatives up to `order` (≤ 3) at `u` (clamped to the domain); higher entries
+    /// are zero. Rational quotient rule of A4.2.
+    pub fn derivatives(&self, u: f64, order: usize) -> Derivatives {
+        let order = order.min(MAX_DERIV);
+        let u = u.clamp(self.u_min(), self.u_max());
+        let span = self.find_span(u);
+        let basis = self.basis_derivatives(span, u, order);
+        let p = self.degree;
+        let dim = self.dim;
+        // Homogeneous derivatives: A^(k) = sum N^(k) w P, w^(k) = sum N^(k) w.
+        let mut aw = [[0.0f64; MAX_DIM]; MAX_DERIV + 1];
+        let mut w = [0.0f64; MAX_DERIV + 1];
+        let kmax = order.min(p);
+        for j in 0..=p {
+            let i = span - p + j;
+            let wi = self.weights[i];
+            let point = &self.points[i * dim..i * dim + dim];
+            for k in 0..=kmax {
+                let nw = basis[k][j] * wi;
+                w[k] += nw;
+                for (acc, c) in aw[k].iter_mut().zip(point) {
+                    *acc += nw * c;
+                }
+            }
+        }
+        let mut out = [[0.0f64; MAX_DIM]; MAX_DERIV + 1];
+        for k in 0..=order {
+            let mut v = aw[k];
+            for i in 1..=k {
+                let factor = binomial(k, i) * w[i];
+                for (x, c) in v.iter_mut().zip(out[k - i].iter()) {
+                    *x -= factor * c;
+                }
+            }
+            for x in v.iter_mut().take(dim) {
+                *x /= w[0];
+            }
+            out[k] = v;
+        }
+        out
+    }
+
+    /// Curve point at `u`.
+    pub fn point(&self, u: f64) -> Vector {
+        self.derivatives(u, 0)[0]
+    }
+
+    /// Parametric speed |C'(u)| of the first `axes` coordinates (the tool-tip curve of a
+    /// two-curve 5-axis path uses 3 of 6).
+    pub fn speed(&self, u: f64, axes: usize) -> f64 {
+        norm(&self.derivatives(u, 1)[1], axes)
+    }
+}

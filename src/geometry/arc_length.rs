@@ -1,0 +1,165 @@
+//! Arc length of the tool-tip path: Gauss-Legendre quadrature per knot span (adaptively
+//! subdivided until converged), the paper's adaptive Simpson rule, and the inverse map from arc
+//! length to curve parameter.
+
+use super::Nurbs;
+
+/// 16-point Gauss-Legendre nodes and weights on [-1, 1] (positive half; symmetric).
+const GL_X: [f64; 8] = [
+    0.095_012_509_837_637_44,
+    0.281_603_550_779_258_9,
+    0.458_016_777_657_227_4,
+    0.617_876_244_402_643_7,
+    0.755_404_408_355_003,
+    0.865_631_202_387_831_8,
+    0.944_575_023_073_232_6,
+    0.989_400_934_991_649_9,
+];
+const GL_W: [f64; 8] = [
+    0.189_450_610_455_068_5,
+    0.182_603_415_044_923_6,
+    0.169_156_519_395_002_5,
+    0.149_595_988_816_576_7,
+    0.124_628_971_255_533_9,
+    0.095_158_511_682_492_78,
+    0.062_253_523_938_647_89,
+    0.027_152_459_411_754_095,
+];
+
+fn gauss16(f: &dyn Fn(f64) -> f64, a: f64, b: f64) -> f64 {
+    let (c, h) = (0.5 * (a + b), 0.5 * (b - a));
+    let mut s = 0.0;
+    for i in 0..8 {
+        s += GL_W[i] * (f(c - h * GL_X[i]) + f(c + h * GL_X[i]));
+    }
+    s * h
+}
+
+/// Adaptive Gauss-Legendre: split until two halves agree with the whole to `tol`.
+fn gauss_adaptive(f: &dyn Fn(f64) -> f64, a: f64, b: f64, whole: f64, tol: f64, depth: u32) -> f64 {
+    let m = 0.5 * (a + b);
+    let (l, r) = (gauss16(f, a, m), gauss16(f, m, b));
+    if depth == 0 || (l + r - whole).abs() <= tol {
+        return l + r;
+    }
+    gauss_adaptive(f, a, m, l, tol * 0.5, depth - 1) + gauss_adaptive(f, m, b, r, tol * 0.5, depth - 1)
+}
+
+/// Adaptive Simpson quadrature of `f` on `[a, b]` to absolute tolerance `tol` (as in the paper).
+pub fn adaptive_simpson(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64) -> f64 {
+    fn rec(f: &dyn Fn(f64) -> f64, a: f64, b: f64, fa: f64, fm: f64, fb: f64, whole: f64, tol: f64, depth: u32) -> f64 {
+        let m = 0.5 * (a + b);
+        let (lm, rm) = (0.5 * (a + m), 0.5 * (m + b));
+        let (flm, frm) = (f(lm), f(rm));
+        let left = (m - a) / 6.0 * (fa + 4.0 * flm + fm);
+        let right = (b - m) / 6.0 * (fm + 4.0 * frm + fb);
+        let delta = left + right - whole;
+        // At least a few levels, so that a symmetric integrand cannot fool the first estimate.
+        if depth == 0 || (depth < 45 && delta.abs() <= 15.0 * tol) {
+            return left + right + delta / 15.0;
+        }
+        rec(f, a, m, fa, flm, fm, left, tol / 2.0, depth - 1) + rec(f, m, b, fm, frm, fb, right, tol / 2.0, depth - 1)
+    }
+    let (fa, fm, fb) = (f(a), f(0.5 * (a + b)), f(b));
+    let whole = (b - a) / 6.0 * (fa + 4.0 * fm + fb);
+    rec(f, a, b, fa, fm, fb, whole, tol, 50)
+}
+
+/// Arc length of `curve` between parameters `a < b` by adaptive Simpson, span by span.
+pub fn simpson_length(curve: &Nurbs, a: f64, b: f64, tol: f64) -> f64 {
+    let speed = |u: f64| curve.speed(u);
+    let mut cuts: Vec<f64> = vec![a];
+    cuts.extend(curve.breakpoints().into_iter().filter(|&k| k > a && k < b));
+    cuts.push(b);
+    let n = (cuts.len() - 1) as f64;
+    cuts.windows(2).map(|w| adaptive_simpson(&speed, w[0], w[1], tol / n)).sum()
+}
+
+/// Cumulative arc length of a curve on a fine parameter grid (per knot span), for the total
+/// length, the length between two parameters and the inverse map s -> u.
+#[derive(Clone, Debug)]
+pub struct ArcLengthTable {
+    /// Parameter grid (increasing).
+    u: Vec<f64>,
+    /// Arc length from the curve start at each grid value.
+    s: Vec<f64>,
+}
+
+/// Sub-intervals per knot span in the table.
+const PIECES_PER_SPAN: usize = 8;
+
+impl ArcLengthTable {
+    pub fn new(curve: &Nurbs) -> Self {
+        let breaks = curve.breakpoints();
+        let mut u = vec![breaks[0]];
+        let mut s = vec![0.0];
+        let speed = |t: f64| curve.speed(t);
+        for w in breaks.windows(2) {
+            for i in 0..PIECES_PER_SPAN {
+                let a = w[0] + (w[1] - w[0]) * i as f64 / PIECES_PER_SPAN as f64;
+                let b = if i + 1 == PIECES_PER_SPAN {
+                    w[1]
+                } else {
+                    w[0] + (w[1] - w[0]) * (i + 1) as f64 / PIECES_PER_SPAN as f64
+                };
+                let whole = gauss16(&speed, a, b);
+                let piece = gauss_adaptive(&speed, a, b, whole, 1e-14 * (1.0 + whole), 12);
+                u.push(b);
+                s.push(s.last().unwrap() + piece);
+            }
+        }
+        ArcLengthTable { u, s }
+    }
+
+    pub fn total(&self) -> f64 {
+        *self.s.last().unwrap()
+    }
+
+    /// Arc length from the curve start to parameter `t`.
+    pub fn length_to(&self, curve: &Nurbs, t: f64) -> f64 {
+        let t = t.clamp(self.u[0], *self.u.last().unwrap());
+        let i = match self.u.partition_point(|&x| x <= t) {
+            0 => 0,
+            k => k - 1,
+        };
+        if i + 1 >= self.u.len() {
+            return self.total();
+        }
+        let speed = |x: f64| curve.speed(x);
+        let whole = gauss16(&speed, self.u[i], t);
+        self.s[i] + gauss_adaptive(&speed, self.u[i], t, whole, 1e-14 * (1.0 + whole), 12)
+    }
+
+    /// Parameter at arc length `target` (Newton's method safeguarded by bisection).
+    pub fn parameter_at(&self, curve: &Nurbs, target: f64) -> f64 {
+        if target <= 0.0 {
+            return self.u[0];
+        }
+        if target >= self.total() {
+            return *self.u.last().unwrap();
+        }
+        let i = self.s.partition_point(|&x| x <= target).max(1) - 1;
+        let (mut lo, mut hi) = (self.u[i], self.u[i + 1]);
+        let mut t = lo + (hi - lo) * (target - self.s[i]) / (self.s[i + 1] - self.s[i]).max(f64::MIN_POSITIVE);
+        for _ in 0..60 {
+            let err = self.length_to(curve, t) - target;
+            if err.abs() < 1e-12 * (1.0 + target) {
+                break;
+            }
+            if err > 0.0 {
+                hi = t;
+            } else {
+                lo = t;
+            }
+            let sp = curve.speed(t);
+            let newton = t - err / sp;
+            t = if sp > 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
+        }
+        t
+    }
+
+    /// Grid of the table (parameter values and cumulative lengths).
+    pub fn grid(&self) -> (&[f64], &[f64]) {
+        (&self.u, &self.s)
+    }
+}

@@ -1,0 +1,8 @@
+//! Jerk-limited feedrate planning along NURBS toolpaths.
+//!
+//! Layout (dependencies point one way): [`readers`] turn files into [`geometry`]; the planners
+//! (coming) turn geometry into `nurbs_rtcore` segment records; the realtime core executes them.
+
+pub mod cli;
+pub mod geometry;
+pub mod readers;
