@@ -27,10 +27,11 @@ LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
 MODULE_DIR  ?= /usr/lib/linuxcnc/modules
 PREFIX      ?= /usr/local
 BINDIR      ?= $(PREFIX)/bin
-# Generators pinned to Debian bookworm's packages: their output is committed, so every machine
-# must produce the same bytes.
+# Generator versions: their output is committed, so every machine must produce the same bytes.
+# bindgen from Debian bookworm (with its libclang); cbindgen from crates.io (Debian's 0.24 cannot
+# parse C-string literals or let-else).
 BINDGEN_VERSION  := 0.60.1
-CBINDGEN_VERSION := 0.24.3
+CBINDGEN_VERSION := 0.29.4
 
 # What Rust's std needs from the C side (rustc --print native-static-libs for a staticlib).
 NATIVE_LIBS := -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc
@@ -52,8 +53,10 @@ BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc
 all: module planner
 
 # One cargo invocation builds the staticlib and the binaries with the same features.
-$(STATICLIB) planner: FORCE
+$(STATICLIB): FORCE
 	$(CARGO) build --release -p nurbs-hal --features linuxcnc --lib --bins
+
+planner: $(STATICLIB)
 
 module: $(MODULE)
 
@@ -107,10 +110,38 @@ check-generated:
 	fi; echo "generated files are up to date"
 
 tools:
-	apt-get install -y --no-install-recommends bindgen=$(BINDGEN_VERSION)-\* cbindgen=$(CBINDGEN_VERSION)-\* libclang-dev
+	apt-get install -y --no-install-recommends bindgen=$(BINDGEN_VERSION)-\* libclang-dev
+	$(CBINDGEN) --version 2>/dev/null | grep -q ' $(CBINDGEN_VERSION)$$' || \
+		$(CARGO) install --locked cbindgen --version $(CBINDGEN_VERSION)
 
 clean:
 	$(CARGO) clean -p nurbs-hal
 	rm -f $(MODULE)
 
 FORCE:
+
+# ---------------------------------------------------------------------------------------------
+# The README's two commands: `make demo` (set up, plan the bundled butterfly, verify it) and
+# `make check` (set up, lint, every test including real LinuxCNC). CI runs `make check`.
+DEMO_LIMITS := --feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025
+
+.PHONY: setup demo check lint
+
+setup:
+	bash .ci/setup.sh
+
+demo: setup
+	$(CARGO) build --release --bin nurbs-plan
+	mkdir -p out
+	$(OUT)/nurbs-plan inspect examples/butterfly.json
+	$(OUT)/nurbs-plan plan examples/butterfly.json $(DEMO_LIMITS) --out out/butterfly.csv --summary out/butterfly.json
+	$(OUT)/nurbs-plan verify out/butterfly.csv examples/butterfly.json $(DEMO_LIMITS)
+	cat out/butterfly.json
+
+lint:
+	$(CARGO) fmt --all -- --check
+	$(CARGO) clippy --workspace --all-targets -- -D warnings
+
+check: setup lint check-generated
+	$(CARGO) test --workspace
+	$(MAKE) --no-print-directory test-hal

@@ -17,7 +17,13 @@ fn stats_of(name: &str) -> serde_json::Value {
     v["stats"]["control_points"].clone()
 }
 
-const CURVES: [&str; 5] = ["butterfly.json", "trident.json", "fan.json", "open_pocket.json", "fan_5axis.json"];
+const CURVES: [&str; 5] = [
+    "butterfly.json",
+    "trident.json",
+    "fan.json",
+    "open_pocket.json",
+    "fan_5axis.json",
+];
 
 #[test]
 fn arc_lengths_match_independent_stats_to_1e_6_mm() {
@@ -28,7 +34,10 @@ fn arc_lengths_match_independent_stats_to_1e_6_mm() {
         assert!((got - expected).abs() < 1e-6, "{name}: {got} vs {expected}");
         // The paper's adaptive Simpson agrees as well.
         let simpson = nurbs_motion::geometry::simpson_length(&curve, curve.u_min(), curve.u_max(), 1e-10);
-        assert!((simpson - expected).abs() < 1e-6, "{name}: Simpson {simpson} vs {expected}");
+        assert!(
+            (simpson - expected).abs() < 1e-6,
+            "{name}: Simpson {simpson} vs {expected}"
+        );
     }
 }
 
@@ -39,12 +48,22 @@ fn max_curvature_and_bbox_match_independent_stats() {
         let s = stats_of(name);
         let got = analyze(&curve);
         let k = s["max_curvature_per_mm"].as_f64().unwrap();
-        assert!((got.max_curvature_per_mm - k).abs() <= 1e-3 * k.max(1e-9), "{name}: {} vs {k}", got.max_curvature_per_mm);
+        assert!(
+            (got.max_curvature_per_mm - k).abs() <= 1e-3 * k.max(1e-9),
+            "{name}: {} vs {k}",
+            got.max_curvature_per_mm
+        );
         for (a, (lo, hi)) in got.bbox_min.iter().zip(&got.bbox_max).enumerate() {
             let (elo, ehi) = (s["bbox_min"][a].as_f64().unwrap(), s["bbox_max"][a].as_f64().unwrap());
             // Independent stats come from sampling, so our refined extremes may only be wider.
-            assert!(*lo <= elo + 1e-9 && *lo > elo - 1e-4, "{name} axis {a} min {lo} vs {elo}");
-            assert!(*hi >= ehi - 1e-9 && *hi < ehi + 1e-4, "{name} axis {a} max {hi} vs {ehi}");
+            assert!(
+                *lo <= elo + 1e-9 && *lo > elo - 1e-4,
+                "{name} axis {a} min {lo} vs {elo}"
+            );
+            assert!(
+                *hi >= ehi - 1e-9 && *hi < ehi + 1e-4,
+                "{name} axis {a} max {hi} vs {ehi}"
+            );
         }
     }
 }
@@ -98,7 +117,11 @@ fn derivatives_match_finite_differences() {
                     if (dp[k][a] - dm[k][a]).abs() > 1e-3 * scale {
                         continue;
                     }
-                    assert!((fd - d[k][a]).abs() < 1e-5 * scale, "{name} u={u} k={k} axis={a}: {fd} vs {}", d[k][a]);
+                    assert!(
+                        (fd - d[k][a]).abs() < 1e-5 * scale,
+                        "{name} u={u} k={k} axis={a}: {fd} vs {}",
+                        d[k][a]
+                    );
                 }
             }
         }
@@ -115,19 +138,28 @@ fn matches_curvo_on_rational_curve() {
     let weights: Vec<f64> = (0..n).map(|i| 0.3 + 2.0 * ((i as f64 * 0.7).sin().abs())).collect();
     let rows: Vec<Vec<f64>> = (0..n).map(|i| butterfly.control_point(i).to_vec()).collect();
     let ours = Nurbs::new(3, butterfly.knots().to_vec(), &rows, Some(weights.clone())).unwrap();
-    let homogeneous: Vec<Point3<f64>> =
-        rows.iter().zip(&weights).map(|(p, w)| Point3::new(p[0] * w, p[1] * w, *w)).collect();
+    let homogeneous: Vec<Point3<f64>> = rows
+        .iter()
+        .zip(&weights)
+        .map(|(p, w)| Point3::new(p[0] * w, p[1] * w, *w))
+        .collect();
     let theirs = curvo::prelude::NurbsCurve2D::try_new(3, homogeneous, butterfly.knots().to_vec()).unwrap();
     for i in 0..=500 {
         let u = i as f64 / 500.0;
         let p = ours.point(u);
         let q = theirs.point_at(u);
-        assert!((p[0] - q.x).abs() < 1e-9 && (p[1] - q.y).abs() < 1e-9, "u={u}: {p:?} vs {q:?}");
+        assert!(
+            (p[0] - q.x).abs() < 1e-9 && (p[1] - q.y).abs() < 1e-9,
+            "u={u}: {p:?} vs {q:?}"
+        );
         let d = ours.view().derivatives(u, 2);
         let e = theirs.rational_derivatives(u, 2);
         for k in 1..=2 {
             let scale = 1.0 + e[k].norm();
-            assert!((d[k][0] - e[k][0]).abs() < 1e-8 * scale && (d[k][1] - e[k][1]).abs() < 1e-8 * scale, "u={u} k={k}");
+            assert!(
+                (d[k][0] - e[k][0]).abs() < 1e-8 * scale && (d[k][1] - e[k][1]).abs() < 1e-8 * scale,
+                "u={u} k={k}"
+            );
         }
     }
 }
@@ -151,7 +183,10 @@ fn malformed_curves_are_rejected_with_the_reason() {
     assert!(Nurbs::new(3, k.clone(), &p, None).is_ok());
     assert_eq!(Nurbs::new(0, k.clone(), &p, None), Err(DegreeOutOfRange { degree: 0 }));
     assert_eq!(Nurbs::new(8, k.clone(), &p, None), Err(DegreeOutOfRange { degree: 8 }));
-    assert_eq!(Nurbs::new(3, k[1..].to_vec(), &p, None), Err(KnotCountMismatch { expected: 8, found: 7 }));
+    assert_eq!(
+        Nurbs::new(3, k[1..].to_vec(), &p, None),
+        Err(KnotCountMismatch { expected: 8, found: 7 })
+    );
     let mut dec = vec![0.0, 0.0, 0.0, 0.0, 0.6, 0.4, 1.0, 1.0, 1.0, 1.0];
     let p6: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64, (i * i) as f64]).collect();
     assert_eq!(Nurbs::new(3, dec.clone(), &p6, None), Err(KnotsDecreasing { index: 5 }));
@@ -161,10 +196,16 @@ fn malformed_curves_are_rejected_with_the_reason() {
         Nurbs::new(3, k.clone(), &p, Some(vec![1.0, 0.0, 1.0, 1.0])),
         Err(NonPositiveWeight { index: 1, value: 0.0 })
     );
-    assert_eq!(Nurbs::new(3, k.clone(), &p[..3], None).unwrap_err(), TooFewControlPoints { count: 3, needed: 4 });
+    assert_eq!(
+        Nurbs::new(3, k.clone(), &p[..3], None).unwrap_err(),
+        TooFewControlPoints { count: 3, needed: 4 }
+    );
     let mut nan = p.clone();
     nan[2][1] = f64::INFINITY;
-    assert_eq!(Nurbs::new(3, k.clone(), &nan, None), Err(NonFiniteCoordinate { point: 2, axis: 1 }));
+    assert_eq!(
+        Nurbs::new(3, k.clone(), &nan, None),
+        Err(NonFiniteCoordinate { point: 2, axis: 1 })
+    );
     let unclamped = vec![0.0, 0.1, 0.2, 0.3, 0.7, 0.8, 0.9, 1.0];
     assert_eq!(Nurbs::new(3, unclamped, &p, None), Err(NotClamped));
 }

@@ -38,7 +38,12 @@ impl PathCursor {
     /// Cursor at parameter `u`, taken to be at arc length `s`.
     pub fn at(curve: &CurveView, tip_axes: usize, u: f64, s: f64) -> Self {
         let d = curve.derivatives(u, 1);
-        PathCursor { u, s, point: d[0], speed: norm(&d[1], tip_axes) }
+        PathCursor {
+            u,
+            s,
+            point: d[0],
+            speed: norm(&d[1], tip_axes),
+        }
     }
 }
 
@@ -48,7 +53,7 @@ fn speed_at(curve: &CurveView, tip_axes: usize, u: f64) -> f64 {
 }
 
 /// RK2 predictor-corrector step from `cur` to arc length `s_target` (eq. 1-9, see module doc).
-/// Bounded work: four curve evaluations, no loops over data.
+/// Bounded work: at most 3 + 2 * MAX_CORRECTIONS curve evaluations (5 in the normal case).
 pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64) -> PathCursor {
     let (u_lo, u_hi) = (curve.u_min(), curve.u_max());
     let ds = s_target - cur.s;
@@ -61,15 +66,51 @@ pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target
     let k2 = 1.0 / speed_at(curve, tip_axes, u_trial).max(MIN_SPEED);
     let u_pred = (cur.u + 0.5 * (k1 + k2) * ds).clamp(u_lo, u_hi);
     // Arc length actually covered by the prediction, by Simpson's rule.
-    let mid_speed = speed_at(curve, tip_axes, 0.5 * (cur.u + u_pred));
-    let pred = curve.derivatives(u_pred, 1);
-    let pred_speed = norm(&pred[1], tip_axes);
-    let covered = (u_pred - cur.u) / 6.0 * (cur.speed + 4.0 * mid_speed + pred_speed);
-    // Corrector (eq. 5-9 with the arc length in place of the chord).
-    let u_next = (u_pred + (ds - covered) / pred_speed.max(MIN_SPEED)).clamp(u_lo, u_hi);
-    let d = curve.derivatives(u_next, 1);
-    PathCursor { u: u_next, s: s_target, point: d[0], speed: norm(&d[1], tip_axes) }
+    let simpson = |u: f64, end_speed: f64| {
+        let mid = speed_at(curve, tip_axes, 0.5 * (cur.u + u));
+        (u - cur.u) / 6.0 * (cur.speed + 4.0 * mid + end_speed)
+    };
+    let mut d = curve.derivatives(u_pred, 1);
+    let mut u = u_pred;
+    let mut speed = norm(&d[1], tip_axes);
+    let mut covered = simpson(u, speed);
+    // Corrector (eq. 5-9 with the arc length in place of the chord). Normally one step; where
+    // |C'| nearly vanishes (repeated control points) the linear correction is unreliable, so it
+    // is safeguarded by the bracket [lo, hi] and repeated at most MAX_CORRECTIONS times.
+    let (mut lo, mut hi) = (cur.u, u_hi);
+    let tolerance = 1e-12 * (1.0 + ds.abs());
+    for _ in 0..MAX_CORRECTIONS {
+        let residual = ds - covered;
+        if residual.abs() <= tolerance {
+            break;
+        }
+        if residual > 0.0 {
+            lo = u;
+        } else {
+            hi = u;
+        }
+        let newton = u + residual / speed.max(MIN_SPEED);
+        u = if newton > lo && newton < hi {
+            newton
+        } else {
+            0.5 * (lo + hi)
+        };
+        d = curve.derivatives(u, 1);
+        speed = norm(&d[1], tip_axes);
+        covered = simpson(u, speed);
+    }
+    // The next step aims at its own target from the arc length actually reached, so the
+    // corrector's residual never accumulates along the path.
+    PathCursor {
+        u,
+        s: cur.s + covered,
+        point: d[0],
+        speed,
+    }
 }
+
+/// Corrector iterations at most (two curve evaluations each); one in the normal case.
+const MAX_CORRECTIONS: usize = 6;
 
 /// Second-order Taylor step of u(s) by the arc-length increment `ds`.
 pub fn sot_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {
@@ -97,7 +138,12 @@ fn taylor_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64, th
     }
     let u = (cur.u + du).clamp(curve.u_min(), curve.u_max());
     let e = curve.derivatives(u, 1);
-    PathCursor { u, s: cur.s + ds, point: e[0], speed: norm(&e[1], tip_axes) }
+    PathCursor {
+        u,
+        s: cur.s + ds,
+        point: e[0],
+        speed: norm(&e[1], tip_axes),
+    }
 }
 
 /// Feed correction polynomial: u = sum c_k x^k with x the normalised arc length in a span

@@ -5,7 +5,10 @@
 //! curve parameter. The crate is `no_std` and does not link `alloc`, so nothing here can
 //! allocate; it knows nothing of HAL, files or the planner.
 #![cfg_attr(not(test), no_std)]
+// The numerical loops mirror the indices of the published algorithms (P&T A2.3, A4.2).
+#![allow(clippy::needless_range_loop)]
 
+pub mod executor;
 pub mod interp;
 pub mod math;
 pub mod nurbs;

@@ -125,15 +125,24 @@ impl<'a> CurveView<'a> {
         if !(2..=MAX_DIM).contains(&dim) {
             return Err(GeometryError::DimensionOutOfRange { dim });
         }
-        if points.len() % dim != 0 {
-            return Err(GeometryError::PointDataMismatch { values: points.len(), dim });
+        if !points.len().is_multiple_of(dim) {
+            return Err(GeometryError::PointDataMismatch {
+                values: points.len(),
+                dim,
+            });
         }
         let count = points.len() / dim;
         if count < degree + 1 {
-            return Err(GeometryError::TooFewControlPoints { count, needed: degree + 1 });
+            return Err(GeometryError::TooFewControlPoints {
+                count,
+                needed: degree + 1,
+            });
         }
         if weights.len() != count {
-            return Err(GeometryError::WeightCountMismatch { weights: weights.len(), points: count });
+            return Err(GeometryError::WeightCountMismatch {
+                weights: weights.len(),
+                points: count,
+            });
         }
         if knots.len() != count + degree + 1 {
             return Err(GeometryError::KnotCountMismatch {
@@ -151,8 +160,7 @@ impl<'a> CurveView<'a> {
         }
         let first = knots[0];
         let last = knots[knots.len() - 1];
-        if knots[..=degree].iter().any(|k| *k != first)
-            || knots[knots.len() - degree - 1..].iter().any(|k| *k != last)
+        if knots[..=degree].iter().any(|k| *k != first) || knots[knots.len() - degree - 1..].iter().any(|k| *k != last)
         {
             return Err(GeometryError::NotClamped);
         }
@@ -173,7 +181,10 @@ impl<'a> CurveView<'a> {
         }
         for (i, c) in points.iter().enumerate() {
             if !c.is_finite() {
-                return Err(GeometryError::NonFiniteCoordinate { point: i / dim, axis: i % dim });
+                return Err(GeometryError::NonFiniteCoordinate {
+                    point: i / dim,
+                    axis: i % dim,
+                });
             }
         }
         for (index, w) in weights.iter().enumerate() {
@@ -181,7 +192,13 @@ impl<'a> CurveView<'a> {
                 return Err(GeometryError::NonPositiveWeight { index, value: *w });
             }
         }
-        Ok(Self { degree, dim, knots, points, weights })
+        Ok(Self {
+            degree,
+            dim,
+            knots,
+            points,
+            weights,
+        })
     }
 
     pub fn degree(&self) -> usize {
@@ -245,12 +262,7 @@ impl<'a> CurveView<'a> {
 
     /// Non-zero basis functions and their derivatives up to `order` at `u` in `span` (A2.3).
     /// `ders[k][j]` is the k-th derivative of N_{span-degree+j, degree}.
-    fn basis_derivatives(
-        &self,
-        span: usize,
-        u: f64,
-        order: usize,
-    ) -> [[f64; MAX_ORDER]; MAX_DERIV + 1] {
+    fn basis_derivatives(&self, span: usize, u: f64, order: usize) -> [[f64; MAX_ORDER]; MAX_DERIV + 1] {
         let p = self.degree;
         let knots = self.knots;
         let mut ndu = [[0.0f64; MAX_ORDER]; MAX_ORDER];
@@ -316,9 +328,23 @@ impl<'a> CurveView<'a> {
     /// Point and derivatives up to `order` (≤ 3) at `u` (clamped to the domain); higher entries
     /// are zero. Rational quotient rule of A4.2.
     pub fn derivatives(&self, u: f64, order: usize) -> Derivatives {
-        let order = order.min(MAX_DERIV);
         let u = u.clamp(self.u_min(), self.u_max());
-        let span = self.find_span(u);
+        self.derivatives_in_span(u, self.find_span(u), order)
+    }
+
+    /// Left-hand limits of the derivatives at `u`: evaluated on the non-empty span that ends at
+    /// or after `u` coming from below (differs from [`Self::derivatives`] only at knots).
+    pub fn derivatives_left(&self, u: f64, order: usize) -> Derivatives {
+        let u = u.clamp(self.u_min(), self.u_max());
+        let mut span = self.find_span(u);
+        while span > self.degree && self.knots[span] >= u {
+            span -= 1;
+        }
+        self.derivatives_in_span(u, span, order)
+    }
+
+    fn derivatives_in_span(&self, u: f64, span: usize, order: usize) -> Derivatives {
+        let order = order.min(MAX_DERIV);
         let basis = self.basis_derivatives(span, u, order);
         let p = self.degree;
         let dim = self.dim;

@@ -5,6 +5,8 @@ use crate::scurve::{SCurve, PHASES};
 
 /// This is the last segment of the toolpath: the motion ends at rest at `u_end`.
 pub const FLAG_LAST: u32 = 1;
+/// The path element (curve) a segment runs on is stored in the upper 16 bits of `flags`.
+pub const CURVE_SHIFT: u32 = 16;
 
 /// One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
 #[repr(C)]
@@ -17,7 +19,7 @@ pub struct SegmentRecord {
     /// Curve parameter at the segment start and end.
     pub u_start: f64,
     pub u_end: f64,
-    /// Arc length from the curve start to the segment start, and the segment length (mm).
+    /// Arc length from the start of its curve to the segment start, and the segment length (mm).
     pub s_start: f64,
     pub length: f64,
     /// Feed at the segment start (mm/s); the tangential acceleration there is zero.
@@ -43,7 +45,16 @@ pub enum RecordError {
 
 impl SegmentRecord {
     pub fn profile(&self) -> SCurve {
-        SCurve { feed_start: self.feed_start, durations: self.durations, jerks: self.jerks }
+        SCurve {
+            feed_start: self.feed_start,
+            durations: self.durations,
+            jerks: self.jerks,
+        }
+    }
+
+    /// Index of the curve (path element) this segment runs on.
+    pub fn curve(&self) -> usize {
+        (self.flags >> CURVE_SHIFT) as usize
     }
 
     pub fn is_last(&self) -> bool {
@@ -54,7 +65,12 @@ impl SegmentRecord {
     /// durations and feeds, and a profile whose distance matches `length`.
     pub fn check(&self) -> Result<(), RecordError> {
         let values = [self.u_start, self.u_end, self.s_start, self.length, self.feed_start];
-        if values.iter().chain(&self.durations).chain(&self.jerks).any(|v| !v.is_finite()) {
+        if values
+            .iter()
+            .chain(&self.durations)
+            .chain(&self.jerks)
+            .any(|v| !v.is_finite())
+        {
             return Err(RecordError::NotFinite);
         }
         if self.durations.iter().any(|d| *d < 0.0) {

@@ -67,13 +67,22 @@ impl SCurve {
     pub fn table(&self) -> SCurveTable {
         let mut starts = [0.0; PHASES + 1];
         let mut states = [SCurveState::default(); PHASES + 1];
-        states[0] = SCurveState { s: 0.0, v: self.feed_start, a: 0.0, j: self.jerks[0] };
+        states[0] = SCurveState {
+            s: 0.0,
+            v: self.feed_start,
+            a: 0.0,
+            j: self.jerks[0],
+        };
         for k in 0..PHASES {
             starts[k + 1] = starts[k] + self.durations[k];
             states[k + 1] = states[k].advance(self.jerks[k], self.durations[k]);
         }
         states[PHASES].j = 0.0;
-        SCurveTable { profile: *self, starts, states }
+        SCurveTable {
+            profile: *self,
+            starts,
+            states,
+        }
     }
 }
 

@@ -57,7 +57,10 @@ pub fn run(path: &Path, json: bool) -> Result<(), Box<dyn std::error::Error>> {
         arc_length_mm: elements.iter().map(|e| e.stats.arc_length_mm).sum(),
         bbox_min,
         bbox_max,
-        max_curvature_per_mm: elements.iter().map(|e| e.stats.max_curvature_per_mm).fold(0.0, f64::max),
+        max_curvature_per_mm: elements
+            .iter()
+            .map(|e| e.stats.max_curvature_per_mm)
+            .fold(0.0, f64::max),
         elements,
     };
     if json {

@@ -1,13 +1,21 @@
 //! The `nurbs-plan` command line: `inspect` (geometry report), `plan` and `verify`.
 
 mod inspect;
+mod plan;
+mod verify;
+
+pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "nurbs-plan", version, about = "Jerk-limited feedrate planning along NURBS toolpaths")]
+#[command(
+    name = "nurbs-plan",
+    version,
+    about = "Jerk-limited feedrate planning along NURBS toolpaths"
+)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -23,6 +31,63 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Plan a jerk-limited feed profile and write one setpoint per servo period.
+    Plan {
+        toolpath: PathBuf,
+        #[command(flatten)]
+        limits: LimitArgs,
+        /// Setpoint CSV (t,u,x,y[,z],feed,element).
+        #[arg(long)]
+        out: PathBuf,
+        /// Summary JSON (motion time, plan time, peaks per axis).
+        #[arg(long)]
+        summary: Option<PathBuf>,
+    },
+    /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
+    Verify {
+        setpoints: PathBuf,
+        toolpath: PathBuf,
+        #[command(flatten)]
+        limits: LimitArgs,
+    },
+}
+
+/// Limit flags shared by `plan` and `verify` (mm, s). Axis lists are comma-separated in axis
+/// order; one value applies to all axes.
+#[derive(clap::Args, Clone, Debug)]
+pub struct LimitArgs {
+    /// Programmed feed F (mm/s).
+    #[arg(long)]
+    pub feed: f64,
+    /// Axial acceleration limit(s) (mm/s^2).
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub accel: Vec<f64>,
+    /// Axial jerk limit(s) (mm/s^3).
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub jerk: Vec<f64>,
+    /// Axial velocity limit(s) (mm/s); default: the feed.
+    #[arg(long, value_delimiter = ',')]
+    pub vel: Option<Vec<f64>>,
+    /// Chord error tolerance (mm).
+    #[arg(long = "chord-tol")]
+    pub chord_tol: f64,
+    /// Interpolation period (s).
+    #[arg(long)]
+    pub period: f64,
+}
+
+impl LimitArgs {
+    pub fn limits(&self, axes: usize) -> Result<crate::planner::Limits, crate::planner::LimitsError> {
+        crate::planner::Limits {
+            feed: self.feed,
+            velocity: self.vel.clone().unwrap_or_else(|| vec![self.feed]),
+            acceleration: self.accel.clone(),
+            jerk: self.jerk.clone(),
+            chord_tolerance: self.chord_tol,
+            period: self.period,
+        }
+        .for_axes(axes)
+    }
 }
 
 /// Runs the command line; errors are printed to stderr with a non-zero exit code.
@@ -30,6 +95,26 @@ pub fn run() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Inspect { toolpath, json } => inspect::run(&toolpath, json),
+        Command::Plan {
+            toolpath,
+            limits,
+            out,
+            summary,
+        } => plan::run(plan::PlanArgs {
+            toolpath: &toolpath,
+            limits: &limits,
+            out: &out,
+            summary: summary.as_deref(),
+        }),
+        Command::Verify {
+            setpoints,
+            toolpath,
+            limits,
+        } => match verify::run(&setpoints, &toolpath, &limits) {
+            Ok(true) => Ok(()),
+            Ok(false) => return ExitCode::from(1),
+            Err(e) => Err(e),
+        },
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -47,6 +47,7 @@ fn gauss_adaptive(f: &dyn Fn(f64) -> f64, a: f64, b: f64, whole: f64, tol: f64, 
 
 /// Adaptive Simpson quadrature of `f` on `[a, b]` to absolute tolerance `tol` (as in the paper).
 pub fn adaptive_simpson(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64) -> f64 {
+    #[allow(clippy::too_many_arguments)]
     fn rec(f: &dyn Fn(f64) -> f64, a: f64, b: f64, fa: f64, fm: f64, fb: f64, whole: f64, tol: f64, depth: u32) -> f64 {
         let m = 0.5 * (a + b);
         let (lm, rm) = (0.5 * (a + m), 0.5 * (m + b));
@@ -72,7 +73,9 @@ pub fn simpson_length(curve: &Nurbs, a: f64, b: f64, tol: f64) -> f64 {
     cuts.extend(curve.breakpoints().into_iter().filter(|&k| k > a && k < b));
     cuts.push(b);
     let n = (cuts.len() - 1) as f64;
-    cuts.windows(2).map(|w| adaptive_simpson(&speed, w[0], w[1], tol / n)).sum()
+    cuts.windows(2)
+        .map(|w| adaptive_simpson(&speed, w[0], w[1], tol / n))
+        .sum()
 }
 
 /// Cumulative arc length of a curve on a fine parameter grid (per knot span), for the total
@@ -153,7 +156,11 @@ impl ArcLengthTable {
             }
             let sp = curve.speed(t);
             let newton = t - err / sp;
-            t = if sp > 0.0 && newton > lo && newton < hi { newton } else { 0.5 * (lo + hi) };
+            t = if sp > 0.0 && newton > lo && newton < hi {
+                newton
+            } else {
+                0.5 * (lo + hi)
+            };
         }
         t
     }

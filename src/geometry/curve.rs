@@ -25,7 +25,10 @@ impl Nurbs {
     ) -> Result<Self, GeometryError> {
         let dim = control_points.first().map_or(0, |p| p.len());
         if let Some(bad) = control_points.iter().position(|p| p.len() != dim) {
-            return Err(GeometryError::PointDataMismatch { values: control_points[bad].len(), dim });
+            return Err(GeometryError::PointDataMismatch {
+                values: control_points[bad].len(),
+                dim,
+            });
         }
         let points: Vec<f64> = control_points.iter().flatten().copied().collect();
         let weights = weights.unwrap_or_else(|| vec![1.0; control_points.len()]);
@@ -45,14 +48,24 @@ impl Nurbs {
         if !(2..=3).contains(&tip_dim) || (dim != tip_dim && dim != 2 * tip_dim) {
             return Err(GeometryError::DimensionOutOfRange { dim });
         }
-        Ok(Nurbs { degree, dim, tip_dim, knots, points, weights })
+        Ok(Nurbs {
+            degree,
+            dim,
+            tip_dim,
+            knots,
+            points,
+            weights,
+        })
     }
 
     /// Two curves on the same degree and knots side by side: tool tip and a second point on the
     /// tool axis (5-axis paths).
     pub fn with_top_curve(self, top: &Nurbs) -> Result<Self, GeometryError> {
         if top.degree != self.degree || top.knots != self.knots || top.dim != self.dim || self.dim != self.tip_dim {
-            return Err(GeometryError::PointDataMismatch { values: top.points.len(), dim: self.dim });
+            return Err(GeometryError::PointDataMismatch {
+                values: top.points.len(),
+                dim: self.dim,
+            });
         }
         let n = self.control_point_count();
         let mut points = Vec::with_capacity(2 * self.points.len());
@@ -136,7 +149,12 @@ impl Nurbs {
             points.extend_from_slice(self.control_point(i));
         }
         let weights: Vec<f64> = self.weights.iter().rev().copied().collect();
-        Nurbs { knots, points, weights, ..self.clone() }
+        Nurbs {
+            knots,
+            points,
+            weights,
+            ..self.clone()
+        }
     }
 }
 
@@ -264,4 +282,3 @@ pub fn golden_max(f: &dyn Fn(f64) -> f64, mut a: f64, mut b: f64) -> (f64, f64) 
         (d, fd)
     }
 }
-

@@ -7,5 +7,5 @@ mod curve;
 mod toolpath;
 
 pub use arc_length::{adaptive_simpson, simpson_length, ArcLengthTable};
-pub use curve::{analyze, CurveStats, Nurbs};
+pub use curve::{analyze, golden_max, CurveStats, Nurbs};
 pub use toolpath::{ElementKind, PathElement, Toolpath};

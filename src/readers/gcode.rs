@@ -1,4 +1,1361 @@
-//! placeholder
+//! LinuxCNC G-code (RS274/NGC as interpreted by LinuxCNC 2.9) to a [`Toolpath`].
+//!
+//! The reader follows LinuxCNC's interpreter source (`src/emc/rs274ngc/` in LinuxCNC/linuxcnc)
+//! where it and the documentation disagree. What it reads:
+//!
+//! * **Lines and words.** Letters are case-insensitive; spaces and tabs outside comments are
+//!   ignored (`close_and_downcase` in `interp_read.cc`); `( … )` comments (a `(` inside a comment
+//!   is an error, as is an unclosed one) and `;` comments to the end of the line; an `N` number is
+//!   only allowed first on a line; a program may be wrapped in `%` lines (then the second `%` ends
+//!   it, and a missing one is an error, like LinuxCNC's "File ended with no percent sign"). `M2`
+//!   and `M30` end the program; the rest of the file is ignored. Words execute in LinuxCNC's
+//!   order of execution: `F` before `G20`/`G21`, those before `G90`/`G91`, motion last.
+//! * **Units.** The program starts in `G21` (mm) and `G90`, `G91.1`, `G17`, `G94` (LinuxCNC's
+//!   defaults with `LINEAR_UNITS = mm`). `G20` reads lengths in inches (×25.4). `F` is in
+//!   program units per minute and is stored in mm/s; as in `convert_length_units`, a feed keeps its
+//!   physical value when the units change afterwards.
+//! * **Start point.** The tool's position before the first move is unknown (LinuxCNC uses the
+//!   machine's actual position). An axis becomes known when a move programs it in `G90`; a move
+//!   that needs an unknown coordinate (an incremental move of an unknown axis, or a feed move
+//!   starting from an unknown point) is an error that asks for a `G0` positioning move first.
+//! * **`G0` rapids** are not part of the planned motion: rapids before the first feed move only
+//!   position the tool, rapids after the last feed move (retracts) are dropped, and a rapid that
+//!   moves the tool *between* two feed moves is an error, because a [`Toolpath`] is one continuous
+//!   feed motion.
+//! * **`G1`**: consecutive `G1` moves at the same feed become one [`ElementKind::Polyline`]
+//!   element, parameterised by cumulative chord length (mm). Zero-length moves are skipped.
+//! * **`G2`/`G3`** in the XY plane with `I J` (incremental, or absolute after `G90.1`) or `R`
+//!   (negative `R` for more than a half turn) and optional `P` turns become one exact
+//!   [`ElementKind::Arc`] element: a rational quadratic NURBS split into equal pieces of at most
+//!   90°, middle weights `cos(Δ/2)`, double interior knots, knot values the arc length (mm) at
+//!   the piece ends. LinuxCNC's checks (`interp_arc.cc`) are reproduced: zero radius, radius to
+//!   end differing from radius to start by more than `CENTER_ARC_RADIUS_TOLERANCE` (0.0283 mm /
+//!   0.00283 in) or 0.1 %, `R` too small to reach the end point, start = end with `R`. LinuxCNC
+//!   runs an arc whose two radii differ (within tolerance) as a spiral; a spiral is not a rational
+//!   curve, so the reader moves the centre onto the perpendicular bisector of the chord (the
+//!   exact circle through both programmed end points nearest the programmed centre) and rejects
+//!   the arc if that moves the centre by more than the same tolerance. A full circle (start =
+//!   end with `I J`) is 360°; `P n` adds n − 1 full turns. A `Z` word that changes Z on an arc
+//!   (a helix) is an error: a helix has no exact rational representation.
+//! * **`G5.2`/`G5.3` NURBS blocks** as `Interp::convert_nurbs` (`interp_convert.cc`): the current
+//!   position is the first control point, with weight 1, or `P` if the opening `G5.2` line has
+//!   `P` but no `X Y`; every control-point line needs both `X` and `Y` and a positive `P`; `L`
+//!   (the order, degree + 1, default 3) takes effect on any line of the block when `L > 3`, as
+//!   in LinuxCNC (a smaller `L` is ignored); `G5.3` needs at least `L` control points. The knot
+//!   vector is LinuxCNC's `knot_vector_creator(n, k)` (`nurbs_additional_functions.cc`):
+//!   `k` zeros, then `1, 2, …, n − k + 1`, then `k` times `n − k + 2` — clamped, uniform, integer.
+//!   In `G91` every control point is relative to the block's start point, because LinuxCNC's
+//!   `find_ends` adds the current position, which `convert_nurbs` only updates at `G5.3`. The
+//!   feed is the one in effect at `G5.3`. Stricter than LinuxCNC (which would silently produce a
+//!   different or degenerate path): a missing or non-positive `P` on the opening `G5.2` line
+//!   with `X Y` (LinuxCNC stores weight −1 or 0), `Z` or other axis words inside a block
+//!   (LinuxCNC ignores them), axis words on the `G5.3` line (ignored by LinuxCNC), any other G- or
+//!   M-code inside a block (LinuxCNC would discard the open block), and end of file inside a
+//!   block are errors.
+//! * **Dimension.** The toolpath is 3-D (X Y Z) if any feed move (`G1`/`G2`/`G3`) has a `Z`
+//!   word; every element then carries Z (arcs and NURBS at the Z where they start). Otherwise
+//!   all elements are 2-D (X Y) and `Z` on rapids only positions the tool.
+//! * **Accepted modal codes that do not change the tool-tip path:** `G17`, `G40`, `G43 H…`,
+//!   `G49`, `G54`–`G59.3` (only before the first move: a change afterwards would move the path),
+//!   `G61`, `G61.1`, `G64` (with `P`/`Q`), `G80`, `G90`/`G91`, `G90.1`/`G91.1`, `G94`, `G96`,
+//!   `G97`, `G98`, `G99`, `M0`, `M1`, `M3`–`M9`, `S`, `T`. Everything that would change the path
+//!   or timing in a way we do not model — cutter compensation `G41`/`G42`, `G5`/`G5.1`, other
+//!   planes, `G93`/`G95`, `G4`, `G10`, `G28`, `G30`, `G52`, `G53`, `G92…`, canned cycles, probing,
+//!   threading, axes A B C U V W, parameters `#`, expressions `[…]`, O-words and block delete —
+//!   is an error naming the line and column. An unknown G- or M-code is an error.
+
 use super::ReadError;
-use crate::geometry::Toolpath;
-pub fn parse(file: &str, _text: &str) -> Result<Toolpath, ReadError> { Err(ReadError::new(file, "G-code reader not built yet")) }
+use crate::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use std::f64::consts::{FRAC_PI_2, SQRT_2, TAU};
+
+const MM_PER_INCH: f64 = 25.4;
+/// `CENTER_ARC_RADIUS_TOLERANCE_MM` (interp_internal.hh), in mm.
+const SPIRAL_ABS_TOL_MM: f64 = 2.0 * 0.01 * SQRT_2;
+/// `CENTER_ARC_RADIUS_TOLERANCE_INCH`, in inches.
+const SPIRAL_ABS_TOL_INCH: f64 = 2.0 * 0.001 * SQRT_2;
+/// `SPIRAL_RELATIVE_TOLERANCE`.
+const SPIRAL_REL_TOL: f64 = 0.001;
+/// `RADIUS_TOLERANCE_INCH`; `RADIUS_TOLERANCE_MM` is this times 25.4.
+const RADIUS_TOL_INCH: f64 = 0.00005;
+/// Most full turns accepted on one G2/G3 (keeps the arc's control polygon bounded).
+const MAX_TURNS: u32 = 10_000;
+/// Highest NURBS order (degree + 1) the geometry core supports.
+const MAX_ORDER: usize = nurbs_rtcore::MAX_DEGREE + 1;
+
+/// One word of a line: letter, value and 1-based column in the original text.
+#[derive(Clone, Copy, Debug)]
+struct Word {
+    letter: char,
+    value: f64,
+    col: usize,
+}
+
+/// A 3-D point whose coordinates may be unknown.
+type Pos = [Option<f64>; 3];
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Motion {
+    Rapid,
+    Line,
+    ArcCw,
+    ArcCcw,
+    Nurbs,
+}
+
+/// A move after interpretation, in mm.
+#[derive(Clone, Debug)]
+enum Move {
+    Rapid {
+        line: usize,
+        col: usize,
+        from: Pos,
+        to: Pos,
+    },
+    Line {
+        line: usize,
+        from: Pos,
+        to: Pos,
+        feed: f64,
+        z_word: bool,
+    },
+    Arc {
+        line: usize,
+        arc: ArcGeom,
+        z: Option<f64>,
+        feed: f64,
+        z_word: bool,
+    },
+    Nurbs {
+        line: usize,
+        order: usize,
+        points: Vec<[f64; 2]>,
+        weights: Vec<f64>,
+        z: Option<f64>,
+        feed: f64,
+    },
+}
+
+/// A circular arc in the XY plane: exact end points, centre and signed sweep (radians, > 0 CCW).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ArcGeom {
+    pub start: [f64; 2],
+    pub end: [f64; 2],
+    pub center: [f64; 2],
+    pub sweep: f64,
+}
+
+/// An open `G5.2` block.
+struct NurbsBlock {
+    line: usize,
+    order: usize,
+    start: [f64; 2],
+    z: Option<f64>,
+    points: Vec<[f64; 2]>,
+    weights: Vec<f64>,
+}
+
+struct Interp<'a> {
+    file: &'a str,
+    /// mm per program unit.
+    scale: f64,
+    absolute: bool,
+    ij_absolute: bool,
+    /// Modal motion; `None` after G80 / G5.3 / at start (LinuxCNC: G80 or -1).
+    motion: Option<Motion>,
+    /// Feed in mm/s (0 until an F word).
+    feed: f64,
+    pos: Pos,
+    coord_system: i32,
+    nurbs: Option<NurbsBlock>,
+    moves: Vec<Move>,
+}
+
+fn err(file: &str, line: usize, col: usize, msg: impl Into<String>) -> ReadError {
+    ReadError::at(file, line, Some(col), msg)
+}
+
+fn fmt_code(letter: char, code10: i32) -> String {
+    if code10 % 10 == 0 {
+        format!("{letter}{}", code10 / 10)
+    } else {
+        format!("{letter}{}.{}", code10 / 10, code10 % 10)
+    }
+}
+
+/// Splits one line into words (LinuxCNC `close_and_downcase` + `read_items`).
+fn tokenize(file: &str, lineno: usize, text: &str) -> Result<Vec<Word>, ReadError> {
+    // Normalised characters with their original columns.
+    let mut chars: Vec<(char, usize)> = Vec::new();
+    let mut in_comment: Option<usize> = None;
+    for (i, c) in text.chars().enumerate() {
+        let col = i + 1;
+        if let Some(_start) = in_comment {
+            if c == ')' {
+                in_comment = None;
+            } else if c == '(' {
+                return Err(err(file, lineno, col, "nested comment found: '(' inside a '(' comment"));
+            }
+            continue;
+        }
+        match c {
+            '(' => in_comment = Some(col),
+            ';' => break,
+            ' ' | '\t' | '\r' => {}
+            _ => chars.push((c.to_ascii_lowercase(), col)),
+        }
+    }
+    if let Some(start) = in_comment {
+        return Err(err(file, lineno, start, "unclosed comment: '(' without ')'"));
+    }
+    let mut words = Vec::new();
+    let mut i = 0;
+    while i < chars.len() {
+        let (c, col) = chars[i];
+        match c {
+            '/' if i == 0 => {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    "block delete '/' is not supported (whether the line runs depends on the operator's switch)",
+                ))
+            }
+            '#' => return Err(err(file, lineno, col, "parameters ('#') are not supported")),
+            '[' => return Err(err(file, lineno, col, "expressions ('[...]') are not supported")),
+            'o' => {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    "O-words (subroutines, loops, conditionals) are not supported",
+                ))
+            }
+            'a'..='z' => {}
+            _ => return Err(err(file, lineno, col, format!("bad character '{c}' used"))),
+        }
+        i += 1;
+        // Number: [+-] digits [. digits], at least one digit.
+        let start = i;
+        let mut s = String::new();
+        if i < chars.len() && (chars[i].0 == '+' || chars[i].0 == '-') {
+            s.push(chars[i].0);
+            i += 1;
+        }
+        let mut digits = 0;
+        let mut dot = false;
+        while i < chars.len() {
+            let d = chars[i].0;
+            if d.is_ascii_digit() {
+                digits += 1;
+            } else if d == '.' && !dot {
+                dot = true;
+            } else {
+                break;
+            }
+            s.push(d);
+            i += 1;
+        }
+        if i < chars.len() && (chars[i].0 == '#' || chars[i].0 == '[') && digits == 0 {
+            let what = if chars[i].0 == '#' {
+                "parameters ('#')"
+            } else {
+                "expressions ('[...]')"
+            };
+            return Err(err(file, lineno, chars[i].1, format!("{what} are not supported")));
+        }
+        if digits == 0 {
+            let at = chars.get(start).map_or(col + 1, |p| p.1);
+            return Err(err(
+                file,
+                lineno,
+                at,
+                format!(
+                    "bad number format: '{}' must be followed by a number",
+                    c.to_ascii_uppercase()
+                ),
+            ));
+        }
+        let value: f64 = s.parse().map_err(|_| {
+            err(
+                file,
+                lineno,
+                col,
+                format!("bad number format after '{}'", c.to_ascii_uppercase()),
+            )
+        })?;
+        if c == 'n' {
+            if !words.is_empty() {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    "an N line number is only allowed at the start of a line",
+                ));
+            }
+            continue;
+        }
+        words.push(Word {
+            letter: c.to_ascii_uppercase(),
+            value,
+            col,
+        });
+    }
+    Ok(words)
+}
+
+/// The words of one line sorted by kind.
+#[derive(Default)]
+struct Block {
+    g: Vec<(i32, usize)>,
+    m: Vec<(i32, usize)>,
+    /// Other words by letter index.
+    words: [Option<(f64, usize)>; 26],
+}
+
+impl Block {
+    fn get(&self, letter: char) -> Option<(f64, usize)> {
+        self.words[(letter as u8 - b'A') as usize]
+    }
+    fn has(&self, letter: char) -> bool {
+        self.get(letter).is_some()
+    }
+    fn has_g(&self, code: i32) -> bool {
+        self.g.iter().any(|g| g.0 == code)
+    }
+    fn col_g(&self, code: i32) -> usize {
+        self.g.iter().find(|g| g.0 == code).map_or(1, |g| g.1)
+    }
+}
+
+/// Modal groups of the G-codes we know (from `_gees` in `interp_array.cc`), `None` if unknown.
+fn g_group(code: i32) -> Option<u8> {
+    Some(match code {
+        0 | 10 | 20 | 30 | 50 | 51 | 52 | 53 | 330 | 331 | 382..=385 | 730 | 740 | 760 | 800..=890 => 1,
+        170 | 171 | 180 | 181 | 190 | 191 => 2,
+        900 | 910 => 3,
+        901 | 911 => 4,
+        930 | 940 | 950 => 5,
+        200 | 210 => 6,
+        400 | 410 | 411 | 420 | 421 => 7,
+        430 | 431 | 432 | 490 => 8,
+        980 | 990 => 10,
+        540 | 550 | 560 | 570 | 580 | 590 | 591 | 592 | 593 => 12,
+        610 | 611 | 640 => 13,
+        960 | 970 => 14,
+        70 | 80 => 15,
+        40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920..=923 => 0,
+        _ => return None,
+    })
+}
+
+fn unsupported_g(code: i32) -> Option<&'static str> {
+    Some(match code {
+        50 | 51 => "cubic/quadratic splines G5/G5.1 are not supported (use G5.2/G5.3)",
+        330 | 331 | 760 => "spindle-synchronised motion and threading are not supported",
+        382..=385 => "probing moves are not supported",
+        730 | 740 | 810..=890 => "canned cycles are not supported",
+        171 | 180 | 181 | 190 | 191 => "only the XY plane (G17) is supported",
+        930 => "inverse-time feed G93 is not supported (use G94)",
+        950 => "feed per revolution G95 is not supported (use G94)",
+        410 | 411 | 420 | 421 => "cutter radius compensation (G41/G42) changes the path and is not supported",
+        431 | 432 => "dynamic/added tool length offsets (G43.1/G43.2) are not supported",
+        70 | 80 => "lathe diameter/radius mode (G7/G8) is not supported",
+        40 => "dwell G4 is not supported (the toolpath is one continuous feed motion)",
+        100 => "G10 (setting offsets and tables) is not supported",
+        280 | 281 | 300 | 301 => "reference moves G28/G30 are not supported",
+        520 | 920..=923 => "coordinate offsets G52/G92 change the path and are not supported",
+        530 => "moves in machine coordinates G53 are not supported",
+        _ => return None,
+    })
+}
+
+impl<'a> Interp<'a> {
+    fn parse_block(&self, lineno: usize, words: &[Word]) -> Result<Block, ReadError> {
+        let file = self.file;
+        let mut b = Block::default();
+        let mut groups: Vec<(u8, i32)> = Vec::new();
+        for w in words {
+            match w.letter {
+                'G' => {
+                    let code = (w.value * 10.0).round();
+                    if (w.value * 10.0 - code).abs() > 1e-4 || !(0.0..10000.0).contains(&code) {
+                        return Err(err(file, lineno, w.col, format!("unknown G-code G{}", w.value)));
+                    }
+                    let code = code as i32;
+                    let group = g_group(code)
+                        .ok_or_else(|| err(file, lineno, w.col, format!("unknown G-code {}", fmt_code('G', code))))?;
+                    if let Some(&(_, other)) = groups.iter().find(|(g, _)| *g == group && group != 0) {
+                        return Err(err(
+                            file,
+                            lineno,
+                            w.col,
+                            format!(
+                                "{} and {} are in the same modal group and cannot be on one line",
+                                fmt_code('G', other),
+                                fmt_code('G', code)
+                            ),
+                        ));
+                    }
+                    groups.push((group, code));
+                    b.g.push((code, w.col));
+                }
+                'M' => {
+                    let code = w.value.round();
+                    if (w.value - code).abs() > 1e-4 || code < 0.0 {
+                        return Err(err(file, lineno, w.col, format!("unknown M-code M{}", w.value)));
+                    }
+                    let code = code as i32;
+                    match code {
+                        0..=9 | 30 => {}
+                        _ => {
+                            return Err(err(
+                                file,
+                                lineno,
+                                w.col,
+                                format!("M{code} is not supported (accepted: M0-M9, M2, M30)"),
+                            ))
+                        }
+                    }
+                    b.m.push((code * 10, w.col));
+                }
+                'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                    return Err(err(
+                        file,
+                        lineno,
+                        w.col,
+                        format!("axis {} is not supported: toolpaths are X Y Z only", w.letter),
+                    ))
+                }
+                'E' => return Err(err(file, lineno, w.col, "E word is not supported")),
+                letter => {
+                    let slot = &mut b.words[(letter as u8 - b'A') as usize];
+                    if slot.is_some() {
+                        return Err(err(file, lineno, w.col, format!("multiple {letter} words on one line")));
+                    }
+                    *slot = Some((w.value, w.col));
+                }
+            }
+        }
+        // M-codes: one per LinuxCNC modal group (4: stop, 6: tool change, 7: spindle, 8: coolant).
+        for (i, &(a, _)) in b.m.iter().enumerate() {
+            let group = |m: i32| match m / 10 {
+                0 | 1 | 2 | 30 => 4,
+                6 => 6,
+                3..=5 => 7,
+                _ => 8,
+            };
+            if let Some(&(bm, bcol)) = b.m[i + 1..].iter().find(|(m, _)| group(*m) == group(a)) {
+                return Err(err(
+                    file,
+                    lineno,
+                    bcol,
+                    format!(
+                        "M{} and M{} are in the same modal group and cannot be on one line",
+                        a / 10,
+                        bm / 10
+                    ),
+                ));
+            }
+        }
+        if let Some((_, col)) = b.words.iter().flatten().find(|w| !w.0.is_finite()) {
+            return Err(err(file, lineno, *col, "number out of range"));
+        }
+        Ok(b)
+    }
+
+    fn need(&self, lineno: usize, col: usize, axis: usize) -> Result<f64, ReadError> {
+        self.pos[axis].ok_or_else(|| {
+            err(
+                self.file,
+                lineno,
+                col,
+                format!(
+                    "the current {} position is unknown here: position the tool with G0 (in G90) first",
+                    ["X", "Y", "Z"][axis]
+                ),
+            )
+        })
+    }
+
+    /// End point of a move (`find_ends`), in mm; unknown stays unknown for axes not programmed.
+    fn find_end(&self, lineno: usize, b: &Block) -> Result<Pos, ReadError> {
+        let mut end = self.pos;
+        for (axis, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            if let Some((v, col)) = b.get(letter) {
+                let v = v * self.scale;
+                end[axis] = Some(if self.absolute {
+                    v
+                } else {
+                    self.need(lineno, col, axis)? + v
+                });
+            }
+        }
+        Ok(end)
+    }
+
+    fn line(&mut self, lineno: usize, words: &[Word]) -> Result<bool, ReadError> {
+        let file = self.file;
+        let b = self.parse_block(lineno, words)?;
+        let in_nurbs = self.nurbs.is_some();
+
+        if let Some(open) = &self.nurbs {
+            let opened = open.line;
+            if let Some(&(code, col)) = b.g.iter().find(|g| g.0 != 52 && g.0 != 53) {
+                let what = if unsupported_g(code).is_some() || g_group(code).is_some() {
+                    format!("{} is not allowed inside a G5.2 NURBS block", fmt_code('G', code))
+                } else {
+                    format!("unknown G-code {} inside a G5.2 NURBS block", fmt_code('G', code))
+                };
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!("{what} (opened at line {opened}; close it with G5.3)"),
+                ));
+            }
+            if let Some(&(code, col)) = b.m.first() {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!(
+                        "M{} is not allowed inside a G5.2 NURBS block (opened at line {opened})",
+                        code / 10
+                    ),
+                ));
+            }
+            for letter in ['Z', 'I', 'J', 'K', 'R', 'Q', 'H', 'S', 'T'] {
+                if let Some((_, col)) = b.get(letter) {
+                    let why = if letter == 'Z' {
+                        " (LinuxCNC NURBS are XY only and ignore Z)"
+                    } else {
+                        ""
+                    };
+                    return Err(err(
+                        file,
+                        lineno,
+                        col,
+                        format!(
+                            "{letter} word is not allowed inside a G5.2 NURBS block (opened at line {opened}){why}"
+                        ),
+                    ));
+                }
+            }
+        }
+
+        for &(code, col) in &b.g {
+            if let Some(why) = unsupported_g(code) {
+                return Err(err(file, lineno, col, format!("{}: {why}", fmt_code('G', code))));
+            }
+        }
+
+        // Order of execution (LinuxCNC manual, "Order of Execution"; execute_block).
+        // F: feed rate, in the units active before this line's G20/G21.
+        if let Some((f, col)) = b.get('F') {
+            if f < 0.0 {
+                return Err(err(file, lineno, col, "negative F word found"));
+            }
+            self.feed = f * self.scale / 60.0;
+        }
+        if let Some((s, col)) = b.get('S') {
+            if s < 0.0 {
+                return Err(err(file, lineno, col, "negative S word found"));
+            }
+        }
+        if let Some((t, col)) = b.get('T') {
+            if t < 0.0 || t.fract() != 0.0 {
+                return Err(err(file, lineno, col, "T word must be a non-negative integer"));
+            }
+        }
+        if b.has_g(200) {
+            self.scale = MM_PER_INCH;
+        }
+        if b.has_g(210) {
+            self.scale = 1.0;
+        }
+        if let Some(&(code, col)) = b.g.iter().find(|g| g_group(g.0) == Some(12)) {
+            if code != self.coord_system && self.pos.iter().any(|p| p.is_some()) {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!(
+                        "changing the coordinate system ({}) after the first move shifts the path; not supported",
+                        fmt_code('G', code)
+                    ),
+                ));
+            }
+            self.coord_system = code;
+        }
+        if b.has_g(900) {
+            self.absolute = true;
+        }
+        if b.has_g(910) {
+            self.absolute = false;
+        }
+        if b.has_g(901) {
+            self.ij_absolute = true;
+        }
+        if b.has_g(911) {
+            self.ij_absolute = false;
+        }
+
+        // Motion (enhance_block).
+        let motion_code = b.g.iter().find(|g| g_group(g.0) == Some(1)).copied();
+        let axis_word = ['X', 'Y', 'Z'].iter().find_map(|&l| b.get(l).map(|w| (l, w.1)));
+        let motion: Option<(i32, usize)> = match motion_code {
+            Some(m) => Some(m),
+            None => match axis_word {
+                Some((_, col)) => match self.motion {
+                    None => {
+                        return Err(err(
+                            file,
+                            lineno,
+                            col,
+                            "cannot use axis values without a G-code that uses them (no motion mode is active)",
+                        ))
+                    }
+                    Some(m) => Some((
+                        match m {
+                            Motion::Rapid => 0,
+                            Motion::Line => 10,
+                            Motion::ArcCw => 20,
+                            Motion::ArcCcw => 30,
+                            Motion::Nurbs => 52,
+                        },
+                        col,
+                    )),
+                },
+                None => None,
+            },
+        };
+        let mcode = motion.map(|m| m.0);
+        // Words that need a code to use them (check_other_codes).
+        let arc = matches!(mcode, Some(20) | Some(30));
+        for (letter, ok, users) in [
+            ('I', arc, "G2 or G3"),
+            ('J', arc, "G2 or G3"),
+            ('R', arc, "G2 or G3"),
+            ('K', false, "an arc in the XY plane (K belongs to other planes)"),
+            ('P', arc || mcode == Some(52) || b.has_g(640), "G2, G3, G5.2 or G64"),
+            ('Q', b.has_g(640), "G64"),
+            ('L', mcode == Some(52), "G5.2"),
+            ('H', b.has_g(430), "G43"),
+            ('D', false, "G41 or G42 (cutter compensation is not supported)"),
+        ] {
+            if let (Some((_, col)), false) = (b.get(letter), ok) {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!("{letter} word with no {users} to use it"),
+                ));
+            }
+        }
+
+        match mcode {
+            None => {}
+            Some(800) => self.motion = None,
+            Some(0) | Some(10) => {
+                let m = if mcode == Some(0) { Motion::Rapid } else { Motion::Line };
+                self.motion = Some(m);
+                let to = self.find_end(lineno, &b)?;
+                if m == Motion::Line {
+                    if self.feed == 0.0 {
+                        return Err(err(file, lineno, motion.unwrap().1, "cannot do G1 with zero feed rate"));
+                    }
+                    if to != self.pos {
+                        // A feed move needs a known XY start point.
+                        let col = axis_word.map_or(motion.unwrap().1, |a| a.1);
+                        self.need(lineno, col, 0)?;
+                        self.need(lineno, col, 1)?;
+                    }
+                    self.moves.push(Move::Line {
+                        line: lineno,
+                        from: self.pos,
+                        to,
+                        feed: self.feed,
+                        z_word: b.has('Z'),
+                    });
+                } else {
+                    let col = axis_word.map_or(motion.unwrap().1, |a| a.1);
+                    self.moves.push(Move::Rapid {
+                        line: lineno,
+                        col,
+                        from: self.pos,
+                        to,
+                    });
+                }
+                self.pos = to;
+            }
+            Some(20) | Some(30) => {
+                self.motion = Some(if mcode == Some(20) {
+                    Motion::ArcCw
+                } else {
+                    Motion::ArcCcw
+                });
+                self.arc(lineno, motion.unwrap().1, mcode == Some(20), &b)?;
+            }
+            Some(52) => self.nurbs_point(lineno, motion.unwrap().1, &b)?,
+            Some(53) => {
+                let col = b.col_g(53);
+                let Some(block) = self.nurbs.take() else {
+                    return Err(err(file, lineno, col, "cannot use G5.3 without G5.2 first"));
+                };
+                if let Some((l, c)) = axis_word {
+                    return Err(err(
+                        file,
+                        lineno,
+                        c,
+                        format!("{l} word on the G5.3 line: LinuxCNC ignores it; put the last control point on its own line"),
+                    ));
+                }
+                for letter in ['P', 'L'] {
+                    if let Some((_, c)) = b.get(letter) {
+                        return Err(err(file, lineno, c, format!("{letter} word with no G5.2 to use it")));
+                    }
+                }
+                let n = block.points.len();
+                if n < block.order {
+                    return Err(err(
+                        file,
+                        lineno,
+                        col,
+                        format!(
+                            "you must specify a number of control points at least equal to the order L = {} (the block opened at line {} has {n})",
+                            block.order, block.line
+                        ),
+                    ));
+                }
+                let last = block.points[n - 1];
+                self.pos[0] = Some(last[0]);
+                self.pos[1] = Some(last[1]);
+                self.moves.push(Move::Nurbs {
+                    line: block.line,
+                    order: block.order,
+                    points: block.points,
+                    weights: block.weights,
+                    z: block.z,
+                    feed: self.feed,
+                });
+                self.motion = None;
+            }
+            Some(other) => {
+                return Err(err(
+                    file,
+                    lineno,
+                    motion.unwrap().1,
+                    format!("{} is not supported", fmt_code('G', other)),
+                ))
+            }
+        }
+        if mcode != Some(52) && mcode != Some(53) && in_nurbs {
+            // A line inside the block without control point: only F, comments and N are allowed.
+            for letter in ['P', 'L'] {
+                if let Some((_, col)) = b.get(letter) {
+                    return Err(err(
+                        file,
+                        lineno,
+                        col,
+                        format!("{letter} word without X Y control point"),
+                    ));
+                }
+            }
+        }
+        // Stop codes run last.
+        Ok(b.m.iter().any(|m| m.0 == 20 || m.0 == 300))
+    }
+
+    /// One line of a G5.2 block (`Interp::convert_nurbs`).
+    fn nurbs_point(&mut self, lineno: usize, col: usize, b: &Block) -> Result<(), ReadError> {
+        let file = self.file;
+        let (x, y) = (b.get('X'), b.get('Y'));
+        if x.is_some() != y.is_some() {
+            let c = x.or(y).map_or(col, |w| w.1);
+            return Err(err(
+                file,
+                lineno,
+                c,
+                "you must specify both X and Y coordinates for control points",
+            ));
+        }
+        let has_xy = x.is_some();
+        let first = self.nurbs.is_none();
+        if !has_xy && b.has('P') && !first {
+            return Err(err(
+                file,
+                lineno,
+                b.get('P').unwrap().1,
+                "can specify P without X and Y only for the first control point",
+            ));
+        }
+        if self.feed == 0.0 {
+            return Err(err(file, lineno, col, "cannot make a NURBS with 0 feedrate"));
+        }
+        if first {
+            let x0 = self.need(lineno, col, 0)?;
+            let y0 = self.need(lineno, col, 1)?;
+            let w0 = match (has_xy, b.get('P')) {
+                (false, Some((p, pc))) => {
+                    if p <= 0.0 {
+                        return Err(err(
+                            file,
+                            lineno,
+                            pc,
+                            "must specify positive weight P for every control point",
+                        ));
+                    }
+                    p
+                }
+                _ => 1.0,
+            };
+            self.nurbs = Some(NurbsBlock {
+                line: lineno,
+                order: 3,
+                start: [x0, y0],
+                z: self.pos[2],
+                points: vec![[x0, y0]],
+                weights: vec![w0],
+            });
+            self.motion = Some(Motion::Nurbs);
+        }
+        let (scale, absolute) = (self.scale, self.absolute);
+        let block = self.nurbs.as_mut().expect("opened above");
+        if let Some((l, lc)) = b.get('L') {
+            if l.fract() != 0.0 || l < 0.0 {
+                return Err(err(file, lineno, lc, "L word must be a non-negative integer"));
+            }
+            // LinuxCNC: `if (block->l_number != -1 && block->l_number > 3) nurbs_order = L`.
+            if l > 3.0 {
+                if l > MAX_ORDER as f64 {
+                    return Err(err(
+                        file,
+                        lineno,
+                        lc,
+                        format!(
+                            "NURBS order L = {l} is above the supported maximum {MAX_ORDER} (degree {})",
+                            MAX_ORDER - 1
+                        ),
+                    ));
+                }
+                block.order = l as usize;
+            }
+        }
+        if let (Some((xv, _)), Some((yv, _))) = (x, y) {
+            let p = match b.get('P') {
+                Some((p, _)) if p > 0.0 => p,
+                Some((_, pc)) => {
+                    return Err(err(
+                        file,
+                        lineno,
+                        pc,
+                        "must specify positive weight P for every control point",
+                    ))
+                }
+                None => {
+                    return Err(err(
+                        file,
+                        lineno,
+                        col,
+                        "must specify positive weight P for every control point",
+                    ))
+                }
+            };
+            let (xv, yv) = (xv * scale, yv * scale);
+            let pt = if absolute {
+                [xv, yv]
+            } else {
+                [block.start[0] + xv, block.start[1] + yv]
+            };
+            block.points.push(pt);
+            block.weights.push(p);
+        }
+        Ok(())
+    }
+
+    /// G2/G3 in the XY plane (`convert_arc`, `arc_data_ijk`, `arc_data_r`).
+    fn arc(&mut self, lineno: usize, col: usize, cw: bool, b: &Block) -> Result<(), ReadError> {
+        let file = self.file;
+        let name = if cw { "G2" } else { "G3" };
+        let ijk = b.has('I') || b.has('J');
+        let r = b.get('R');
+        if r.is_none() && !ijk {
+            return Err(err(file, lineno, col, "R, I, J, and K words all missing for arc"));
+        }
+        if let (Some((_, rc)), true) = (r, ijk) {
+            return Err(err(file, lineno, rc, "mixed radius-ijk format for arc"));
+        }
+        if r.is_some() && !b.has('X') && !b.has('Y') {
+            return Err(err(file, lineno, col, "X and Y words missing for arc in XY plane"));
+        }
+        if self.feed == 0.0 {
+            return Err(err(file, lineno, col, "cannot make arc with zero feed rate"));
+        }
+        let turns = match b.get('P') {
+            None => 1,
+            Some((p, pc)) => {
+                if p.fract() != 0.0 || p < 1.0 {
+                    return Err(err(
+                        file,
+                        lineno,
+                        pc,
+                        format!("P word on {name} (number of turns) must be an integer >= 1"),
+                    ));
+                }
+                if p > MAX_TURNS as f64 {
+                    return Err(err(
+                        file,
+                        lineno,
+                        pc,
+                        format!("P{p} on {name}: more than {MAX_TURNS} turns is not supported"),
+                    ));
+                }
+                p as u32
+            }
+        };
+        let end = self.find_end(lineno, b)?;
+        let sx = self.need(lineno, col, 0)?;
+        let sy = self.need(lineno, col, 1)?;
+        let (ex, ey) = (end[0].unwrap_or(sx), end[1].unwrap_or(sy));
+        if let Some((_, zc)) = b.get('Z') {
+            let z0 = self.need(lineno, zc, 2)?;
+            if end[2] != Some(z0) {
+                return Err(err(
+                    file,
+                    lineno,
+                    zc,
+                    "helical arc (Z changes on G2/G3) cannot be represented exactly as a NURBS; not supported",
+                ));
+            }
+        }
+        let (spiral_abs, radius_tol) = if self.scale == 1.0 {
+            (SPIRAL_ABS_TOL_MM, RADIUS_TOL_INCH * MM_PER_INCH)
+        } else {
+            (SPIRAL_ABS_TOL_INCH * MM_PER_INCH, RADIUS_TOL_INCH * MM_PER_INCH)
+        };
+        let center = if let Some((rv, _)) = r {
+            // arc_data_r
+            let radius = rv * self.scale;
+            if ex == sx && ey == sy {
+                return Err(err(file, lineno, col, "current point same as end point of arc"));
+            }
+            let abs_r = radius.abs();
+            let (mx, my) = ((ex + sx) / 2.0, (ey + sy) / 2.0);
+            let mut half = (mx - ex).hypot(my - ey);
+            if half - abs_r > radius_tol {
+                return Err(err(file, lineno, col, "arc radius too small to reach end point"));
+            }
+            if half / abs_r > 1.0 - 1e-12 {
+                half = abs_r;
+            }
+            let theta = if (cw && radius > 0.0) || (!cw && radius < 0.0) {
+                (ey - sy).atan2(ex - sx) - FRAC_PI_2
+            } else {
+                (ey - sy).atan2(ex - sx) + FRAC_PI_2
+            };
+            let offset = abs_r * (half / abs_r).asin().cos();
+            [mx + offset * theta.cos(), my + offset * theta.sin()]
+        } else {
+            let i = b.get('I').map(|w| w.0 * self.scale);
+            let j = b.get('J').map(|w| w.0 * self.scale);
+            if self.ij_absolute {
+                for (v, l) in [(i, 'I'), (j, 'J')] {
+                    if v.is_none() {
+                        return Err(err(
+                            file,
+                            lineno,
+                            col,
+                            format!("{l} word missing in absolute center arc"),
+                        ));
+                    }
+                }
+                [i.unwrap(), j.unwrap()]
+            } else {
+                [sx + i.unwrap_or(0.0), sy + j.unwrap_or(0.0)]
+            }
+        };
+        let r1 = (center[0] - sx).hypot(center[1] - sy);
+        let r2 = (center[0] - ex).hypot(center[1] - ey);
+        if r1 < radius_tol || r2 < radius_tol {
+            return Err(err(
+                file,
+                lineno,
+                col,
+                format!(
+                    "zero-radius arc: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4})",
+                    center[0], center[1]
+                ),
+            ));
+        }
+        let abs_err = (r1 - r2).abs();
+        let rel_err = abs_err / r1.max(r2);
+        if abs_err > spiral_abs || rel_err > SPIRAL_REL_TOL {
+            return Err(err(
+                file,
+                lineno,
+                col,
+                format!(
+                    "radius to end of arc differs from radius to start: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4}) r1={r1:.4} r2={r2:.4} (mm)",
+                    center[0], center[1]
+                ),
+            ));
+        }
+        let geom = arc_geometry([sx, sy], [ex, ey], center, !cw, turns).map_err(|shift| {
+            err(
+                file,
+                lineno,
+                col,
+                format!(
+                    "the arc's radii differ by {abs_err:.3e} mm; the exact circle through both end points would move the centre by {shift:.3e} mm (LinuxCNC would run a spiral); not supported"
+                ),
+            )
+        })?;
+        if let Some(shift) = geom.1 {
+            if shift > spiral_abs {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!(
+                        "the arc's radii differ by {abs_err:.3e} mm; the exact circle through both end points would move the centre by {shift:.3e} mm (LinuxCNC would run a spiral); not supported"
+                    ),
+                ));
+            }
+        }
+        self.moves.push(Move::Arc {
+            line: lineno,
+            arc: geom.0,
+            z: self.pos[2],
+            feed: self.feed,
+            z_word: b.has('Z'),
+        });
+        self.pos[0] = Some(ex);
+        self.pos[1] = Some(ey);
+        Ok(())
+    }
+}
+
+/// The exact circular arc from `start` to `end` about (nearly) `center`, counter-clockwise if
+/// `ccw`, with `turns - 1` extra full turns. When the two radii differ, the centre is projected
+/// onto the chord's perpendicular bisector; the second value is how far it moved. A full circle
+/// is made when `start == end`.
+pub(crate) fn arc_geometry(
+    start: [f64; 2],
+    end: [f64; 2],
+    center: [f64; 2],
+    ccw: bool,
+    turns: u32,
+) -> Result<(ArcGeom, Option<f64>), f64> {
+    let mut c = center;
+    let mut shift = None;
+    let chord = [end[0] - start[0], end[1] - start[1]];
+    let len = chord[0].hypot(chord[1]);
+    if len > 0.0 {
+        let m = [(start[0] + end[0]) / 2.0, (start[1] + end[1]) / 2.0];
+        let u = [chord[0] / len, chord[1] / len];
+        let along = (c[0] - m[0]) * u[0] + (c[1] - m[1]) * u[1];
+        if along != 0.0 {
+            c = [c[0] - along * u[0], c[1] - along * u[1]];
+            shift = Some(along.abs());
+        }
+    }
+    let a0 = (start[1] - c[1]).atan2(start[0] - c[0]);
+    let a1 = (end[1] - c[1]).atan2(end[0] - c[0]);
+    let mut base = if ccw { a1 - a0 } else { a0 - a1 };
+    base = base.rem_euclid(TAU);
+    if base < 1e-12 || len == 0.0 {
+        base = TAU;
+    }
+    let sweep = base + TAU * (turns.max(1) - 1) as f64;
+    Ok((
+        ArcGeom {
+            start,
+            end,
+            center: c,
+            sweep: if ccw { sweep } else { -sweep },
+        },
+        shift,
+    ))
+}
+
+/// An exact rational quadratic NURBS for an arc in the XY plane, at height `z` if given.
+pub(crate) fn arc_nurbs(arc: &ArcGeom, z: Option<f64>) -> Result<Nurbs, nurbs_rtcore::GeometryError> {
+    let c = arc.center;
+    let r = (arc.start[0] - c[0]).hypot(arc.start[1] - c[1]);
+    let a0 = (arc.start[1] - c[1]).atan2(arc.start[0] - c[0]);
+    let pieces = ((arc.sweep.abs() / FRAC_PI_2) - 1e-9).ceil().max(1.0) as usize;
+    let d = arc.sweep / pieces as f64;
+    let w = (d / 2.0).cos();
+    let seg_len = r * d.abs();
+    let mut points: Vec<Vec<f64>> = Vec::with_capacity(2 * pieces + 1);
+    let mut weights = Vec::with_capacity(2 * pieces + 1);
+    let mut knots = vec![0.0; 3];
+    let with_z = |x: f64, y: f64| match z {
+        Some(z) => vec![x, y, z],
+        None => vec![x, y],
+    };
+    points.push(with_z(arc.start[0], arc.start[1]));
+    weights.push(1.0);
+    for i in 0..pieces {
+        let am = a0 + d * (i as f64 + 0.5);
+        let rm = r / w;
+        points.push(with_z(c[0] + rm * am.cos(), c[1] + rm * am.sin()));
+        weights.push(w);
+        if i + 1 == pieces {
+            points.push(with_z(arc.end[0], arc.end[1]));
+        } else {
+            let ae = a0 + d * (i + 1) as f64;
+            points.push(with_z(c[0] + r * ae.cos(), c[1] + r * ae.sin()));
+        }
+        weights.push(1.0);
+        let k = seg_len * (i + 1) as f64;
+        if i + 1 == pieces {
+            knots.extend_from_slice(&[k, k, k]);
+        } else {
+            knots.extend_from_slice(&[k, k]);
+        }
+    }
+    Nurbs::new(2, knots, &points, Some(weights))
+}
+
+/// A degree-1 NURBS through `points`, parameterised by cumulative chord length (mm).
+/// Consecutive duplicate points must have been removed.
+pub(crate) fn polyline_nurbs(points: &[Vec<f64>]) -> Result<Nurbs, nurbs_rtcore::GeometryError> {
+    let mut knots = vec![0.0, 0.0];
+    let mut s = 0.0;
+    for w in points.windows(2) {
+        s += w[0]
+            .iter()
+            .zip(&w[1])
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+        knots.push(s);
+    }
+    knots.push(s);
+    Nurbs::new(1, knots, points, None)
+}
+
+/// LinuxCNC's `knot_vector_creator(n, k)` for `n + 1` control points and order `k`.
+pub fn linuxcnc_knot_vector(control_points: usize, order: usize) -> Vec<f64> {
+    let n = control_points - 1;
+    (0..=n + order)
+        .map(|i| {
+            if i < order {
+                0.0
+            } else if i <= n {
+                (i - order + 1) as f64
+            } else {
+                (n + 2 - order) as f64
+            }
+        })
+        .collect()
+}
+
+/// Parses a LinuxCNC G-code program into a toolpath (see the module documentation for the exact
+/// semantics and every decision).
+pub fn parse(file: &str, text: &str) -> Result<Toolpath, ReadError> {
+    if text.trim().is_empty() {
+        return Err(ReadError::new(file, "file is empty"));
+    }
+    let mut it = Interp {
+        file,
+        scale: 1.0,
+        absolute: true,
+        ij_absolute: false,
+        motion: None,
+        feed: 0.0,
+        pos: [None; 3],
+        coord_system: 540,
+        nurbs: None,
+        moves: Vec::new(),
+    };
+    let mut percent: Option<bool> = None; // Some(open) once the first non-blank line is seen
+    let mut last_line = 0;
+    let mut ended = false;
+    for (idx, raw) in text.lines().enumerate() {
+        let lineno = idx + 1;
+        last_line = lineno;
+        let trimmed = raw.trim();
+        if trimmed.starts_with('%') {
+            match percent {
+                None => {
+                    percent = Some(true);
+                    continue;
+                }
+                Some(true) => {
+                    percent = Some(false);
+                    ended = true;
+                    break;
+                }
+                Some(false) => {}
+            }
+        }
+        if percent.is_none() && !trimmed.is_empty() {
+            percent = Some(false);
+        }
+        let words = tokenize(file, lineno, raw)?;
+        if it.line(lineno, &words)? {
+            if let Some(block) = &it.nurbs {
+                return Err(ReadError::at(
+                    file,
+                    lineno,
+                    None,
+                    format!("program ends inside the G5.2 NURBS block opened at line {}", block.line),
+                ));
+            }
+            ended = true;
+            break;
+        }
+    }
+    if percent == Some(true) && !ended {
+        return Err(ReadError::at(
+            file,
+            last_line,
+            None,
+            "file ended with no closing percent sign",
+        ));
+    }
+    if let Some(block) = &it.nurbs {
+        return Err(ReadError::at(
+            file,
+            last_line,
+            None,
+            format!(
+                "file ends inside the G5.2 NURBS block opened at line {} (missing G5.3)",
+                block.line
+            ),
+        ));
+    }
+    build(file, it.moves)
+}
+
+/// Turns interpreted moves into path elements.
+fn build(file: &str, moves: Vec<Move>) -> Result<Toolpath, ReadError> {
+    let three_d = moves.iter().any(|m| match m {
+        Move::Line { z_word, .. } | Move::Arc { z_word, .. } => *z_word,
+        _ => false,
+    });
+    let geometry = |line: usize| {
+        move |e: nurbs_rtcore::GeometryError| ReadError::at(file, line, None, format!("invalid curve: {e}"))
+    };
+    let need_z = |line: usize, z: Option<f64>| {
+        z.ok_or_else(|| {
+            ReadError::at(
+                file,
+                line,
+                None,
+                "the Z position is unknown at the start of this move, but the program moves in Z: position Z with G0 first",
+            )
+        })
+    };
+    let mut elements: Vec<PathElement> = Vec::new();
+    // Current polyline under construction: (first line, feed, points).
+    let mut poly: Option<(usize, f64, Vec<Vec<f64>>)> = None;
+    let mut pending_rapid: Option<(usize, usize)> = None;
+    let flush = |poly: &mut Option<(usize, f64, Vec<Vec<f64>>)>, elements: &mut Vec<PathElement>| {
+        if let Some((line, feed, pts)) = poly.take() {
+            let curve = polyline_nurbs(&pts).map_err(geometry(line))?;
+            elements.push(PathElement {
+                kind: ElementKind::Polyline,
+                curve,
+                feed: Some(feed),
+                source_line: Some(line),
+            });
+        }
+        Ok::<(), ReadError>(())
+    };
+    for m in moves {
+        let feed_move_line = match &m {
+            Move::Rapid { line, col, from, to } => {
+                if from != to && (!elements.is_empty() || poly.is_some()) && pending_rapid.is_none() {
+                    pending_rapid = Some((*line, *col));
+                }
+                None
+            }
+            Move::Line { line, from, to, .. } => {
+                let moves_xy = from[0] != to[0] || from[1] != to[1];
+                let moves_z = three_d && from[2] != to[2];
+                (moves_xy || moves_z).then_some(*line)
+            }
+            Move::Arc { line, .. } | Move::Nurbs { line, .. } => Some(*line),
+        };
+        let Some(_) = feed_move_line else { continue };
+        if let Some((rl, rc)) = pending_rapid.take() {
+            return Err(ReadError::at(
+                file,
+                rl,
+                Some(rc),
+                "G0 rapid between feed moves is not supported: a toolpath is one continuous feed motion (split the program)",
+            ));
+        }
+        match m {
+            Move::Rapid { .. } => unreachable!("rapids are skipped above"),
+            Move::Line {
+                line, from, to, feed, ..
+            } => {
+                let point = |p: &Pos| -> Result<Vec<f64>, ReadError> {
+                    let (x, y) = (p[0].expect("checked"), p[1].expect("checked"));
+                    Ok(if three_d {
+                        vec![x, y, need_z(line, p[2])?]
+                    } else {
+                        vec![x, y]
+                    })
+                };
+                let (a, b) = (point(&from)?, point(&to)?);
+                match &mut poly {
+                    Some((_, f, pts)) if *f == feed && pts.last() == Some(&a) => pts.push(b),
+                    _ => {
+                        flush(&mut poly, &mut elements)?;
+                        poly = Some((line, feed, vec![a, b]));
+                    }
+                }
+            }
+            Move::Arc { line, arc, z, feed, .. } => {
+                flush(&mut poly, &mut elements)?;
+                let z = if three_d { Some(need_z(line, z)?) } else { None };
+                let curve = arc_nurbs(&arc, z).map_err(geometry(line))?;
+                elements.push(PathElement {
+                    kind: ElementKind::Arc,
+                    curve,
+                    feed: Some(feed),
+                    source_line: Some(line),
+                });
+            }
+            Move::Nurbs {
+                line,
+                order,
+                points,
+                weights,
+                z,
+                feed,
+            } => {
+                flush(&mut poly, &mut elements)?;
+                let z = if three_d { Some(need_z(line, z)?) } else { None };
+                let pts: Vec<Vec<f64>> = points
+                    .iter()
+                    .map(|p| match z {
+                        Some(z) => vec![p[0], p[1], z],
+                        None => vec![p[0], p[1]],
+                    })
+                    .collect();
+                let knots = linuxcnc_knot_vector(pts.len(), order);
+                let curve = Nurbs::new(order - 1, knots, &pts, Some(weights)).map_err(geometry(line))?;
+                elements.push(PathElement {
+                    kind: ElementKind::Nurbs,
+                    curve,
+                    feed: Some(feed),
+                    source_line: Some(line),
+                });
+            }
+        }
+    }
+    flush(&mut poly, &mut elements)?;
+    if elements.is_empty() {
+        return Err(ReadError::new(
+            file,
+            "the program contains no feed moves (G1, G2, G3 or G5.2/G5.3)",
+        ));
+    }
+    Ok(Toolpath { elements })
+}

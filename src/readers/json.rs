@@ -73,12 +73,19 @@ pub fn parse(file: &str, text: &str) -> Result<Toolpath, ReadError> {
         if top_points.len() != points.len() {
             return Err(ReadError::new(
                 file,
-                format!("{} top_control_points for {} control_points", top_points.len(), points.len()),
+                format!(
+                    "{} top_control_points for {} control_points",
+                    top_points.len(),
+                    points.len()
+                ),
             ));
         }
         let top = Nurbs::new(degree, knots, &top_points, weights).map_err(geometry_error)?;
         curve = curve.with_top_curve(&top).map_err(|_| {
-            ReadError::new(file, "top_control_points must have the same dimension (3) as control_points")
+            ReadError::new(
+                file,
+                "top_control_points must have the same dimension (3) as control_points",
+            )
         })?;
     }
     if let Some(f) = raw.feed_mm_s {
@@ -87,6 +94,11 @@ pub fn parse(file: &str, text: &str) -> Result<Toolpath, ReadError> {
         }
     }
     Ok(Toolpath {
-        elements: vec![PathElement { kind: ElementKind::Nurbs, curve, feed: raw.feed_mm_s, source_line: None }],
+        elements: vec![PathElement {
+            kind: ElementKind::Nurbs,
+            curve,
+            feed: raw.feed_mm_s,
+            source_line: None,
+        }],
     })
 }

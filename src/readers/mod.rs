@@ -24,10 +24,20 @@ pub struct ReadError {
 
 impl ReadError {
     pub fn new(file: &str, message: impl Into<String>) -> Self {
-        ReadError { file: file.to_string(), line: None, column: None, message: message.into() }
+        ReadError {
+            file: file.to_string(),
+            line: None,
+            column: None,
+            message: message.into(),
+        }
     }
     pub fn at(file: &str, line: usize, column: Option<usize>, message: impl Into<String>) -> Self {
-        ReadError { file: file.to_string(), line: Some(line), column, message: message.into() }
+        ReadError {
+            file: file.to_string(),
+            line: Some(line),
+            column,
+            message: message.into(),
+        }
     }
 }
 
@@ -69,9 +79,8 @@ impl Format {
 /// Reads a toolpath, choosing the reader by file extension.
 pub fn read_toolpath(path: &Path) -> Result<Toolpath, ReadError> {
     let name = path.display().to_string();
-    let format = Format::from_path(path).ok_or_else(|| {
-        ReadError::new(&name, "unknown file type: expected .json, .ngc/.nc/.gcode/.tap or .dxf")
-    })?;
+    let format = Format::from_path(path)
+        .ok_or_else(|| ReadError::new(&name, "unknown file type: expected .json, .ngc/.nc/.gcode/.tap or .dxf"))?;
     match format {
         Format::Json => {
             let text = std::fs::read_to_string(path).map_err(|e| ReadError::new(&name, e.to_string()))?;

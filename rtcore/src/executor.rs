@@ -1,0 +1,163 @@
+//! The per-period interpolator: turns a stream of segment records into curve positions.
+//!
+//! Time runs continuously across segments: a sample at `t` in a segment that ends at `T < t`
+//! falls `t - T` into the next one, so segment boundaries need not lie on the servo period. The
+//! arc length of a sample is the exact S-curve distance; [`rk2pc_step`] turns it into the curve
+//! parameter. The planner runs this very code to check its plan, so what the servo thread
+//! produces is what was checked.
+
+use crate::interp::{rk2pc_step, PathCursor};
+use crate::nurbs::CurveView;
+use crate::records::SegmentRecord;
+use crate::scurve::SCurveTable;
+use crate::Vector;
+
+pub use crate::nurbs::Derivatives as Derivs;
+
+/// Curves (path elements) addressed by the index in a record's flags.
+pub trait CurveSet {
+    fn curve(&self, index: usize) -> Option<CurveView<'_>>;
+    /// Number of tool-tip coordinates (the rest of a 6-D curve is the tool-axis top curve).
+    fn tip_axes(&self) -> usize;
+}
+
+/// One interpolated setpoint.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sample {
+    pub curve: usize,
+    pub u: f64,
+    pub s: f64,
+    pub point: Vector,
+    /// Planned feed and tangential acceleration at this sample.
+    pub feed: f64,
+    pub accel: f64,
+}
+
+/// What one period produced.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Step {
+    Sample(Sample),
+    /// The sample falls beyond the loaded segments and no next record was available; nothing
+    /// changed (the caller decides: wait, or stop).
+    Starved,
+    /// The last segment has been completed; the position stays at the end.
+    Finished,
+    /// A record refers to a curve that does not exist or is malformed.
+    BadRecord,
+}
+
+/// Interpolation state between periods (plain data, `Copy`, so the planner can checkpoint it).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Interpolator {
+    cursor: PathCursor,
+    curve: usize,
+    record: SegmentRecord,
+    table: SCurveTable,
+    /// Time of the last sample relative to the start of the loaded segment.
+    t_local: f64,
+    loaded: bool,
+    finished: bool,
+}
+
+impl Interpolator {
+    /// An interpolator that has not started (the first record positions it).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+    pub fn cursor(&self) -> &PathCursor {
+        &self.cursor
+    }
+    pub fn curve_index(&self) -> usize {
+        self.curve
+    }
+    /// The loaded segment record, if any.
+    pub fn record(&self) -> Option<&SegmentRecord> {
+        self.loaded.then_some(&self.record)
+    }
+    /// Time left in the loaded segment after the last sample (s).
+    pub fn time_left_in_segment(&self) -> f64 {
+        if self.loaded {
+            (self.table.total_time() - self.t_local).max(0.0)
+        } else {
+            0.0
+        }
+    }
+
+    fn load<C: CurveSet + ?Sized>(&mut self, curves: &C, record: SegmentRecord, t_local: f64) -> bool {
+        let index = record.curve();
+        if !self.loaded || index != self.curve {
+            let Some(view) = curves.curve(index) else { return false };
+            self.cursor = PathCursor::at(&view, curves.tip_axes(), record.u_start, record.s_start);
+            self.curve = index;
+        }
+        self.record = record;
+        self.table = record.profile().table();
+        self.t_local = t_local;
+        self.loaded = true;
+        true
+    }
+
+    /// Advances one period `dt`, pulling records from `next` as segments are used up.
+    pub fn step<C: CurveSet + ?Sized>(
+        &mut self,
+        curves: &C,
+        dt: f64,
+        next: &mut dyn FnMut() -> Option<SegmentRecord>,
+    ) -> Step {
+        if self.finished {
+            return Step::Finished;
+        }
+        if !self.loaded {
+            match next() {
+                // The first sample lands on the segment start.
+                Some(r) => {
+                    if !self.load(curves, r, -dt) {
+                        return Step::BadRecord;
+                    }
+                }
+                None => return Step::Starved,
+            }
+        }
+        loop {
+            let total = self.table.total_time();
+            if self.t_local + dt <= total || self.record.is_last() {
+                break;
+            }
+            match next() {
+                // The last sample lies before the new segment's start: negative local time.
+                Some(r) => {
+                    if !self.load(curves, r, self.t_local - total) {
+                        return Step::BadRecord;
+                    }
+                }
+                None => return Step::Starved,
+            }
+        }
+        let t = (self.t_local + dt).min(self.table.total_time());
+        let Some(view) = curves.curve(self.curve) else {
+            return Step::BadRecord;
+        };
+        let state = self.table.state_at(t);
+        let s_target = self.record.s_start + state.s;
+        if self.record.is_last() && t >= self.table.total_time() {
+            // End of the path: land exactly on the end parameter, at rest.
+            self.cursor = PathCursor::at(&view, curves.tip_axes(), self.record.u_end, s_target);
+            self.finished = true;
+        } else {
+            self.cursor = rk2pc_step(&view, curves.tip_axes(), &self.cursor, s_target);
+        }
+        self.t_local = t;
+        Step::Sample(Sample {
+            curve: self.curve,
+            u: self.cursor.u,
+            s: self.cursor.s,
+            point: self.cursor.point,
+            feed: state.v,
+            accel: state.a,
+        })
+    }
+}

@@ -1,0 +1,44 @@
+#!/bin/bash
+# Plans every benchmark case with the release build, verifies each output with
+# `nurbs-plan verify`, and prints the README's table of motion and planning times.
+# Usage: scripts/figures.sh  (after `cargo build --release --bin nurbs-plan`)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=target/release/nurbs-plan
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
+cases=(
+  "butterfly|lab set 1|$lab1|2.404|3.163"
+  "butterfly|lab set 2|$lab2|1.609|"
+  "trident|lab set 1|$lab1|0.721|"
+  "trident|lab set 2|$lab2|0.483|"
+  "fan|lab set 1|$lab1|1.783|"
+  "fan|lab set 2|$lab2|1.194|"
+  "open_pocket|lab set 1 (tip)|$lab1||"
+  "open_pocket|lab set 2 (tip)|$lab2||"
+  "fan_5axis|lab set 1 (tip)|$lab1||"
+  "fan_5axis|lab set 2 (tip)|$lab2||"
+  "butterfly|F40 A500 J2e4|--feed 40 --accel 500 --jerk 2e4 --chord-tol 0.001 --period 0.00025||"
+  "butterfly|F250 A2000 J2e4|--feed 250 --accel 2000 --jerk 2e4 --chord-tol 0.001 --period 0.00025|3.512|4.562"
+  "butterfly|F300 A2500 J5e4|--feed 300 --accel 2500 --jerk 5e4 --chord-tol 0.001 --period 0.00025||"
+  "trident|VPOp limits|--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006|1.650|1.668"
+)
+echo "| curve | limits | motion time (s) | / lower bound | / best known | plan time (ms) | plan / motion | max jerk / limit | verify |"
+echo "|---|---|---|---|---|---|---|---|---|"
+for c in "${cases[@]}"; do
+  IFS='|' read -r curve name lim lb best <<<"$c"
+  # shellcheck disable=SC2086
+  $bin plan examples/$curve.json $lim --out "$dir/o.csv" --summary "$dir/s.json" 2>/dev/null
+  # shellcheck disable=SC2086
+  if $bin verify "$dir/o.csv" examples/$curve.json $lim >/dev/null; then ok=pass; else ok=FAIL; fi
+  python3 - "$dir/s.json" "$curve" "$name" "$lb" "$best" "$ok" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1])); curve, name, lb, best, ok = sys.argv[2:7]
+t = s["motion_time_s"]
+ratio = lambda x: f"{t / float(x):.2f}" if x else "-"
+jr = max(a / b for a, b in zip(s["max_axial_jerk"], s["limits"]["jerk"]))
+print(f"| {curve} | {name} | {t:.4f} | {ratio(lb)} | {ratio(best)} | {s['plan_time_s']*1e3:.1f} | {100*s['plan_time_s']/t:.1f} % | {jr:.4f} | {ok} |")
+PY
+done

@@ -1,0 +1,616 @@
+//! The feedrate planner of paper 000 (Erwinski, Wawrzak, Paprocki 2022, section III, Fig. 3),
+//! made strict: every segment is interpolated with the realtime interpolator itself and checked
+//! by finite differences; a segment that still violates after the golden-section searches of
+//! jerk and acceleration (steps 1-7) gets a lower end feed (step 8) and, failing that, a lower
+//! start feed by re-planning the previous segment (step 9). Nothing that violates is emitted.
+
+use super::axial::FiniteDifferences;
+use super::flf::{critical_points, flf, CriticalPoint, FlfScan};
+use super::scurve_fit::{fit, reachable_feed};
+use super::simulate::{run_segment, SimState};
+use super::{Limits, LimitsError, PathCurves};
+use crate::geometry::{ArcLengthTable, Toolpath};
+use nurbs_rtcore::executor::CurveSet;
+use nurbs_rtcore::math::{dot, norm};
+use nurbs_rtcore::records::{CURVE_SHIFT, FLAG_LAST};
+use nurbs_rtcore::scurve::SCurve;
+use nurbs_rtcore::SegmentRecord;
+use std::fmt;
+use std::time::Instant;
+
+/// Tuning of the planner (the paper's values by default).
+#[derive(Clone, Debug)]
+pub struct PlanOptions {
+    /// FLF samples per control point (step 1).
+    pub samples_per_control_point: usize,
+    /// Fraction of the FLF acceleration and jerk caps used as segment end feeds, leaving room
+    /// for the tangential acceleration terms.
+    pub flf_margin: f64,
+}
+
+impl Default for PlanOptions {
+    fn default() -> Self {
+        PlanOptions {
+            samples_per_control_point: 500,
+            flf_margin: 0.95,
+        }
+    }
+}
+
+/// A finished plan.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    pub records: Vec<SegmentRecord>,
+    /// Critical points per curve (after refinement), as (curve, point).
+    pub critical_points: Vec<(usize, CriticalPoint)>,
+    /// FLF scans per curve (for plots and reports).
+    pub scans: Vec<FlfScan>,
+    pub motion_time: f64,
+    /// Wall time spent planning (s) and until the first record was ready (s).
+    pub plan_time: f64,
+    pub first_record_time: f64,
+    /// Limits as used (one value per axis).
+    pub limits: Limits,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum PlanError {
+    Limits(LimitsError),
+    EmptyPath,
+    MixedDimensions,
+    /// No feed profile within the limits could be found (should not happen; reported rather
+    /// than emitting a violating plan).
+    Infeasible {
+        curve: usize,
+        u: f64,
+        reason: String,
+    },
+}
+
+impl fmt::Display for PlanError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            PlanError::Limits(e) => write!(f, "{e}"),
+            PlanError::EmptyPath => write!(f, "the toolpath has no elements"),
+            PlanError::MixedDimensions => write!(f, "the toolpath mixes 2-D and 3-D elements"),
+            PlanError::Infeasible { curve, u, reason } => {
+                write!(
+                    f,
+                    "no feed profile within the limits near curve {curve}, u = {u}: {reason}"
+                )
+            }
+        }
+    }
+}
+impl std::error::Error for PlanError {}
+
+impl From<LimitsError> for PlanError {
+    fn from(e: LimitsError) -> Self {
+        PlanError::Limits(e)
+    }
+}
+
+/// A segment boundary: where the previous segment ends and the next begins (the same point;
+/// at a join of two path elements the curve changes).
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    /// Curve and parameter of the segment ending here.
+    #[allow(dead_code)]
+    end_curve: usize,
+    end_u: f64,
+    end_s: f64,
+    /// Curve and parameter of the segment starting here.
+    start_curve: usize,
+    start_u: f64,
+    start_s: f64,
+    /// Feed cap at this point.
+    cap: f64,
+}
+
+/// Plans `toolpath` under `limits`; every record is passed to `on_record` as soon as it is final.
+pub fn plan(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    options: &PlanOptions,
+    on_record: &mut dyn FnMut(&SegmentRecord),
+) -> Result<Plan, PlanError> {
+    let started = Instant::now();
+    if toolpath.elements.is_empty() {
+        return Err(PlanError::EmptyPath);
+    }
+    let tip = toolpath.tip_dim();
+    if toolpath.elements.iter().any(|e| e.curve.tip_dim() != tip) {
+        return Err(PlanError::MixedDimensions);
+    }
+    let limits = limits.for_axes(tip)?;
+    let curves = PathCurves::new(toolpath);
+    let tables: Vec<ArcLengthTable> = toolpath
+        .elements
+        .iter()
+        .map(|e| ArcLengthTable::new(&e.curve))
+        .collect();
+
+    // Steps 1-3 per curve: FLF scan and refined minima; a programmed feed lowers the cap.
+    let mut scans = Vec::new();
+    let mut criticals = Vec::new();
+    let mut nodes: Vec<Node> = Vec::new();
+    for (c, element) in toolpath.elements.iter().enumerate() {
+        let mut lim = limits.clone();
+        if let Some(f) = element.feed {
+            lim.feed = lim.feed.min(f);
+        }
+        let view = curves.view(c);
+        let scan = FlfScan::new(view, tip, &lim, options.samples_per_control_point);
+        let points = critical_points(view, tip, &lim, &scan);
+        let cap_of = |p: &CriticalPoint| {
+            let v = flf(view, tip, &lim, p.u);
+            v.speed_cap().min(options.flf_margin * v.accel.min(v.jerk))
+        };
+        let (u0, u1) = (view.u_min(), view.u_max());
+        let start_cap = if c == 0 { 0.0 } else { join_cap(&curves, &limits, c) };
+        match nodes.last_mut() {
+            Some(last) => {
+                last.start_curve = c;
+                last.start_u = u0;
+                last.start_s = 0.0;
+                last.cap = last.cap.min(start_cap);
+            }
+            None => nodes.push(Node {
+                end_curve: 0,
+                end_u: u0,
+                end_s: 0.0,
+                start_curve: 0,
+                start_u: u0,
+                start_s: 0.0,
+                cap: 0.0,
+            }),
+        }
+        // Interior knots where the curve is only C0 or C1: corners stop, curvature jumps cap.
+        let mut stops: Vec<CriticalPoint> = interior_breaks(view, tip, &lim)
+            .into_iter()
+            .map(|(u, cap)| CriticalPoint { u, flf: cap })
+            .collect();
+        let mut all: Vec<(CriticalPoint, Option<f64>)> = points.iter().map(|p| (*p, None)).collect();
+        // Critical points too close to a break are superseded by it.
+        all.retain(|(p, _)| stops.iter().all(|b| (b.u - p.u).abs() > 1e-9 * (u1 - u0)));
+        all.extend(stops.drain(..).map(|b| (b, Some(b.flf))));
+        all.sort_by(|a, b| a.0.u.total_cmp(&b.0.u));
+        for (p, fixed_cap) in &all {
+            let p = &p;
+            let s = tables[c].length_to(&element.curve, p.u);
+            let cap = fixed_cap.unwrap_or_else(|| cap_of(p));
+            nodes.push(Node {
+                end_curve: c,
+                end_u: p.u,
+                end_s: s,
+                start_curve: c,
+                start_u: p.u,
+                start_s: s,
+                cap,
+            });
+            criticals.push((c, **p));
+        }
+        let s1 = tables[c].total();
+        let end_cap = if c + 1 == toolpath.elements.len() {
+            0.0
+        } else {
+            join_cap(&curves, &limits, c + 1)
+        };
+        nodes.push(Node {
+            end_curve: c,
+            end_u: u1,
+            end_s: s1,
+            start_curve: c,
+            start_u: u1,
+            start_s: s1,
+            cap: end_cap,
+        });
+        // Feed cap inside every segment of this curve: no interior point may need less than the
+        // segment's ends (insert the dip as a node otherwise).
+        scans.push(scan);
+    }
+    // Peak caps (feed, chord, axial velocity) inside each segment, inserting nodes at dips.
+    let mut k = 0;
+    let mut peak_caps = Vec::new();
+    while k + 1 < nodes.len() {
+        let (a, b) = (nodes[k], nodes[k + 1]);
+        let scan = &scans[a.start_curve];
+        let dip = scan.min_speed_cap_between(a.start_u, b.end_u);
+        match dip {
+            Some((m, u)) if m < a.cap.max(b.cap) && u > a.start_u && u < b.end_u && m < a.cap.min(b.cap) => {
+                let c = a.start_curve;
+                let s = tables[c].length_to(&toolpath.elements[c].curve, u);
+                nodes.insert(
+                    k + 1,
+                    Node {
+                        end_curve: c,
+                        end_u: u,
+                        end_s: s,
+                        start_curve: c,
+                        start_u: u,
+                        start_s: s,
+                        cap: m,
+                    },
+                );
+            }
+            _ => {
+                let element_feed = toolpath.elements[a.start_curve].feed.unwrap_or(f64::INFINITY);
+                peak_caps.push(limits.feed.min(element_feed));
+                k += 1;
+            }
+        }
+    }
+    let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
+    let (acc, jerk) = (limits.min_accel(), limits.min_jerk());
+
+    // Look-ahead: forward and backward reachability with the nominal tangential limits.
+    let mut feeds: Vec<f64> = nodes.iter().map(|n| n.cap).collect();
+    for k in (0..lengths.len()).rev() {
+        feeds[k] = feeds[k].min(reachable_feed(feeds[k + 1], lengths[k], acc, jerk, feeds[k]));
+    }
+    for k in 0..lengths.len() {
+        feeds[k + 1] = feeds[k + 1].min(reachable_feed(feeds[k], lengths[k], acc, jerk, feeds[k + 1]));
+    }
+
+    // Segment by segment with axial checks and back-tracking.
+    let nseg = lengths.len();
+    let mut records: Vec<SegmentRecord> = Vec::with_capacity(nseg);
+    let mut states: Vec<SimState> = vec![SimState::start(tip, limits.period)];
+    let mut start_feeds: Vec<f64> = vec![0.0];
+    let check_limits = strict(&limits);
+    let mut k = 0;
+    let mut backtracks = 0usize;
+    while k < nseg {
+        let ctx = SegmentContext {
+            curves: &curves,
+            limits: &check_limits,
+            node_start: nodes[k],
+            node_end: nodes[k + 1],
+            length: lengths[k],
+            peak_cap: peak_caps[k],
+            last: k + 1 == nseg,
+            seq: k as u32,
+            accel: acc,
+            jerk,
+        };
+        let outcome = solve_segment(&ctx, start_feeds[k], feeds[k + 1], &states[k]);
+        if std::env::var_os("NURBS_PLAN_DEBUG").is_some() {
+            eprintln!(
+                "seg {k}/{nseg} u {:.6}..{:.6} len {:.3e} v0 {:.6e} v1 {:.6e} -> {:?}",
+                nodes[k].start_u,
+                nodes[k + 1].end_u,
+                lengths[k],
+                start_feeds[k],
+                feeds[k + 1],
+                outcome.as_ref().map(|r| r.0.durations).map_err(|e| *e)
+            );
+        }
+        match outcome {
+            Ok((record, state)) => {
+                records.truncate(k);
+                records.push(record);
+                states.truncate(k + 1);
+                states.push(state);
+                start_feeds.truncate(k + 1);
+                let end_v = record.profile().table().end().v;
+                start_feeds.push(end_v);
+                k += 1;
+            }
+            Err(start_max) => {
+                backtracks += 1;
+                if k == 0 || backtracks > 50 * nseg + 100 {
+                    return Err(PlanError::Infeasible {
+                        curve: nodes[k].start_curve,
+                        u: nodes[k].start_u,
+                        reason: "segment violates the axis limits even from its lowest start feed".into(),
+                    });
+                }
+                // Step 9: the previous segment must end slower.
+                feeds[k] = start_max.min(feeds[k]);
+                k -= 1;
+            }
+        }
+    }
+    let first_record_time = started.elapsed().as_secs_f64();
+    for r in &records {
+        on_record(r);
+    }
+    let motion_time = records.iter().map(|r| r.profile().total_time()).sum();
+    Ok(Plan {
+        records,
+        critical_points: criticals,
+        scans,
+        motion_time,
+        plan_time: started.elapsed().as_secs_f64(),
+        first_record_time,
+        limits,
+    })
+}
+
+/// Limits a hair below the user's, so that the check has headroom for the last rounding.
+fn strict(limits: &Limits) -> Limits {
+    let shrink = |v: &Vec<f64>| v.iter().map(|x| x * (1.0 - 1e-9)).collect();
+    Limits {
+        velocity: shrink(&limits.velocity),
+        acceleration: shrink(&limits.acceleration),
+        jerk: shrink(&limits.jerk),
+        ..limits.clone()
+    }
+}
+
+/// Interior knots of multiplicity >= degree - 1 (continuity C1 or less) with the feed cap
+/// there: zero where the tangent turns, else the curvature-jump cap of [`jump_cap`].
+fn interior_breaks(view: &nurbs_rtcore::CurveView, tip: usize, limits: &Limits) -> Vec<(f64, f64)> {
+    let p = view.degree();
+    let knots = view.knots();
+    let n = view.control_point_count();
+    let mut out = Vec::new();
+    let mut i = p + 1;
+    while i < n {
+        let mut m = 1;
+        while i + m < n && knots[i + m] == knots[i] {
+            m += 1;
+        }
+        if m + 1 >= p {
+            let u = knots[i];
+            let left = view.derivatives_left(u, 3);
+            let right = view.derivatives(u, 3);
+            out.push((u, jump_cap(&left, &right, tip, limits)));
+        }
+        i += m;
+    }
+    out
+}
+
+/// Feed cap across a point where the derivatives jump from `left` to `right` (parameter
+/// derivatives; converted to arc length here): zero at a tangent break, otherwise the axial
+/// acceleration jump at feed v, |dx''| v^2, must stay within one period's jerk.
+fn jump_cap(
+    left: &nurbs_rtcore::executor::Derivs,
+    right: &nurbs_rtcore::executor::Derivs,
+    tip: usize,
+    limits: &Limits,
+) -> f64 {
+    let to_arc = |d: &nurbs_rtcore::executor::Derivs| {
+        let g2 = dot(&d[1], &d[1], tip);
+        let g = g2.sqrt();
+        let mut x1 = [0.0; nurbs_rtcore::MAX_DIM];
+        let mut x2 = [0.0; nurbs_rtcore::MAX_DIM];
+        if g > 0.0 {
+            let c12 = dot(&d[1], &d[2], tip);
+            for i in 0..tip {
+                x1[i] = d[1][i] / g;
+                x2[i] = d[2][i] / g2 - d[1][i] * c12 / (g2 * g2);
+            }
+        }
+        (x1, x2, g)
+    };
+    let (l1, l2, gl) = to_arc(left);
+    let (r1, r2, gr) = to_arc(right);
+    let gap = norm(&nurbs_rtcore::math::sub(&left[0], &right[0]), tip);
+    if gap > 1e-9 || gl == 0.0 || gr == 0.0 || dot(&l1, &r1, tip) < 1.0 - 1e-12 {
+        return 0.0;
+    }
+    let mut cap = limits.feed;
+    for i in 0..tip {
+        let jump = (l2[i] - r2[i]).abs();
+        if jump > 0.0 {
+            cap = cap.min(0.5 * (limits.jerk[i] * limits.period / jump).sqrt());
+        }
+    }
+    cap
+}
+
+/// Feed cap where curve `c - 1` joins curve `c`: zero at a tangent break; otherwise the axial
+/// acceleration jump between the two curves must not exceed one period's jerk.
+fn join_cap(curves: &PathCurves, limits: &Limits, c: usize) -> f64 {
+    let (a, b) = (curves.view(c - 1), curves.view(c));
+    jump_cap(
+        &a.derivatives(a.u_max(), 3),
+        &b.derivatives(b.u_min(), 3),
+        limits.velocity.len(),
+        limits,
+    )
+}
+
+struct SegmentContext<'a> {
+    curves: &'a PathCurves<'a>,
+    limits: &'a Limits,
+    node_start: Node,
+    node_end: Node,
+    length: f64,
+    peak_cap: f64,
+    last: bool,
+    seq: u32,
+    accel: f64,
+    jerk: f64,
+}
+
+/// One candidate profile, interpolated and measured.
+struct Trial {
+    record: SegmentRecord,
+    state: SimState,
+    /// Worst peak / limit ratio (> 1 is a violation), eq. 22-23 sums, duration.
+    ratio: f64,
+    acc_violation: f64,
+    jerk_violation: f64,
+    duration: f64,
+}
+
+impl Trial {
+    fn ok(&self) -> bool {
+        self.ratio <= 1.0
+    }
+}
+
+fn make_record(ctx: &SegmentContext, profile: &SCurve) -> SegmentRecord {
+    let mut flags = (ctx.node_start.start_curve as u32) << CURVE_SHIFT;
+    if ctx.last {
+        flags |= FLAG_LAST;
+    }
+    SegmentRecord {
+        seq: ctx.seq,
+        flags,
+        u_start: ctx.node_start.start_u,
+        u_end: ctx.node_end.end_u,
+        s_start: ctx.node_start.start_s,
+        length: profile.table().length(),
+        feed_start: profile.feed_start,
+        durations: profile.durations,
+        jerks: profile.jerks,
+    }
+}
+
+fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, accel: f64, jerk: f64) -> Option<Trial> {
+    let profile = fit(v0, v1, ctx.length, ctx.peak_cap, accel, jerk).ok()?;
+    let record = make_record(ctx, &profile);
+    let mut state = *from;
+    state.check.reset_peaks();
+    // Chord error between consecutive samples, measured at the middle parameter (where the
+    // sagitta of a smooth arc peaks), with 10 % kept for the exact check.
+    let mut chord_ratio: f64 = 0.0;
+    let tip = ctx.limits.velocity.len();
+    let mut prev: Option<nurbs_rtcore::executor::Sample> = from.last_sample;
+    let mut last_sample = from.last_sample;
+    let eps = 0.9 * ctx.limits.chord_tolerance;
+    let sink = &mut |s: &nurbs_rtcore::executor::Sample| {
+        if let Some(p) = prev {
+            if p.curve == s.curve && s.u > p.u {
+                if let Some(view) = ctx.curves.curve(s.curve) {
+                    chord_ratio = chord_ratio.max(sagitta(&view, tip, &p, s) / eps);
+                }
+            }
+        }
+        prev = Some(*s);
+        last_sample = Some(*s);
+    };
+    if !run_segment(ctx.curves, ctx.limits, &mut state, record, sink) {
+        return None;
+    }
+    let check: &FiniteDifferences = &state.check;
+    let ratio = check.worst_ratio(ctx.limits).max(chord_ratio);
+    state.last_sample = last_sample;
+    let n = check.peaks.samples.max(1) as f64;
+    Some(Trial {
+        record,
+        state,
+        ratio,
+        acc_violation: check.peaks.acc_violation / n,
+        jerk_violation: check.peaks.jerk_violation / n,
+        duration: profile.total_time(),
+    })
+}
+
+/// Distance from the curve point at the middle parameter to the chord between two samples.
+fn sagitta(
+    view: &nurbs_rtcore::CurveView,
+    tip: usize,
+    a: &nurbs_rtcore::executor::Sample,
+    b: &nurbs_rtcore::executor::Sample,
+) -> f64 {
+    let m = view.point(0.5 * (a.u + b.u));
+    let ab = nurbs_rtcore::math::sub(&b.point, &a.point);
+    let am = nurbs_rtcore::math::sub(&m, &a.point);
+    let len2 = dot(&ab, &ab, tip);
+    let t = if len2 > 0.0 {
+        (dot(&am, &ab, tip) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let mut e = 0.0;
+    for i in 0..tip {
+        let d = am[i] - t * ab[i];
+        e += d * d;
+    }
+    e.sqrt()
+}
+
+/// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the
+/// paper's rules: violating vs violating, the smaller violation; both fine, the shorter; else
+/// the one without violation.
+fn golden(upper: f64, eval: &dyn Fn(f64) -> Option<Trial>, violation: &dyn Fn(&Trial) -> f64) -> Option<(f64, Trial)> {
+    let g = (5f64.sqrt() + 1.0) / 2.0;
+    let better = |a: &Option<Trial>, b: &Option<Trial>| -> bool {
+        match (a, b) {
+            (Some(x), Some(y)) => match (x.ok(), y.ok()) {
+                (true, true) => x.duration <= y.duration,
+                (false, false) => violation(x) <= violation(y),
+                (ok, _) => ok,
+            },
+            (Some(_), None) => true,
+            (None, _) => false,
+        }
+    };
+    let (mut a, mut b) = (0.0, upper);
+    let mut xl = b - (b - a) / g;
+    let mut xr = a + (b - a) / g;
+    let (mut fl, mut fr) = (eval(xl), eval(xr));
+    // Terminate at 0.1 % of the range (the paper's absolute 0.1 would take 30 steps at 2e5).
+    while b - a > 1e-3 * upper {
+        if better(&fl, &fr) {
+            b = xr;
+            xr = xl;
+            fr = fl;
+            xl = b - (b - a) / g;
+            fl = eval(xl);
+        } else {
+            a = xl;
+            xl = xr;
+            fl = fr;
+            xr = a + (b - a) / g;
+            fr = eval(xr);
+        }
+    }
+    if better(&fl, &fr) {
+        fl.map(|t| (xl, t))
+    } else {
+        fr.map(|t| (xr, t))
+    }
+}
+
+/// Plans one segment from feed `v0` (fixed: the previous segment ends there) towards `v1`.
+/// Returns the record and the state after it, or the highest start feed worth retrying with.
+fn solve_segment(
+    ctx: &SegmentContext,
+    v0: f64,
+    v1_target: f64,
+    from: &SimState,
+) -> Result<(SegmentRecord, SimState), f64> {
+    let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
+    for _attempt in 0..12 {
+        if let Some(t) = trial(ctx, from, v0, v1, ctx.accel, ctx.jerk) {
+            if std::env::var_os("NURBS_PLAN_DEBUG").is_some() {
+                eprintln!("  trial ratio {} peaks {:?}", t.ratio, t.state.check.peaks);
+            }
+            if t.ok() {
+                return Ok((t.record, t.state));
+            }
+        }
+        // Steps 3-5: jerk, then step 6: acceleration.
+        let by_jerk = golden(ctx.jerk, &|j| trial(ctx, from, v0, v1, ctx.accel, j), &|t| {
+            t.jerk_violation + t.acc_violation
+        });
+        let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
+        if let Some((_, t)) = &by_jerk {
+            if t.ok() {
+                // Acceleration may still be raised back? It is at its nominal value already.
+                let (record, state) = (t.record, t.state);
+                return Ok((record, state));
+            }
+        }
+        let by_acc = golden(ctx.accel, &|a| trial(ctx, from, v0, v1, a, j), &|t| {
+            t.acc_violation + t.jerk_violation
+        });
+        if let Some((_, t)) = by_acc {
+            if t.ok() {
+                return Ok((t.record, t.state));
+            }
+        }
+        // Step 8: a lower end feed.
+        if v1 <= 1e-6 {
+            break;
+        }
+        v1 = if v1 < 1e-3 { 0.0 } else { 0.5 * v1 };
+    }
+    Err(0.5 * v0)
+}

@@ -1,0 +1,255 @@
+//! Feedrate limit function (paper 000, eq. 10-14) and its critical points (section III, steps
+//! 1-5).
+//!
+//! The paper writes the centripetal caps with the curvature and the smallest axis limit
+//! (eq. 11-12). Here they are written per axis with the derivatives of the axis positions with
+//! respect to arc length: at constant feed v, axis i moves with velocity x_i' v, acceleration
+//! x_i'' v^2 and jerk x_i''' v^3 exactly, so
+//!   F <= V_i / |x_i'|,  F <= sqrt(A_i / |x_i''|),  F <= cbrt(J_i / |x_i'''|).
+//! For a planar curve |x''| = kappa, so the acceleration cap is never below eq. 11; the jerk cap
+//! also counts the change of curvature (x''' = kappa' n - kappa^2 t), which eq. 12 leaves out.
+
+use super::Limits;
+use nurbs_rtcore::math::dot;
+use nurbs_rtcore::{CurveView, Vector};
+
+/// The components of the FLF at one parameter value (mm/s).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FlfValue {
+    /// Programmed feed and axial velocity caps.
+    pub feed: f64,
+    /// Chord error cap, eq. 10.
+    pub chord: f64,
+    /// Axial acceleration cap at constant feed (eq. 11 per axis).
+    pub accel: f64,
+    /// Axial jerk cap at constant feed (eq. 12 per axis).
+    pub jerk: f64,
+}
+
+impl FlfValue {
+    /// FLF = min of the components (eq. 14).
+    pub fn value(&self) -> f64 {
+        self.feed.min(self.chord).min(self.accel).min(self.jerk)
+    }
+    /// The caps that limit speed alone (feed, axial velocity, chord error).
+    pub fn speed_cap(&self) -> f64 {
+        self.feed.min(self.chord)
+    }
+}
+
+/// Derivatives of the tool-tip coordinates with respect to arc length at `u` (Faa di Bruno with
+/// u_s = 1/g, u_ss = -(C'.C'')/g^4, u_sss = -(|C''|^2 + C'.C''')/g^5 + 4 (C'.C'')^2/g^7).
+pub fn arc_derivatives(curve: &CurveView, tip: usize, u: f64) -> [Vector; 4] {
+    let d = curve.derivatives(u, 3);
+    let g2 = dot(&d[1], &d[1], tip);
+    let g = g2.sqrt();
+    let mut out = [[0.0; nurbs_rtcore::MAX_DIM]; 4];
+    out[0] = d[0];
+    if g == 0.0 {
+        return out;
+    }
+    let c12 = dot(&d[1], &d[2], tip);
+    let u_s = 1.0 / g;
+    let u_ss = -c12 / (g2 * g2);
+    let u_sss =
+        -(dot(&d[2], &d[2], tip) + dot(&d[1], &d[3], tip)) / (g2 * g2 * g) + 4.0 * c12 * c12 / (g2 * g2 * g2 * g);
+    for i in 0..tip {
+        out[1][i] = d[1][i] * u_s;
+        out[2][i] = d[2][i] * u_s * u_s + d[1][i] * u_ss;
+        out[3][i] = d[3][i] * u_s * u_s * u_s + 3.0 * d[2][i] * u_s * u_ss + d[1][i] * u_sss;
+    }
+    out
+}
+
+/// FLF components at `u`.
+pub fn flf(curve: &CurveView, tip: usize, limits: &Limits, u: f64) -> FlfValue {
+    let x = arc_derivatives(curve, tip, u);
+    if x[1][..tip].iter().all(|c| *c == 0.0) {
+        // C'(u) = 0: a cusp or a degenerate point, where the direction may turn: stop.
+        return FlfValue {
+            feed: 0.0,
+            chord: 0.0,
+            accel: 0.0,
+            jerk: 0.0,
+        };
+    }
+    let mut v = FlfValue {
+        feed: limits.feed,
+        chord: f64::INFINITY,
+        accel: f64::INFINITY,
+        jerk: f64::INFINITY,
+    };
+    let mut kappa2 = 0.0;
+    for i in 0..tip {
+        v.feed = v.feed.min(limits.velocity[i] / x[1][i].abs());
+        v.accel = v.accel.min((limits.acceleration[i] / x[2][i].abs()).sqrt());
+        v.jerk = v.jerk.min((limits.jerk[i] / x[3][i].abs()).cbrt());
+        kappa2 += x[2][i] * x[2][i];
+    }
+    // Eq. 10: the chord of an arc of radius rho with sagitta eps is 2 sqrt(rho^2 - (rho-eps)^2),
+    // covered in one period. Below rho = eps the chord is at most the diameter.
+    let eps = limits.chord_tolerance;
+    if kappa2 > 0.0 {
+        let rho = 1.0 / kappa2.sqrt();
+        let half_chord = if rho > eps {
+            (rho * rho - (rho - eps) * (rho - eps)).sqrt()
+        } else {
+            rho
+        };
+        v.chord = 2.0 * half_chord / limits.period;
+    }
+    v
+}
+
+/// A local minimum of the FLF where a segment starts or ends (its feed: the FLF there).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CriticalPoint {
+    pub u: f64,
+    pub flf: f64,
+}
+
+/// FLF samples over a curve: `u[i]`, `value[i]` (full FLF) and `speed[i]` (speed caps only).
+#[derive(Clone, Debug, Default)]
+pub struct FlfScan {
+    pub u: Vec<f64>,
+    pub value: Vec<f64>,
+    pub speed: Vec<f64>,
+    pub components: Vec<FlfValue>,
+}
+
+impl FlfScan {
+    /// Step 1: sample at `per_point` equidistant parameters per control point.
+    pub fn new(curve: &CurveView, tip: usize, limits: &Limits, per_point: usize) -> Self {
+        let n = (curve.control_point_count() * per_point).max(2);
+        let (a, b) = (curve.u_min(), curve.u_max());
+        let mut scan = FlfScan::default();
+        for k in 0..=n {
+            let u = a + (b - a) * k as f64 / n as f64;
+            let f = flf(curve, tip, limits, u);
+            scan.u.push(u);
+            scan.value.push(f.value());
+            scan.speed.push(f.speed_cap());
+            scan.components.push(f);
+        }
+        scan
+    }
+
+    /// Speed cap at `u`, linearly interpolated between the (uniform) samples.
+    pub fn speed_cap_at(&self, u: f64) -> f64 {
+        let n = self.u.len() - 1;
+        let (a, b) = (self.u[0], self.u[n]);
+        let x = ((u - a) / (b - a) * n as f64).clamp(0.0, n as f64);
+        let i = (x.floor() as usize).min(n - 1);
+        let f = x - i as f64;
+        self.speed[i] * (1.0 - f) + self.speed[i + 1] * f
+    }
+
+    /// Smallest speed cap among the samples strictly inside `(u0, u1)`, with its parameter.
+    pub fn min_speed_cap_between(&self, u0: f64, u1: f64) -> Option<(f64, f64)> {
+        let i0 = self.u.partition_point(|&u| u <= u0);
+        let i1 = self.u.partition_point(|&u| u < u1);
+        (i0..i1)
+            .map(|i| (self.speed[i], self.u[i]))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+    }
+}
+
+/// Steps 2-3: samples lower than their five neighbours on each side, refined by Brent's method
+/// inside the bracket of their neighbours.
+pub fn critical_points(curve: &CurveView, tip: usize, limits: &Limits, scan: &FlfScan) -> Vec<CriticalPoint> {
+    const NEIGHBOURS: usize = 5;
+    let v = &scan.value;
+    let mut out = Vec::new();
+    let n = v.len();
+    let mut i = 1;
+    while i + 1 < n {
+        let lo = i.saturating_sub(NEIGHBOURS);
+        let hi = (i + NEIGHBOURS).min(n - 1);
+        let is_min = (lo..=hi).all(|k| k == i || v[i] <= v[k]) && (lo..=hi).any(|k| v[i] < v[k]);
+        if is_min {
+            let f = |u: f64| flf(curve, tip, limits, u).value();
+            let (u, fu) = brent_min(&f, scan.u[i - 1], scan.u[i], scan.u[i + 1]);
+            let (u, fu) = if fu <= v[i] { (u, fu) } else { (scan.u[i], v[i]) };
+            out.push(CriticalPoint { u, flf: fu });
+            i += NEIGHBOURS; // a plateau yields one point
+        } else {
+            i += 1;
+        }
+    }
+    out
+}
+
+/// Brent's minimisation on the bracket `a < b < c` (Numerical Recipes `brent`), to a parameter
+/// tolerance of 1e-10 relative.
+pub fn brent_min(f: &dyn Fn(f64) -> f64, a: f64, b: f64, c: f64) -> (f64, f64) {
+    const CGOLD: f64 = 0.381_966_011_250_105_1;
+    let (mut a, mut bb) = (a.min(c), a.max(c));
+    let (mut x, mut w, mut v) = (b, b, b);
+    let mut fx = f(x);
+    let (mut fw, mut fv) = (fx, fx);
+    let (mut d, mut e): (f64, f64) = (0.0, 0.0);
+    for _ in 0..100 {
+        let xm = 0.5 * (a + bb);
+        let tol1 = 1e-10 * x.abs() + 1e-14;
+        let tol2 = 2.0 * tol1;
+        if (x - xm).abs() <= tol2 - 0.5 * (bb - a) {
+            break;
+        }
+        if e.abs() > tol1 {
+            let r = (x - w) * (fx - fv);
+            let mut q = (x - v) * (fx - fw);
+            let mut p = (x - v) * q - (x - w) * r;
+            q = 2.0 * (q - r);
+            if q > 0.0 {
+                p = -p;
+            }
+            q = q.abs();
+            let etemp = e;
+            e = d;
+            if p.abs() >= (0.5 * q * etemp).abs() || p <= q * (a - x) || p >= q * (bb - x) {
+                e = if x >= xm { a - x } else { bb - x };
+                d = CGOLD * e;
+            } else {
+                d = p / q;
+                let u = x + d;
+                if u - a < tol2 || bb - u < tol2 {
+                    d = tol1.copysign(xm - x);
+                }
+            }
+        } else {
+            e = if x >= xm { a - x } else { bb - x };
+            d = CGOLD * e;
+        }
+        let u = if d.abs() >= tol1 { x + d } else { x + tol1.copysign(d) };
+        let fu = f(u);
+        if fu <= fx {
+            if u >= x {
+                a = x;
+            } else {
+                bb = x;
+            }
+            v = w;
+            w = x;
+            x = u;
+            fv = fw;
+            fw = fx;
+            fx = fu;
+        } else {
+            if u < x {
+                a = u;
+            } else {
+                bb = u;
+            }
+            if fu <= fw || w == x {
+                v = w;
+                w = u;
+                fv = fw;
+                fw = fu;
+            } else if fu <= fv || v == x || v == w {
+                v = u;
+                fv = fu;
+            }
+        }
+    }
+    (x, fx)
+}

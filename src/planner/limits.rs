@@ -1,0 +1,85 @@
+//! Machine limits a plan must respect.
+
+use std::fmt;
+
+/// Feed, per-axis velocity/acceleration/jerk limits, chord tolerance and servo period
+/// (units mm and s). Axis vectors are in machine axis order (x, y, z, ...).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Limits {
+    /// Programmed feed cap F (mm/s).
+    pub feed: f64,
+    pub velocity: Vec<f64>,
+    pub acceleration: Vec<f64>,
+    pub jerk: Vec<f64>,
+    /// Maximum chord error between consecutive setpoints (mm).
+    pub chord_tolerance: f64,
+    /// Interpolation (servo) period (s).
+    pub period: f64,
+}
+
+/// A limit set that cannot be planned with.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LimitsError(pub String);
+
+impl fmt::Display for LimitsError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "invalid limits: {}", self.0)
+    }
+}
+impl std::error::Error for LimitsError {}
+
+impl Limits {
+    /// Limits with the same velocity (= feed), acceleration and jerk on every axis.
+    pub fn uniform(axes: usize, feed: f64, accel: f64, jerk: f64, chord_tolerance: f64, period: f64) -> Self {
+        Limits {
+            feed,
+            velocity: vec![feed; axes],
+            acceleration: vec![accel; axes],
+            jerk: vec![jerk; axes],
+            chord_tolerance,
+            period,
+        }
+    }
+
+    /// Checks every number is finite and positive and that there is one value per axis
+    /// (a single value is spread over all axes).
+    pub fn for_axes(&self, axes: usize) -> Result<Limits, LimitsError> {
+        let spread = |name: &str, v: &[f64]| -> Result<Vec<f64>, LimitsError> {
+            let v = match v.len() {
+                1 => vec![v[0]; axes],
+                n if n == axes => v.to_vec(),
+                n => return Err(LimitsError(format!("{n} {name} values for {axes} axes"))),
+            };
+            if let Some(bad) = v.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(LimitsError(format!("{name} {bad} must be a finite number > 0")));
+            }
+            Ok(v)
+        };
+        for (name, x) in [
+            ("feed", self.feed),
+            ("chord tolerance", self.chord_tolerance),
+            ("period", self.period),
+        ] {
+            if !(x.is_finite() && x > 0.0) {
+                return Err(LimitsError(format!("{name} {x} must be a finite number > 0")));
+            }
+        }
+        Ok(Limits {
+            feed: self.feed,
+            velocity: spread("velocity", &self.velocity)?,
+            acceleration: spread("acceleration", &self.acceleration)?,
+            jerk: spread("jerk", &self.jerk)?,
+            chord_tolerance: self.chord_tolerance,
+            period: self.period,
+        })
+    }
+
+    /// Smallest acceleration and jerk over the axes: the tangential values a plan starts from
+    /// (any direction can be taken at these without exceeding an axis).
+    pub fn min_accel(&self) -> f64 {
+        self.acceleration.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+    pub fn min_jerk(&self) -> f64 {
+        self.jerk.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+}

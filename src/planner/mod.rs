@@ -1,0 +1,51 @@
+//! Feedrate planners. [`erwinski`] is the main, streaming-capable planner of paper 000; it
+//! turns toolpath geometry into `nurbs_rtcore` segment records whose sampled motion never
+//! exceeds an axis limit.
+
+pub mod axial;
+pub mod erwinski;
+pub mod flf;
+mod limits;
+pub mod scurve_fit;
+pub mod simulate;
+pub mod verify;
+
+pub use erwinski::{plan, Plan, PlanError, PlanOptions};
+pub use limits::{Limits, LimitsError};
+
+use crate::geometry::Toolpath;
+use nurbs_rtcore::executor::CurveSet;
+use nurbs_rtcore::CurveView;
+
+/// The curves of a toolpath as the realtime interpolator addresses them.
+pub struct PathCurves<'a> {
+    views: Vec<CurveView<'a>>,
+    tip: usize,
+}
+
+impl<'a> PathCurves<'a> {
+    pub fn new(toolpath: &'a Toolpath) -> Self {
+        PathCurves {
+            views: toolpath.elements.iter().map(|e| e.curve.view()).collect(),
+            tip: toolpath.tip_dim(),
+        }
+    }
+    pub fn len(&self) -> usize {
+        self.views.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.views.is_empty()
+    }
+    pub fn view(&self, i: usize) -> &CurveView<'a> {
+        &self.views[i]
+    }
+}
+
+impl CurveSet for PathCurves<'_> {
+    fn curve(&self, index: usize) -> Option<CurveView<'_>> {
+        self.views.get(index).copied()
+    }
+    fn tip_axes(&self) -> usize {
+        self.tip
+    }
+}

@@ -1,0 +1,132 @@
+//! Fitting a seven-phase S-curve between two feeds over a given distance (paper 000, eq. 15-21).
+
+use nurbs_rtcore::scurve::{SCurve, PHASES};
+
+/// Durations (T1, T2, T3) of a jerk-limited change of feed by `dv >= 0`: trapezoidal
+/// acceleration when `dv >= A^2/J` (eq. 15-17), triangular otherwise (eq. 18-19).
+pub fn ramp_times(dv: f64, accel: f64, jerk: f64) -> [f64; 3] {
+    if dv <= 0.0 {
+        return [0.0; 3];
+    }
+    if dv * jerk >= accel * accel {
+        let t1 = accel / jerk;
+        [t1, dv / accel - t1, t1]
+    } else {
+        let t1 = (dv / jerk).sqrt();
+        [t1, 0.0, t1]
+    }
+}
+
+/// Distance covered while changing feed from `va` to `vb` (symmetric ramp: mean feed times
+/// duration).
+pub fn ramp_distance(va: f64, vb: f64, accel: f64, jerk: f64) -> f64 {
+    let t = ramp_times((vb - va).abs(), accel, jerk);
+    0.5 * (va + vb) * (t[0] + t[1] + t[2])
+}
+
+/// Highest feed reachable from `v_from` within `length` (also: the highest feed from which
+/// `v_from` can be reached), by bisection on the monotone ramp distance.
+pub fn reachable_feed(v_from: f64, length: f64, accel: f64, jerk: f64, cap: f64) -> f64 {
+    if ramp_distance(v_from, cap, accel, jerk) <= length {
+        return cap;
+    }
+    let (mut lo, mut hi) = (v_from, cap);
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if ramp_distance(v_from, mid, accel, jerk) <= length {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
+/// Why no profile fits.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FitError {
+    /// Even without any cruise the change from start to end feed needs more than the length.
+    TooShort,
+}
+
+/// Profile from `v0` to `v1` over `length` with peak feed at most `v_max`, acceleration `accel`
+/// and jerk `jerk`. When the full peak does not fit, the peak is found by bisection (eq. 20-21;
+/// at most 30 iterations or until the step is below 0.001 mm/s) and the remaining distance is
+/// cruised at that peak.
+pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> Result<SCurve, FitError> {
+    let v_floor = v0.max(v1);
+    let v_max = v_max.max(v_floor);
+    let total = |vp: f64| ramp_distance(v0, vp, accel, jerk) + ramp_distance(vp, v1, accel, jerk);
+    if total(v_floor) > length * (1.0 + 1e-12) + 1e-12 {
+        return Err(FitError::TooShort);
+    }
+    let peak = if total(v_max) <= length {
+        v_max
+    } else {
+        // Eq. 20-21: F_k = F_{k-1} +- dF / 2^k, starting from the midpoint.
+        let delta = v_max - v_floor;
+        let mut f = 0.5 * (v_max + v_floor);
+        let mut best = v_floor;
+        for k in 1..=30 {
+            if total(f) <= length {
+                best = best.max(f);
+                f += delta / 2f64.powi(k + 1);
+            } else {
+                f -= delta / 2f64.powi(k + 1);
+            }
+            if delta / 2f64.powi(k + 1) < 1e-3 {
+                break;
+            }
+        }
+        if total(f) <= length {
+            best = best.max(f);
+        }
+        best
+    };
+    let up = ramp_times(peak - v0, accel, jerk);
+    let down = ramp_times(peak - v1, accel, jerk);
+    let mut durations = [up[0], up[1], up[2], 0.0, down[0], down[1], down[2]];
+    let ramps = SCurve::from_phases(v0, durations, jerk, jerk).table().length();
+    // Cruise fills the rest exactly, so the profile length equals the segment length.
+    durations[3] = if peak > 0.0 {
+        ((length - ramps) / peak).max(0.0)
+    } else {
+        0.0
+    };
+    let mut profile = SCurve::from_phases(v0, durations, jerk, jerk);
+    for k in 0..PHASES {
+        if profile.durations[k] == 0.0 {
+            profile.jerks[k] = 0.0;
+        }
+    }
+    Ok(profile)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fits_cover_the_length_and_end_at_the_end_feed() {
+        for &(v0, v1, len) in &[
+            (0.0, 0.0, 10.0),
+            (100.0, 20.0, 5.0),
+            (0.0, 500.0, 300.0),
+            (50.0, 50.0, 0.2),
+        ] {
+            let p = fit(v0, v1, len, 2500.0, 1e4, 6e4).unwrap();
+            let t = p.table();
+            assert!(
+                (t.length() - len).abs() < 1e-9 * (1.0 + len),
+                "{v0} {v1} {len}: {}",
+                t.length()
+            );
+            assert!((t.end().v - v1).abs() < 1e-6, "end feed {}", t.end().v);
+            assert!(t.end().a.abs() < 1e-6);
+            for k in 0..8 {
+                assert!(t.states[k].v <= 2500.0 + 1e-9 && t.states[k].a.abs() <= 1e4 + 1e-6);
+            }
+        }
+        assert_eq!(fit(0.0, 1000.0, 1.0, 2500.0, 1e4, 6e4), Err(FitError::TooShort));
+    }
+}

@@ -1,0 +1,162 @@
+//! The project's own checker of a setpoint file (`nurbs-plan verify`): axial limits by finite
+//! differences (at rest before the first and after the last row), programmed feed, distance of
+//! every row to the curve, chord error between consecutive rows, start and end points.
+
+use super::axial::{AxialPeaks, FiniteDifferences};
+use super::{Limits, PathCurves};
+use nurbs_rtcore::math::{norm, sub};
+
+/// One setpoint row: element index, curve parameter, position.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    pub t: f64,
+    pub curve: usize,
+    pub u: f64,
+    pub q: Vec<f64>,
+}
+
+/// What the check measured, and the violations found (empty when the file passes).
+#[derive(Clone, Debug, Default)]
+pub struct Report {
+    pub peaks: AxialPeaks,
+    pub max_feed: f64,
+    pub max_chord_error: f64,
+    pub max_distance_to_curve: f64,
+    pub violations: Vec<String>,
+    pub rows: usize,
+}
+
+/// Relative slack allowed over a limit, for rounding only.
+pub const SLACK: f64 = 1e-6;
+
+pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
+    let tip = limits.velocity.len();
+    let mut report = Report {
+        rows: rows.len(),
+        ..Default::default()
+    };
+    if rows.is_empty() {
+        report.violations.push("no setpoints".into());
+        return report;
+    }
+    let mut fd = FiniteDifferences::new(tip, limits.period);
+    for r in rows {
+        fd.push(&r.q, limits);
+    }
+    fd.finish(limits);
+    report.peaks = fd.peaks;
+    for i in 0..tip {
+        for (name, peak, limit) in [
+            ("velocity", fd.peaks.vel[i], limits.velocity[i]),
+            ("acceleration", fd.peaks.acc[i], limits.acceleration[i]),
+            ("jerk", fd.peaks.jerk[i], limits.jerk[i]),
+        ] {
+            if peak > limit * (1.0 + SLACK) {
+                report
+                    .violations
+                    .push(format!("axis {i}: {name} {peak:.6} exceeds limit {limit}"));
+            }
+        }
+    }
+    let point = |r: &Row| -> Option<nurbs_rtcore::Vector> { curves.curve(r.curve).map(|c| c.point(r.u)) };
+    use nurbs_rtcore::executor::CurveSet;
+    let mut prev: Option<&Row> = None;
+    for r in rows {
+        let Some(p) = point(r) else {
+            report
+                .violations
+                .push(format!("t={}: element {} does not exist", r.t, r.curve));
+            return report;
+        };
+        let mut q = [0.0; nurbs_rtcore::MAX_DIM];
+        q[..tip].copy_from_slice(&r.q[..tip]);
+        let d = norm(&sub(&p, &q), tip);
+        report.max_distance_to_curve = report.max_distance_to_curve.max(d);
+        if let Some(a) = prev {
+            let mut qa = [0.0; nurbs_rtcore::MAX_DIM];
+            qa[..tip].copy_from_slice(&a.q[..tip]);
+            let step = norm(&sub(&q, &qa), tip);
+            report.max_feed = report.max_feed.max(step / limits.period);
+            if a.curve == r.curve && r.u > a.u {
+                let view = curves.curve(r.curve).unwrap();
+                report.max_chord_error = report.max_chord_error.max(chord_error(&view, tip, a.u, r.u, &qa, &q));
+            }
+        }
+        prev = Some(r);
+    }
+    if report.max_feed > limits.feed * (1.0 + SLACK) {
+        report
+            .violations
+            .push(format!("feed {:.6} exceeds {}", report.max_feed, limits.feed));
+    }
+    if report.max_chord_error > limits.chord_tolerance * (1.0 + SLACK) {
+        report.violations.push(format!(
+            "chord error {:.3e} exceeds {}",
+            report.max_chord_error, limits.chord_tolerance
+        ));
+    }
+    if report.max_distance_to_curve > 1e-6 {
+        report.violations.push(format!(
+            "a setpoint is {:.3e} mm off the curve",
+            report.max_distance_to_curve
+        ));
+    }
+    let first = curves.curve(0).map(|c| c.point(c.u_min()));
+    let last = curves.curve(curves.len() - 1).map(|c| c.point(c.u_max()));
+    let end_gap = |row: &Row, p: Option<nurbs_rtcore::Vector>| -> f64 {
+        let mut q = [0.0; nurbs_rtcore::MAX_DIM];
+        q[..tip].copy_from_slice(&row.q[..tip]);
+        p.map_or(f64::INFINITY, |p| norm(&sub(&p, &q), tip))
+    };
+    if end_gap(&rows[0], first) > 1e-9 {
+        report
+            .violations
+            .push("the first setpoint is not the start of the path".into());
+    }
+    if end_gap(rows.last().unwrap(), last) > 1e-9 {
+        report
+            .violations
+            .push("the last setpoint is not the end of the path".into());
+    }
+    report
+}
+
+/// Largest distance between the curve on `(u0, u1)` and the chord from `a` to `b`.
+fn chord_error(
+    view: &nurbs_rtcore::CurveView,
+    tip: usize,
+    u0: f64,
+    u1: f64,
+    a: &nurbs_rtcore::Vector,
+    b: &nurbs_rtcore::Vector,
+) -> f64 {
+    let ab = sub(b, a);
+    let len2 = nurbs_rtcore::math::dot(&ab, &ab, tip);
+    let dist = |u: f64| {
+        let p = view.point(u);
+        let ap = sub(&p, a);
+        let t = if len2 > 0.0 {
+            (nurbs_rtcore::math::dot(&ap, &ab, tip) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let mut e = 0.0;
+        for i in 0..tip {
+            let d = ap[i] - t * ab[i];
+            e += d * d;
+        }
+        e.sqrt()
+    };
+    const N: usize = 8;
+    let mut best = (0.0, u0);
+    for k in 1..N {
+        let u = u0 + (u1 - u0) * k as f64 / N as f64;
+        let d = dist(u);
+        if d > best.0 {
+            best = (d, u);
+        }
+    }
+    let h = (u1 - u0) / N as f64;
+    let (_, refined) = crate::geometry::golden_max(&dist, (best.1 - h).max(u0), (best.1 + h).min(u1));
+    best.0.max(refined)
+}
