@@ -6,7 +6,7 @@
 
 use super::axial::FiniteDifferences;
 use super::flf::{critical_points, flf, CriticalPoint, FlfScan};
-use super::scurve_fit::{fit, reachable_feed};
+use super::scurve_fit::{fit_ramps, reachable_feed, Ramp};
 use super::simulate::{run_segment, SimState};
 use super::{Limits, LimitsError, PathCurves};
 use crate::geometry::{ArcLengthTable, Toolpath};
@@ -105,6 +105,8 @@ struct Node {
     start_s: f64,
     /// Feed cap at this point.
     cap: f64,
+    /// Path start/end, element joins and corners: never merged away.
+    hard: bool,
 }
 
 /// Plans `toolpath` under `limits`; every record is passed to `on_record` as soon as it is final.
@@ -154,6 +156,7 @@ pub fn plan(
                 last.start_u = u0;
                 last.start_s = 0.0;
                 last.cap = last.cap.min(start_cap);
+                last.hard = true;
             }
             None => nodes.push(Node {
                 end_curve: 0,
@@ -163,6 +166,7 @@ pub fn plan(
                 start_u: u0,
                 start_s: 0.0,
                 cap: 0.0,
+                hard: true,
             }),
         }
         // Interior knots where the curve is only C0 or C1: corners stop, curvature jumps cap.
@@ -187,6 +191,7 @@ pub fn plan(
                 start_u: p.u,
                 start_s: s,
                 cap,
+                hard: fixed_cap.is_some(),
             });
             criticals.push((c, **p));
         }
@@ -204,6 +209,7 @@ pub fn plan(
             start_u: u1,
             start_s: s1,
             cap: end_cap,
+            hard: true,
         });
         // Feed cap inside every segment of this curve: no interior point may need less than the
         // segment's ends (insert the dip as a node otherwise).
@@ -211,7 +217,6 @@ pub fn plan(
     }
     // Peak caps (feed, chord, axial velocity) inside each segment, inserting nodes at dips.
     let mut k = 0;
-    let mut peak_caps = Vec::new();
     while k + 1 < nodes.len() {
         let (a, b) = (nodes[k], nodes[k + 1]);
         let scan = &scans[a.start_curve];
@@ -230,27 +235,36 @@ pub fn plan(
                         start_u: u,
                         start_s: s,
                         cap: m,
+                        hard: true,
                     },
                 );
             }
-            _ => {
-                let element_feed = toolpath.elements[a.start_curve].feed.unwrap_or(f64::INFINITY);
-                peak_caps.push(limits.feed.min(element_feed));
-                k += 1;
-            }
+            _ => k += 1,
         }
     }
-    let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
     let (acc, jerk) = (limits.min_accel(), limits.min_jerk());
-
-    // Look-ahead: forward and backward reachability with the nominal tangential limits.
-    let mut feeds: Vec<f64> = nodes.iter().map(|n| n.cap).collect();
-    for k in (0..lengths.len()).rev() {
-        feeds[k] = feeds[k].min(reachable_feed(feeds[k + 1], lengths[k], acc, jerk, feeds[k]));
-    }
-    for k in 0..lengths.len() {
-        feeds[k + 1] = feeds[k + 1].min(reachable_feed(feeds[k], lengths[k], acc, jerk, feeds[k + 1]));
-    }
+    // Look-ahead, and step 4: a critical point whose feed is bound by reachability (the segments
+    // around it are too short to reach its cap) is dropped and its segments merged, so the
+    // acceleration need not return to zero there. Hard nodes (ends, joins, corners) stay.
+    let (lengths, feeds) = loop {
+        let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
+        let feeds = look_ahead(&nodes, &lengths, acc, jerk);
+        let before = nodes.len();
+        let mut k = 0;
+        nodes.retain(|n| {
+            let keep = n.hard || feeds[k] >= MERGE_TOLERANCE * n.cap;
+            k += 1;
+            keep
+        });
+        if nodes.len() == before {
+            break (lengths, feeds);
+        }
+    };
+    let peak_caps: Vec<f64> = nodes
+        .windows(2)
+        .map(|w| limits.feed.min(toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY)))
+        .collect();
+    let mut feeds = feeds;
 
     // Segment by segment with axial checks and back-tracking.
     let nseg = lengths.len();
@@ -325,6 +339,21 @@ pub fn plan(
         first_record_time,
         limits,
     })
+}
+
+/// A node is kept when the look-ahead reaches at least this fraction of its cap.
+const MERGE_TOLERANCE: f64 = 0.999;
+
+/// Forward and backward reachability of node feeds with the nominal tangential limits.
+fn look_ahead(nodes: &[Node], lengths: &[f64], acc: f64, jerk: f64) -> Vec<f64> {
+    let mut feeds: Vec<f64> = nodes.iter().map(|n| n.cap).collect();
+    for k in (0..lengths.len()).rev() {
+        feeds[k] = feeds[k].min(reachable_feed(feeds[k + 1], lengths[k], acc, jerk, feeds[k]));
+    }
+    for k in 0..lengths.len() {
+        feeds[k + 1] = feeds[k + 1].min(reachable_feed(feeds[k], lengths[k], acc, jerk, feeds[k + 1]));
+    }
+    feeds
 }
 
 /// Limits a hair below the user's, so that the check has headroom for the last rounding.
@@ -461,8 +490,8 @@ fn make_record(ctx: &SegmentContext, profile: &SCurve) -> SegmentRecord {
     }
 }
 
-fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, accel: f64, jerk: f64) -> Option<Trial> {
-    let profile = fit(v0, v1, ctx.length, ctx.peak_cap, accel, jerk).ok()?;
+fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down: Ramp) -> Option<Trial> {
+    let profile = fit_ramps(v0, v1, ctx.length, ctx.peak_cap, up, down).ok()?;
     let record = make_record(ctx, &profile);
     let mut state = *from;
     state.check.reset_peaks();
@@ -568,6 +597,11 @@ fn golden(upper: f64, eval: &dyn Fn(f64) -> Option<Trial>, violation: &dyn Fn(&T
     }
 }
 
+/// Factor applied to the end feed when a segment cannot be made to fit (step 8), and to the
+/// start feed asked of the previous segment when even that fails (step 9).
+const END_FEED_STEP: f64 = 0.8;
+const START_FEED_STEP: f64 = 0.9;
+
 /// Plans one segment from feed `v0` (fixed: the previous segment ends there) towards `v1`.
 /// Returns the record and the state after it, or the highest start feed worth retrying with.
 fn solve_segment(
@@ -576,31 +610,32 @@ fn solve_segment(
     v1_target: f64,
     from: &SimState,
 ) -> Result<(SegmentRecord, SimState), f64> {
+    let both = |accel: f64, jerk: f64| Ramp { accel, jerk };
     let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
-    for _attempt in 0..12 {
-        if let Some(t) = trial(ctx, from, v0, v1, ctx.accel, ctx.jerk) {
-            if std::env::var_os("NURBS_PLAN_DEBUG").is_some() {
-                eprintln!("  trial ratio {} peaks {:?}", t.ratio, t.state.check.peaks);
-            }
+    for _attempt in 0..40 {
+        let nominal = both(ctx.accel, ctx.jerk);
+        if let Some(t) = trial(ctx, from, v0, v1, nominal, nominal) {
             if t.ok() {
                 return Ok((t.record, t.state));
             }
         }
-        // Steps 3-5: jerk, then step 6: acceleration.
-        let by_jerk = golden(ctx.jerk, &|j| trial(ctx, from, v0, v1, ctx.accel, j), &|t| {
-            t.jerk_violation + t.acc_violation
-        });
+        // Steps 3-5: jerk, then step 6: acceleration (golden-section searches, eq. 24-27).
+        let by_jerk = golden(
+            ctx.jerk,
+            &|j| trial(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j)),
+            &|t| t.jerk_violation + t.acc_violation,
+        );
         let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
-        if let Some((_, t)) = &by_jerk {
+        if let Some((_, t)) = by_jerk {
             if t.ok() {
-                // Acceleration may still be raised back? It is at its nominal value already.
-                let (record, state) = (t.record, t.state);
-                return Ok((record, state));
+                return Ok((t.record, t.state));
             }
         }
-        let by_acc = golden(ctx.accel, &|a| trial(ctx, from, v0, v1, a, j), &|t| {
-            t.acc_violation + t.jerk_violation
-        });
+        let by_acc = golden(
+            ctx.accel,
+            &|a| trial(ctx, from, v0, v1, both(a, j), both(a, j)),
+            &|t| t.acc_violation + t.jerk_violation,
+        );
         if let Some((_, t)) = by_acc {
             if t.ok() {
                 return Ok((t.record, t.state));
@@ -610,7 +645,7 @@ fn solve_segment(
         if v1 <= 1e-6 {
             break;
         }
-        v1 = if v1 < 1e-3 { 0.0 } else { 0.5 * v1 };
+        v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
     }
-    Err(0.5 * v0)
+    Err(START_FEED_STEP * v0)
 }

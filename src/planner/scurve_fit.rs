@@ -49,14 +49,29 @@ pub enum FitError {
     TooShort,
 }
 
+/// Acceleration and jerk of one ramp of a profile.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ramp {
+    pub accel: f64,
+    pub jerk: f64,
+}
+
 /// Profile from `v0` to `v1` over `length` with peak feed at most `v_max`, acceleration `accel`
-/// and jerk `jerk`. When the full peak does not fit, the peak is found by bisection (eq. 20-21;
-/// at most 30 iterations or until the step is below 0.001 mm/s) and the remaining distance is
-/// cruised at that peak.
+/// and jerk `jerk` on both ramps.
 pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> Result<SCurve, FitError> {
+    let r = Ramp { accel, jerk };
+    fit_ramps(v0, v1, length, v_max, r, r)
+}
+
+/// Profile from `v0` to `v1` over `length` with peak feed at most `v_max`, the rise with `up`
+/// and the fall with `down`. When the full peak does not fit, the peak is found by bisection
+/// (eq. 20-21; at most 30 iterations or until the step is below 0.001 mm/s) and the remaining
+/// distance is cruised at that peak.
+pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp) -> Result<SCurve, FitError> {
     let v_floor = v0.max(v1);
     let v_max = v_max.max(v_floor);
-    let total = |vp: f64| ramp_distance(v0, vp, accel, jerk) + ramp_distance(vp, v1, accel, jerk);
+    let total =
+        |vp: f64| ramp_distance(v0, vp, up.accel, up.jerk) + ramp_distance(vp, v1, down.accel, down.jerk);
     if total(v_floor) > length * (1.0 + 1e-12) + 1e-12 {
         return Err(FitError::TooShort);
     }
@@ -83,17 +98,13 @@ pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> 
         }
         best
     };
-    let up = ramp_times(peak - v0, accel, jerk);
-    let down = ramp_times(peak - v1, accel, jerk);
-    let mut durations = [up[0], up[1], up[2], 0.0, down[0], down[1], down[2]];
-    let ramps = SCurve::from_phases(v0, durations, jerk, jerk).table().length();
+    let rise = ramp_times(peak - v0, up.accel, up.jerk);
+    let fall = ramp_times(peak - v1, down.accel, down.jerk);
+    let mut durations = [rise[0], rise[1], rise[2], 0.0, fall[0], fall[1], fall[2]];
+    let ramps = SCurve::from_phases(v0, durations, up.jerk, down.jerk).table().length();
     // Cruise fills the rest exactly, so the profile length equals the segment length.
-    durations[3] = if peak > 0.0 {
-        ((length - ramps) / peak).max(0.0)
-    } else {
-        0.0
-    };
-    let mut profile = SCurve::from_phases(v0, durations, jerk, jerk);
+    durations[3] = if peak > 0.0 { ((length - ramps) / peak).max(0.0) } else { 0.0 };
+    let mut profile = SCurve::from_phases(v0, durations, up.jerk, down.jerk);
     for k in 0..PHASES {
         if profile.durations[k] == 0.0 {
             profile.jerks[k] = 0.0;
