@@ -53,7 +53,9 @@ fn fit_fcp(curve: &Nurbs, table: &ArcLengthTable, s0: f64, s1: f64) -> [f64; 8] 
     }
     // Gaussian elimination with partial pivoting.
     for col in 0..8 {
-        let piv = (col..8).max_by(|&a, &b| ata[a][col].abs().total_cmp(&ata[b][col].abs())).unwrap();
+        let piv = (col..8)
+            .max_by(|&a, &b| ata[a][col].abs().total_cmp(&ata[b][col].abs()))
+            .unwrap();
         ata.swap(col, piv);
         atb.swap(col, piv);
         for r in col + 1..8 {
@@ -102,7 +104,11 @@ fn error_table(curve: &Nurbs, s: &[f64]) {
         let mut cur = start;
         let mut us = vec![cur.u];
         for j in 1..s.len() {
-            cur = if third { tot_step(&view, 2, &cur, s[j] - s[j - 1]) } else { sot_step(&view, 2, &cur, s[j] - s[j - 1]) };
+            cur = if third {
+                tot_step(&view, 2, &cur, s[j] - s[j - 1])
+            } else {
+                sot_step(&view, 2, &cur, s[j] - s[j - 1])
+            };
             us.push(cur.u);
         }
         report(name, &us);
@@ -111,7 +117,14 @@ fn error_table(curve: &Nurbs, s: &[f64]) {
     let total = table.total();
     let pieces = (total / 2.0).ceil() as usize;
     let fits: Vec<[f64; 8]> = (0..pieces)
-        .map(|k| fit_fcp(curve, &table, total * k as f64 / pieces as f64, total * (k + 1) as f64 / pieces as f64))
+        .map(|k| {
+            fit_fcp(
+                curve,
+                &table,
+                total * k as f64 / pieces as f64,
+                total * (k + 1) as f64 / pieces as f64,
+            )
+        })
         .collect();
     let us: Vec<f64> = s
         .iter()

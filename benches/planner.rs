@@ -14,7 +14,9 @@ fn bench(c: &mut Criterion) {
         let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
         let p = plan(&tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
         println!("{name}: motion time {:.4} s", p.motion_time);
-        g.bench_function(name, |b| b.iter(|| plan(&tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap()));
+        g.bench_function(name, |b| {
+            b.iter(|| plan(&tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap())
+        });
     }
     g.finish();
 }

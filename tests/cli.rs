@@ -14,7 +14,15 @@ fn example(name: &str) -> PathBuf {
 
 #[test]
 fn inspect_json_gives_the_independent_arc_lengths() {
-    for name in ["butterfly.json", "trident.json", "fan.json", "open_pocket.json", "fan_5axis.json", "trident.ngc", "trident.dxf"] {
+    for name in [
+        "butterfly.json",
+        "trident.json",
+        "fan.json",
+        "open_pocket.json",
+        "fan_5axis.json",
+        "trident.ngc",
+        "trident.dxf",
+    ] {
         let out = bin().args(["inspect", "--json"]).arg(example(name)).output().unwrap();
         assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -33,7 +41,11 @@ fn bad_input_exits_non_zero_with_a_message() {
     let dir = std::env::temp_dir().join(format!("nurbs-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let bad = dir.join("bad.json");
-    std::fs::write(&bad, r#"{"degree": 3, "knots": [0,0,0,0,1,0.5,1,1,1], "control_points": [[0,0],[1,0],[1,1],[0,1],[2,2]]}"#).unwrap();
+    std::fs::write(
+        &bad,
+        r#"{"degree": 3, "knots": [0,0,0,0,1,0.5,1,1,1], "control_points": [[0,0],[1,0],[1,1],[0,1],[2,2]]}"#,
+    )
+    .unwrap();
     let out = bin().arg("inspect").arg(&bad).output().unwrap();
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
@@ -51,7 +63,18 @@ fn plan_then_verify_and_verify_catches_a_jump() {
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("trident.csv");
     let summary = dir.join("summary.json");
-    let limits = ["--feed", "2500", "--accel", "1e4", "--jerk", "6e4", "--chord-tol", "0.001", "--period", "0.00025"];
+    let limits = [
+        "--feed",
+        "2500",
+        "--accel",
+        "1e4",
+        "--jerk",
+        "6e4",
+        "--chord-tol",
+        "0.001",
+        "--period",
+        "0.00025",
+    ];
     let out = bin()
         .arg("plan")
         .arg(example("trident.json"))
@@ -64,10 +87,24 @@ fn plan_then_verify_and_verify_catches_a_jump() {
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
-    for key in ["motion_time_s", "plan_time_s", "segments", "critical_points", "max_axial_jerk"] {
+    for key in [
+        "motion_time_s",
+        "plan_time_s",
+        "segments",
+        "critical_points",
+        "max_axial_jerk",
+    ] {
         assert!(!s[key].is_null(), "summary lacks {key}");
     }
-    let verify = |path: &Path| bin().arg("verify").arg(path).arg(example("trident.json")).args(limits).output().unwrap();
+    let verify = |path: &Path| {
+        bin()
+            .arg("verify")
+            .arg(path)
+            .arg(example("trident.json"))
+            .args(limits)
+            .output()
+            .unwrap()
+    };
     let ok = verify(&csv);
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stdout));
     // Move one setpoint by 1 micrometre: the jerk check must fail.

@@ -10,7 +10,17 @@ use std::path::Path;
 fn flf_traversal_time() {
     for (name, l) in [
         ("butterfly.json", Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025)),
-        ("trident.json", Limits { feed: 166.667, velocity: vec![500.0, 500.0], acceleration: vec![2500.0, 3000.0], jerk: vec![5000.0, 5000.0], chord_tolerance: 0.02, period: 0.006 }),
+        (
+            "trident.json",
+            Limits {
+                feed: 166.667,
+                velocity: vec![500.0, 500.0],
+                acceleration: vec![2500.0, 3000.0],
+                jerk: vec![5000.0, 5000.0],
+                chord_tolerance: 0.02,
+                period: 0.006,
+            },
+        ),
     ] {
         let tp = read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)).unwrap();
         let c = &tp.elements[0].curve;

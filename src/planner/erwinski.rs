@@ -6,6 +6,7 @@
 
 use super::axial::FiniteDifferences;
 use super::flf::{critical_points, flf, CriticalPoint, FlfScan};
+use super::quick_check::{estimate, ArcGrid, Estimate};
 use super::scurve_fit::{fit_ramps, reachable_feed, Ramp};
 use super::simulate::{run_segment, SimState};
 use super::{Limits, LimitsError, PathCurves};
@@ -242,6 +243,11 @@ pub fn plan(
             _ => k += 1,
         }
     }
+    let grids: Vec<ArcGrid> = scans
+        .iter()
+        .enumerate()
+        .map(|(c, scan)| ArcGrid::new(curves.view(c), tip, &scan.u))
+        .collect();
     let (acc, jerk) = (limits.min_accel(), limits.min_jerk());
     // Look-ahead, and step 4: a critical point whose feed is bound by reachability (the segments
     // around it are too short to reach its cap) is dropped and its segments merged, so the
@@ -262,7 +268,11 @@ pub fn plan(
     };
     let peak_caps: Vec<f64> = nodes
         .windows(2)
-        .map(|w| limits.feed.min(toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY)))
+        .map(|w| {
+            limits
+                .feed
+                .min(toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY))
+        })
         .collect();
     let mut feeds = feeds;
 
@@ -282,23 +292,13 @@ pub fn plan(
             node_end: nodes[k + 1],
             length: lengths[k],
             peak_cap: peak_caps[k],
+            grid: &grids[nodes[k].start_curve],
             last: k + 1 == nseg,
             seq: k as u32,
             accel: acc,
             jerk,
         };
         let outcome = solve_segment(&ctx, start_feeds[k], feeds[k + 1], &states[k]);
-        if std::env::var_os("NURBS_PLAN_DEBUG").is_some() {
-            eprintln!(
-                "seg {k}/{nseg} u {:.6}..{:.6} len {:.3e} v0 {:.6e} v1 {:.6e} -> {:?}",
-                nodes[k].start_u,
-                nodes[k + 1].end_u,
-                lengths[k],
-                start_feeds[k],
-                feeds[k + 1],
-                outcome.as_ref().map(|r| r.0.durations).map_err(|e| *e)
-            );
-        }
         match outcome {
             Ok((record, state)) => {
                 records.truncate(k);
@@ -306,7 +306,8 @@ pub fn plan(
                 states.truncate(k + 1);
                 states.push(state);
                 start_feeds.truncate(k + 1);
-                let end_v = record.profile().table().end().v;
+                // Rounding can leave -1e-14 at a stop; a record never starts below zero.
+                let end_v = record.profile().table().end().v.max(0.0);
                 start_feeds.push(end_v);
                 k += 1;
             }
@@ -449,6 +450,7 @@ struct SegmentContext<'a> {
     node_end: Node,
     length: f64,
     peak_cap: f64,
+    grid: &'a ArcGrid,
     last: bool,
     seq: u32,
     accel: f64,
@@ -466,9 +468,33 @@ struct Trial {
     duration: f64,
 }
 
-impl Trial {
+/// What the golden-section search compares.
+trait Candidate {
+    fn ok(&self) -> bool;
+    fn duration(&self) -> f64;
+}
+
+impl Candidate for Trial {
     fn ok(&self) -> bool {
         self.ratio <= 1.0
+    }
+    fn duration(&self) -> f64 {
+        self.duration
+    }
+}
+
+/// A candidate judged by the fast estimate only.
+struct Quick {
+    estimate: Estimate,
+    duration: f64,
+}
+
+impl Candidate for Quick {
+    fn ok(&self) -> bool {
+        self.estimate.ratio <= 1.0
+    }
+    fn duration(&self) -> f64 {
+        self.duration
     }
 }
 
@@ -530,6 +556,33 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     })
 }
 
+/// Margin of the estimate: the searches aim this far inside the limits, so that the exact check
+/// of their choice usually passes.
+const ESTIMATE_MARGIN: f64 = 0.995;
+/// An estimated ratio above this after the searches means: lower the end feed straight away.
+const HOPELESS_ESTIMATE: f64 = 1.05;
+
+fn quick(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down: Ramp) -> Option<Quick> {
+    let profile = fit_ramps(v0, v1, ctx.length, ctx.peak_cap, up, down).ok()?;
+    let t_first = match from.interp.record() {
+        Some(_) => ctx.limits.period - from.interp.time_left_in_segment(),
+        None => 0.0,
+    };
+    let table = profile.table();
+    let estimate = estimate(
+        ctx.grid,
+        ctx.limits,
+        ESTIMATE_MARGIN,
+        &table,
+        ctx.node_start.start_s,
+        t_first,
+    );
+    Some(Quick {
+        estimate,
+        duration: table.total_time(),
+    })
+}
+
 /// Distance from the curve point at the middle parameter to the chord between two samples.
 fn sagitta(
     view: &nurbs_rtcore::CurveView,
@@ -557,12 +610,16 @@ fn sagitta(
 /// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the
 /// paper's rules: violating vs violating, the smaller violation; both fine, the shorter; else
 /// the one without violation.
-fn golden(upper: f64, eval: &dyn Fn(f64) -> Option<Trial>, violation: &dyn Fn(&Trial) -> f64) -> Option<(f64, Trial)> {
+fn golden<T: Candidate>(
+    upper: f64,
+    eval: &dyn Fn(f64) -> Option<T>,
+    violation: &dyn Fn(&T) -> f64,
+) -> Option<(f64, T)> {
     let g = (5f64.sqrt() + 1.0) / 2.0;
-    let better = |a: &Option<Trial>, b: &Option<Trial>| -> bool {
+    let better = |a: &Option<T>, b: &Option<T>| -> bool {
         match (a, b) {
             (Some(x), Some(y)) => match (x.ok(), y.ok()) {
-                (true, true) => x.duration <= y.duration,
+                (true, true) => x.duration() <= y.duration(),
                 (false, false) => violation(x) <= violation(y),
                 (ok, _) => ok,
             },
@@ -604,6 +661,9 @@ const START_FEED_STEP: f64 = 0.9;
 
 /// Plans one segment from feed `v0` (fixed: the previous segment ends there) towards `v1`.
 /// Returns the record and the state after it, or the highest start feed worth retrying with.
+///
+/// The golden-section searches (jerk, then acceleration) first run on the fast estimate, and
+/// their choice is checked exactly; only if that fails do they run again on exact trials.
 fn solve_segment(
     ctx: &SegmentContext,
     v0: f64,
@@ -619,7 +679,31 @@ fn solve_segment(
                 return Ok((t.record, t.state));
             }
         }
-        // Steps 3-5: jerk, then step 6: acceleration (golden-section searches, eq. 24-27).
+        // Steps 3-7 on the estimate.
+        let by_jerk = golden(
+            ctx.jerk,
+            &|j| quick(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j)),
+            &|q| q.estimate.jerk_violation + q.estimate.acc_violation,
+        );
+        let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
+        let (a, estimated_ratio) = match by_jerk {
+            Some((_, q)) if q.ok() => (ctx.accel, q.estimate.ratio),
+            _ => golden(ctx.accel, &|a| quick(ctx, from, v0, v1, both(a, j), both(a, j)), &|q| {
+                q.estimate.acc_violation + q.estimate.jerk_violation
+            })
+            .map_or((ctx.accel, f64::INFINITY), |(a, q)| (a, q.estimate.ratio)),
+        };
+        if let Some(t) = trial(ctx, from, v0, v1, both(a, j), both(a, j)) {
+            if t.ok() {
+                return Ok((t.record, t.state));
+            }
+        }
+        // The estimate was not enough: the same searches on exact trials, unless the estimate
+        // already shows this end feed to be out of reach (they agree to about 1 %).
+        if estimated_ratio > HOPELESS_ESTIMATE {
+            v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
+            continue;
+        }
         let by_jerk = golden(
             ctx.jerk,
             &|j| trial(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j)),
@@ -631,11 +715,9 @@ fn solve_segment(
                 return Ok((t.record, t.state));
             }
         }
-        let by_acc = golden(
-            ctx.accel,
-            &|a| trial(ctx, from, v0, v1, both(a, j), both(a, j)),
-            &|t| t.acc_violation + t.jerk_violation,
-        );
+        let by_acc = golden(ctx.accel, &|a| trial(ctx, from, v0, v1, both(a, j), both(a, j)), &|t| {
+            t.acc_violation + t.jerk_violation
+        });
         if let Some((_, t)) = by_acc {
             if t.ok() {
                 return Ok((t.record, t.state));

@@ -70,8 +70,7 @@ pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> 
 pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp) -> Result<SCurve, FitError> {
     let v_floor = v0.max(v1);
     let v_max = v_max.max(v_floor);
-    let total =
-        |vp: f64| ramp_distance(v0, vp, up.accel, up.jerk) + ramp_distance(vp, v1, down.accel, down.jerk);
+    let total = |vp: f64| ramp_distance(v0, vp, up.accel, up.jerk) + ramp_distance(vp, v1, down.accel, down.jerk);
     if total(v_floor) > length * (1.0 + 1e-12) + 1e-12 {
         return Err(FitError::TooShort);
     }
@@ -103,7 +102,11 @@ pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp
     let mut durations = [rise[0], rise[1], rise[2], 0.0, fall[0], fall[1], fall[2]];
     let ramps = SCurve::from_phases(v0, durations, up.jerk, down.jerk).table().length();
     // Cruise fills the rest exactly, so the profile length equals the segment length.
-    durations[3] = if peak > 0.0 { ((length - ramps) / peak).max(0.0) } else { 0.0 };
+    durations[3] = if peak > 0.0 {
+        ((length - ramps) / peak).max(0.0)
+    } else {
+        0.0
+    };
     let mut profile = SCurve::from_phases(v0, durations, up.jerk, down.jerk);
     for k in 0..PHASES {
         if profile.durations[k] == 0.0 {

@@ -1,0 +1,139 @@
+//! A fast, approximate axial check used to steer the golden-section searches.
+//!
+//! The exact check interpolates every sample with the realtime code (five NURBS evaluations
+//! each). The geometry of a segment does not change between candidate profiles, only the timing
+//! does, so the searches use the continuous axial derivatives instead:
+//!   v_i = x_i' v,  a_i = x_i'' v^2 + x_i' a,  j_i = x_i''' v^3 + 3 x_i'' v a + x_i' j,
+//! with x', x'', x''' (arc-length derivatives) tabulated once per curve. Whatever the searches
+//! choose is then confirmed by the exact check; nothing is emitted on this estimate alone.
+
+use super::flf::arc_derivatives;
+use super::Limits;
+use nurbs_rtcore::scurve::SCurveTable;
+use nurbs_rtcore::CurveView;
+
+/// Axis count covered (tool-tip coordinates).
+const AXES: usize = 3;
+
+/// Arc-length derivatives of the tool tip on a dense grid of one curve.
+#[derive(Clone, Debug, Default)]
+pub struct ArcGrid {
+    s: Vec<f64>,
+    d: Vec<[[f64; AXES]; 3]>,
+    tip: usize,
+}
+
+impl ArcGrid {
+    /// Tabulates at the parameters `u` (increasing; e.g. the FLF scan), with the arc length by
+    /// the trapezoidal rule on the parametric speed.
+    pub fn new(view: &CurveView, tip: usize, u: &[f64]) -> Self {
+        let tip = tip.min(AXES);
+        let mut grid = ArcGrid {
+            s: Vec::with_capacity(u.len()),
+            d: Vec::with_capacity(u.len()),
+            tip,
+        };
+        let mut prev_speed = 0.0;
+        for (k, &uk) in u.iter().enumerate() {
+            let x = arc_derivatives(view, tip, uk);
+            let speed = view.speed(uk, tip);
+            let s = if k == 0 {
+                0.0
+            } else {
+                grid.s[k - 1] + 0.5 * (speed + prev_speed) * (uk - u[k - 1])
+            };
+            prev_speed = speed;
+            let mut d = [[0.0; AXES]; 3];
+            for order in 0..3 {
+                d[order][..tip].copy_from_slice(&x[order + 1][..tip]);
+            }
+            grid.s.push(s);
+            grid.d.push(d);
+        }
+        grid
+    }
+
+    /// Derivatives at arc length `s`, linearly interpolated; `hint` is a starting index that
+    /// moves forward with monotone queries.
+    fn at(&self, s: f64, hint: &mut usize) -> [[f64; AXES]; 3] {
+        let n = self.s.len();
+        while *hint + 2 < n && self.s[*hint + 1] < s {
+            *hint += 1;
+        }
+        let (i, j) = (*hint, (*hint + 1).min(n - 1));
+        let span = self.s[j] - self.s[i];
+        let f = if span > 0.0 {
+            ((s - self.s[i]) / span).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let mut out = [[0.0; AXES]; 3];
+        for o in 0..3 {
+            for a in 0..self.tip {
+                out[o][a] = self.d[i][o][a] * (1.0 - f) + self.d[j][o][a] * f;
+            }
+        }
+        out
+    }
+}
+
+/// Outcome of the estimate for one candidate profile.
+#[derive(Clone, Copy, Debug)]
+pub struct Estimate {
+    /// Worst ratio of an axial value (or the chord error) to its limit.
+    pub ratio: f64,
+    pub acc_violation: f64,
+    pub jerk_violation: f64,
+}
+
+/// Estimates the axial peaks of `profile` starting at arc length `s_start`, sampled at
+/// `t_first + k dt` (local time), against `limits` scaled by `margin`.
+pub fn estimate(
+    grid: &ArcGrid,
+    limits: &Limits,
+    margin: f64,
+    table: &SCurveTable,
+    s_start: f64,
+    t_first: f64,
+) -> Estimate {
+    let dt = limits.period;
+    let tip = grid.tip;
+    let eps = 0.9 * limits.chord_tolerance;
+    let mut est = Estimate {
+        ratio: 0.0,
+        acc_violation: 0.0,
+        jerk_violation: 0.0,
+    };
+    let mut hint = grid.s.partition_point(|&x| x < s_start).saturating_sub(1);
+    let total = table.total_time();
+    let mut k = 0usize;
+    let mut count = 0usize;
+    loop {
+        let t = t_first + k as f64 * dt;
+        if t > total {
+            break;
+        }
+        k += 1;
+        let st = table.state_at(t);
+        let d = grid.at(s_start + st.s, &mut hint);
+        let mut kappa2 = 0.0;
+        for a in 0..tip {
+            let (x1, x2, x3) = (d[0][a], d[1][a], d[2][a]);
+            // No margin on velocity: cruising at a feed equal to an axis limit is legitimate.
+            let vel = (x1 * st.v).abs() / limits.velocity[a];
+            let acc = (x2 * st.v * st.v + x1 * st.a).abs() / (margin * limits.acceleration[a]);
+            let jerk = (x3 * st.v * st.v * st.v + 3.0 * x2 * st.v * st.a + x1 * st.j).abs() / (margin * limits.jerk[a]);
+            est.ratio = est.ratio.max(vel).max(acc).max(jerk);
+            est.acc_violation += (acc - 1.0).max(0.0);
+            est.jerk_violation += (jerk - 1.0).max(0.0);
+            kappa2 += x2 * x2;
+        }
+        let step = st.v * dt;
+        est.ratio = est.ratio.max(kappa2.sqrt() * step * step / 8.0 / eps);
+        count += 1;
+    }
+    let n = count.max(1) as f64;
+    est.acc_violation /= n;
+    est.jerk_violation /= n;
+    est
+}
