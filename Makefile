@@ -1,8 +1,10 @@
 # Build, install and test the LinuxCNC side of nurbs-motion.
 #
 #   make               realtime module nurbs_interp.so + userspace planner (needs linuxcnc-uspace-dev)
-#   make install       module into $(MODULE_DIR), planner into $(BINDIR)
+#                      + the offline CLI nurbs-plan (the tests compare against it)
+#   make install       module into $(MODULE_DIR), planner, recorder and nurbs-plan into $(BINDIR)
 #   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
+#   make bench         criterion: per-period cost of nurbs_interp.update (mock HAL)
 #   make headers       cbindgen -> include/nurbs_rt.h   (committed)
 #   make bindings      bindgen  -> hal/src/bindings.rs (committed; a normal build needs no libclang)
 #   make check-generated   fail if the committed header or bindings are stale
@@ -22,7 +24,7 @@ TARGET_DIR  ?= $(or $(CARGO_TARGET_DIR),target)
 OUT         := $(TARGET_DIR)/release
 MODULE      := $(OUT)/nurbs_interp.so
 STATICLIB   := $(OUT)/libnurbs_hal.a
-BINS        := nurbs-planner nurbs-hal-record
+BINS        := nurbs-planner nurbs-hal-record nurbs-plan
 LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
 MODULE_DIR  ?= /usr/lib/linuxcnc/modules
 PREFIX      ?= /usr/local
@@ -47,7 +49,7 @@ BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc
 	--allowlist-function 'rtapi_(print_msg|shmem_new|shmem_delete|shmem_getptr|get_clocks|get_time)' \
 	--allowlist-var 'HAL_NAME_LEN|HAL_STREAM_MAX_PINS|RTAPI_NAME_LEN'
 
-.PHONY: all module planner install uninstall test test-cargo test-hal headers bindings \
+.PHONY: all module planner install uninstall test test-cargo test-hal bench headers bindings \
 	check-generated tools clean FORCE
 
 all: module planner
@@ -55,6 +57,7 @@ all: module planner
 # One cargo invocation builds the staticlib and the binaries with the same features.
 $(STATICLIB): FORCE
 	$(CARGO) build --release -p nurbs-hal --features linuxcnc --lib --bins
+	$(CARGO) build --release -p nurbs-motion --bin nurbs-plan
 
 planner: $(STATICLIB)
 
@@ -78,6 +81,9 @@ test: test-cargo test-hal
 test-cargo:
 	$(CARGO) test --workspace
 
+bench:
+	$(CARGO) bench -p nurbs-hal --features mock-hal --bench update
+
 # Needs root (or the RTAPI_UID setup in tests/hal/lib.sh) and an installed module.
 test-hal: install
 	bash tests/hal/run.sh
@@ -94,7 +100,8 @@ bindings: hal/src/bindings.rs
 hal/src/bindings.rs: FORCE
 	@$(BINDGEN) --version | grep -q ' $(BINDGEN_VERSION)$$' || \
 		{ echo "need bindgen $(BINDGEN_VERSION) (make tools)"; exit 1; }
-	$(BINDGEN) hal/wrapper.h $(BINDGEN_FLAGS) -o $@ -- -I$(LINUXCNC_INCLUDE) -DRTAPI -DUSPACE
+	$(BINDGEN) hal/wrapper.h $(BINDGEN_FLAGS) --rustfmt-configuration-file $(CURDIR)/hal/bindings-rustfmt.toml \
+		-o $@ -- -I$(LINUXCNC_INCLUDE) -DRTAPI -DUSPACE
 
 check-generated:
 	@tmp=$$(mktemp -d) && trap 'rm -rf "$$tmp"' EXIT && \
@@ -121,8 +128,9 @@ clean:
 FORCE:
 
 # ---------------------------------------------------------------------------------------------
-# The README's two commands: `make demo` (set up, plan the bundled butterfly, verify it) and
-# `make check` (set up, lint, every test including real LinuxCNC). CI runs `make check`.
+# The README's two commands: `make demo` (set up, plan the bundled butterfly offline and verify
+# it, then run it through our module and planner in real LinuxCNC and check every sampled period)
+# and `make check` (set up, lint, every test including real LinuxCNC). CI runs `make check`.
 DEMO_LIMITS := --feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025
 
 .PHONY: setup demo check lint
@@ -130,13 +138,13 @@ DEMO_LIMITS := --feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.0
 setup:
 	bash .ci/setup.sh
 
-demo: setup
-	$(CARGO) build --release --bin nurbs-plan
+demo: setup install
 	mkdir -p out
 	$(OUT)/nurbs-plan inspect examples/butterfly.json
 	$(OUT)/nurbs-plan plan examples/butterfly.json $(DEMO_LIMITS) --out out/butterfly.csv --summary out/butterfly.json
 	$(OUT)/nurbs-plan verify out/butterfly.csv examples/butterfly.json $(DEMO_LIMITS)
 	cat out/butterfly.json
+	bash tests/hal/test_butterfly.sh
 
 lint:
 	$(CARGO) fmt --all -- --check

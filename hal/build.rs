@@ -5,9 +5,7 @@
 //! `rustc-link-arg-bins` and not `rustc-link-lib`.
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
-    if std::env::var_os("CARGO_FEATURE_LINUXCNC").is_some()
-        && std::env::var_os("CARGO_FEATURE_MOCK_HAL").is_none()
-    {
+    if std::env::var_os("CARGO_FEATURE_LINUXCNC").is_some() && std::env::var_os("CARGO_FEATURE_MOCK_HAL").is_none() {
         println!("cargo:rustc-link-arg-bins=-llinuxcnchal");
     }
 }

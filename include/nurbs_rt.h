@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 1
+#define CHANNEL_VERSION 2
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -30,12 +30,30 @@
 #define SEGMENT_SLOTS 1024
 
 /**
- * Number of phases of a jerk-limited S-curve.
+ * Most curves (path elements) one geometry can hold.
+ */
+#define MAX_CURVES 64
+
+/**
+ * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
+ * together): 512 KiB, e.g. 64 cubic 3-D curves of 250 control points each, or the butterfly
+ * (51 planar control points, 208 values) about 300 times over.
+ */
+#define GEOMETRY_VALUES (1 << 16)
+
+/**
+ * Default of the `ramp-time` pin (s).
+ */
+#define DEFAULT_RAMP_TIME 2.0
+
+/**
+ * Number of phases of a jerk-limited S-curve (the length of the records' phase arrays;
+ * spelled out for the C header).
  */
 #define PHASES 7
 
 /**
- * One planned segment (mirror of `nurbs_rtcore::records::SegmentRecord`).
+ * One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
  */
 typedef struct SegmentRecord {
   /**
@@ -52,12 +70,12 @@ typedef struct SegmentRecord {
   double u_start;
   double u_end;
   /**
-   * Arc length from the curve start to the segment start, and the segment length (mm).
+   * Arc length from the start of its curve to the segment start, and the segment length (mm).
    */
   double s_start;
   double length;
   /**
-   * Feed at the segment start (mm/s).
+   * Feed at the segment start (mm/s); the tangential acceleration there is zero.
    */
   double feed_start;
   /**
@@ -69,6 +87,55 @@ typedef struct SegmentRecord {
    */
   double jerks[PHASES];
 } SegmentRecord;
+
+/**
+ * Where one curve's data lies in the geometry arena (offsets and lengths in `f64` values).
+ */
+typedef struct CurveDesc {
+  uint32_t degree;
+  /**
+   * Coordinates per control point (2, 3, or 6 for a 5-axis tip + top curve).
+   */
+  uint32_t dim;
+  uint32_t knots_offset;
+  uint32_t knots_len;
+  uint32_t points_offset;
+  uint32_t points_len;
+  uint32_t weights_offset;
+  uint32_t weights_len;
+  /**
+   * Points the module's underrun stop must not pass faster than allowed: `(s, feed)` pairs
+   * (arc length from the curve start in the records' measure, mm; feed cap, mm/s), e.g. the
+   * planner's critical points, corners and the curve end (feed 0).
+   */
+  uint32_t stops_offset;
+  uint32_t stops_len;
+} CurveDesc;
+
+/**
+ * The fixed-size part of a geometry.
+ */
+typedef struct GeometryHeader {
+  uint32_t curve_count;
+  /**
+   * Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
+   */
+  uint32_t tip_axes;
+  /**
+   * Per-record stop limits in the arena: `(accel, jerk)` of the stop after record `seq` at
+   * values `2 seq`, `2 seq + 1` (chosen by the planner, which checked that stop); records
+   * beyond the table use `stop_accel`, `stop_jerk`.
+   */
+  uint32_t stop_table_offset;
+  uint32_t stop_table_len;
+  /**
+   * Tangential deceleration and jerk (mm/s^2, mm/s^3) of the stop the module makes when the
+   * planner falls behind.
+   */
+  double stop_accel;
+  double stop_jerk;
+  struct CurveDesc curves[MAX_CURVES];
+} GeometryHeader;
 
 /**
  * RTAPI entry point, called by `loadrt nurbs_interp`.

@@ -7,16 +7,22 @@
 //! module only advances `tail`, each with release ordering after touching a slot and acquire
 //! ordering before reading the other side's counter. No locks, no syscalls, no allocation.
 //!
+//! After the ring comes the [`GeometryArea`]: the curves (knots, control points, weights) the
+//! records refer to, in one fixed-capacity arena of `f64` published seqlock-style (a generation
+//! counter, odd while the planner writes, even and non-zero once published, stored last). The
+//! module validates a published geometry with `CurveView::new` before it runs a single record
+//! on it and refuses (fault, hold) anything that does not validate.
+//!
 //! Why not `hal_stream`: it carries at most `HAL_STREAM_MAX_PINS` = 21 values per record, exactly
 //! the size of a segment record, which leaves no room for a record kind, and curve geometry
 //! (knots, control points, weights: variable size, possibly thousands of values) would have to be
 //! chopped into 21-value pieces on a second stream. Our own block keeps one ABI-checked layout
 //! (magic, version, record size, capacity) for both and grows without limits of HAL's.
-//! GEOMETRY: the geometry area (a fixed-capacity arena published with a generation counter) goes
-//! after `segments` in [`Channel`] and bumps [`CHANNEL_VERSION`].
 
 use core::cell::UnsafeCell;
-use core::sync::atomic::{AtomicU32, Ordering};
+use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
+
+use nurbs_rtcore::CurveView;
 
 pub use crate::record::SegmentRecord;
 
@@ -25,10 +31,16 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 1;
+pub const CHANNEL_VERSION: u32 = 2;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
+/// Most curves (path elements) one geometry can hold.
+pub const MAX_CURVES: usize = 64;
+/// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
+/// together): 512 KiB, e.g. 64 cubic 3-D curves of 250 control points each, or the butterfly
+/// (51 planar control points, 208 values) about 300 times over.
+pub const GEOMETRY_VALUES: usize = 1 << 16;
 
 /// Why a channel cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -133,8 +145,15 @@ pub struct Channel {
     version: AtomicU32,
     record_size: AtomicU32,
     segment_slots: AtomicU32,
+    geometry_values: AtomicU32,
+    max_curves: AtomicU32,
+    /// Total motion time (s, `f64` bits) of the records the planner has pushed so far; with the
+    /// time the module has taken, this gives the buffered motion time.
+    planned_time: AtomicU64,
     /// Planner → module segment records.
     pub segments: SpscRing<SegmentRecord, SEGMENT_SLOTS>,
+    /// Planner → module curve geometry.
+    pub geometry: GeometryArea,
 }
 
 impl Channel {
@@ -151,13 +170,14 @@ impl Channel {
         channel.segments.head.0.store(0, Ordering::Relaxed);
         channel.segments.tail.0.store(0, Ordering::Relaxed);
         channel.version.store(CHANNEL_VERSION, Ordering::Relaxed);
-        channel.record_size.store(
-            core::mem::size_of::<SegmentRecord>() as u32,
-            Ordering::Relaxed,
-        );
         channel
-            .segment_slots
-            .store(SEGMENT_SLOTS as u32, Ordering::Relaxed);
+            .record_size
+            .store(core::mem::size_of::<SegmentRecord>() as u32, Ordering::Relaxed);
+        channel.segment_slots.store(SEGMENT_SLOTS as u32, Ordering::Relaxed);
+        channel.geometry_values.store(GEOMETRY_VALUES as u32, Ordering::Relaxed);
+        channel.max_curves.store(MAX_CURVES as u32, Ordering::Relaxed);
+        channel.planned_time.store(0, Ordering::Relaxed);
+        channel.geometry.generation.store(0, Ordering::Relaxed);
         channel.magic.store(CHANNEL_MAGIC, Ordering::Release);
         channel
     }
@@ -178,14 +198,261 @@ impl Channel {
             return Err(ChannelError::NotInitialised);
         }
         let layout_ok = self.version.load(Ordering::Relaxed) == CHANNEL_VERSION
-            && self.record_size.load(Ordering::Relaxed) as usize
-                == core::mem::size_of::<SegmentRecord>()
-            && self.segment_slots.load(Ordering::Relaxed) as usize == SEGMENT_SLOTS;
+            && self.record_size.load(Ordering::Relaxed) as usize == core::mem::size_of::<SegmentRecord>()
+            && self.segment_slots.load(Ordering::Relaxed) as usize == SEGMENT_SLOTS
+            && self.geometry_values.load(Ordering::Relaxed) as usize == GEOMETRY_VALUES
+            && self.max_curves.load(Ordering::Relaxed) as usize == MAX_CURVES;
         if layout_ok {
             Ok(())
         } else {
             Err(ChannelError::Layout)
         }
+    }
+}
+
+impl Channel {
+    /// Producer side: total motion time (s) of all records pushed so far.
+    pub fn set_planned_time(&self, seconds: f64) {
+        self.planned_time.store(seconds.to_bits(), Ordering::Release);
+    }
+
+    pub fn planned_time(&self) -> f64 {
+        f64::from_bits(self.planned_time.load(Ordering::Acquire))
+    }
+}
+
+/// Where one curve's data lies in the geometry arena (offsets and lengths in `f64` values).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CurveDesc {
+    pub degree: u32,
+    /// Coordinates per control point (2, 3, or 6 for a 5-axis tip + top curve).
+    pub dim: u32,
+    pub knots_offset: u32,
+    pub knots_len: u32,
+    pub points_offset: u32,
+    pub points_len: u32,
+    pub weights_offset: u32,
+    pub weights_len: u32,
+    /// Points the module's underrun stop must not pass faster than allowed: `(s, feed)` pairs
+    /// (arc length from the curve start in the records' measure, mm; feed cap, mm/s), e.g. the
+    /// planner's critical points, corners and the curve end (feed 0).
+    pub stops_offset: u32,
+    pub stops_len: u32,
+}
+
+/// The fixed-size part of a geometry.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GeometryHeader {
+    pub curve_count: u32,
+    /// Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
+    pub tip_axes: u32,
+    /// Per-record stop limits in the arena: `(accel, jerk)` of the stop after record `seq` at
+    /// values `2 seq`, `2 seq + 1` (chosen by the planner, which checked that stop); records
+    /// beyond the table use `stop_accel`, `stop_jerk`.
+    pub stop_table_offset: u32,
+    pub stop_table_len: u32,
+    /// Tangential deceleration and jerk (mm/s^2, mm/s^3) of the stop the module makes when the
+    /// planner falls behind.
+    pub stop_accel: f64,
+    pub stop_jerk: f64,
+    pub curves: [CurveDesc; MAX_CURVES],
+}
+
+impl Default for GeometryHeader {
+    fn default() -> Self {
+        GeometryHeader {
+            curve_count: 0,
+            tip_axes: 0,
+            stop_table_offset: 0,
+            stop_table_len: 0,
+            stop_accel: 0.0,
+            stop_jerk: 0.0,
+            curves: [CurveDesc::default(); MAX_CURVES],
+        }
+    }
+}
+
+/// Why a published geometry is refused.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GeometryFault {
+    /// No curve, more than [`MAX_CURVES`], or a tip-axis count outside 2..=3.
+    Header,
+    /// Stop deceleration or jerk (default or per record) not finite and positive, or the stop
+    /// table outside the arena.
+    StopLimits,
+    /// A curve's data lies (partly) outside the arena.
+    OutOfBounds { curve: usize },
+    /// A curve has fewer coordinates than the tip axes.
+    Dimension { curve: usize },
+    /// A curve's stop points are not finite `(s, feed >= 0)` pairs.
+    Stops { curve: usize },
+    /// `CurveView::new` refused the curve.
+    Curve {
+        curve: usize,
+        error: nurbs_rtcore::GeometryError,
+    },
+}
+
+/// One validated curve: the NURBS and its stop points (`(s, feed)` pairs, finite, feed >= 0).
+#[derive(Clone, Copy, Debug)]
+pub struct ValidCurve<'a> {
+    pub view: CurveView<'a>,
+    pub stops: &'a [f64],
+}
+
+/// Validated curves of a geometry, indexed like the records' curve numbers.
+pub type CurveViews<'a> = [Option<ValidCurve<'a>>; MAX_CURVES];
+
+fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
+    let start = offset as usize;
+    let end = start.checked_add(len as usize)?;
+    values.get(start..end)
+}
+
+/// Checks `header` against `values` and builds one validated [`CurveView`] per curve into `out`
+/// (the rest set to `None`); returns the per-record stop table. Allocation-free and panic-free:
+/// the realtime module runs it once per published geometry; the planner runs it before
+/// publishing.
+pub fn validate_geometry<'a>(
+    header: &GeometryHeader,
+    values: &'a [f64],
+    out: &mut CurveViews<'a>,
+) -> Result<&'a [f64], GeometryFault> {
+    for v in out.iter_mut() {
+        *v = None;
+    }
+    let count = header.curve_count as usize;
+    let tip = header.tip_axes as usize;
+    if count == 0 || count > MAX_CURVES || !(2..=3).contains(&tip) {
+        return Err(GeometryFault::Header);
+    }
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    if !positive(header.stop_accel) || !positive(header.stop_jerk) {
+        return Err(GeometryFault::StopLimits);
+    }
+    let table = slice_of(values, header.stop_table_offset, header.stop_table_len)
+        .filter(|t| t.len() % 2 == 0 && t.iter().all(|v| positive(*v)))
+        .ok_or(GeometryFault::StopLimits)?;
+    for (curve, (desc, slot)) in header.curves.iter().zip(out.iter_mut()).take(count).enumerate() {
+        let (Some(knots), Some(points), Some(weights), Some(stops)) = (
+            slice_of(values, desc.knots_offset, desc.knots_len),
+            slice_of(values, desc.points_offset, desc.points_len),
+            slice_of(values, desc.weights_offset, desc.weights_len),
+            slice_of(values, desc.stops_offset, desc.stops_len),
+        ) else {
+            return Err(GeometryFault::OutOfBounds { curve });
+        };
+        let pairs_ok = stops.len() % 2 == 0
+            && stops
+                .chunks_exact(2)
+                .all(|p| p.iter().all(|v| v.is_finite()) && p.get(1).is_some_and(|f| *f >= 0.0));
+        if !pairs_ok {
+            return Err(GeometryFault::Stops { curve });
+        }
+        if (desc.dim as usize) < tip {
+            return Err(GeometryFault::Dimension { curve });
+        }
+        let view = CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
+            .map_err(|error| GeometryFault::Curve { curve, error })?;
+        *slot = Some(ValidCurve { view, stops });
+    }
+    Ok(table)
+}
+
+/// The curve geometry in shared memory, written by the planner, read by the module.
+///
+/// Seqlock protocol: the writer makes `generation` odd, writes header and values, then stores
+/// the next even value (release). A reader takes a snapshot only at an even, non-zero
+/// generation and confirms the generation unchanged after it has validated the data.
+#[repr(C)]
+pub struct GeometryArea {
+    generation: AtomicU32,
+    header: UnsafeCell<GeometryHeader>,
+    values: UnsafeCell<[f64; GEOMETRY_VALUES]>,
+}
+
+// SAFETY: writes happen only under an odd generation, reads are confirmed by an unchanged even
+// generation (seqlock); the data are plain numbers.
+unsafe impl Sync for GeometryArea {}
+
+/// Why the planner cannot publish a geometry.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PublishError {
+    /// More values than [`GEOMETRY_VALUES`].
+    TooLarge,
+    /// The geometry does not validate (the module would refuse it).
+    Invalid(GeometryFault),
+}
+
+impl GeometryArea {
+    /// Current generation: 0 = nothing published, odd = being written.
+    pub fn generation(&self) -> u32 {
+        self.generation.load(Ordering::Acquire)
+    }
+
+    /// Producer side: validate and publish `header` + `values`; returns the new generation.
+    /// The module must be idle (it refuses a geometry that changes during motion).
+    pub fn publish(&self, header: &GeometryHeader, values: &[f64]) -> Result<u32, PublishError> {
+        if values.len() > GEOMETRY_VALUES {
+            return Err(PublishError::TooLarge);
+        }
+        let mut views: CurveViews = [None; MAX_CURVES];
+        validate_geometry(header, values, &mut views).map_err(PublishError::Invalid)?;
+        let old = self.generation.load(Ordering::Relaxed);
+        let writing = (old | 1).wrapping_add(if old & 1 == 1 { 2 } else { 0 });
+        self.generation.store(writing, Ordering::Relaxed);
+        fence(Ordering::Release);
+        // SAFETY: the generation is odd: a reader will discard what it sees now.
+        unsafe {
+            self.header.get().write_volatile(*header);
+            let base = self.values.get() as *mut f64;
+            for (i, v) in values.iter().enumerate() {
+                base.add(i).write_volatile(*v);
+            }
+        }
+        let published = writing.wrapping_add(1).max(2);
+        self.generation.store(published, Ordering::Release);
+        Ok(published)
+    }
+
+    /// Test helper: publish without validating (to prove the module refuses bad geometry).
+    #[cfg(test)]
+    pub(crate) fn publish_unchecked(&self, header: &GeometryHeader, values: &[f64]) -> u32 {
+        let old = self.generation.load(Ordering::Relaxed);
+        self.generation.store(old | 1, Ordering::Relaxed);
+        // SAFETY: odd generation; test only, one thread.
+        unsafe {
+            self.header.get().write_volatile(*header);
+            let base = self.values.get() as *mut f64;
+            for (i, v) in values.iter().take(GEOMETRY_VALUES).enumerate() {
+                base.add(i).write_volatile(*v);
+            }
+        }
+        let published = (old | 1).wrapping_add(1).max(2);
+        self.generation.store(published, Ordering::Release);
+        published
+    }
+
+    /// Consumer side: a copy of the header and the arena, if a geometry is published (generation
+    /// even and non-zero). Confirm with [`GeometryArea::unchanged`] after using the data.
+    pub fn snapshot(&self) -> Option<(u32, GeometryHeader, &[f64; GEOMETRY_VALUES])> {
+        let generation = self.generation.load(Ordering::Acquire);
+        if generation == 0 || generation & 1 == 1 {
+            return None;
+        }
+        // SAFETY: read of plain data; a concurrent writer is detected by `unchanged`.
+        let header = unsafe { self.header.get().read_volatile() };
+        // SAFETY: as above; the arena stays mapped as long as the channel.
+        let values = unsafe { &*self.values.get() };
+        Some((generation, header, values))
+    }
+
+    /// True if the geometry of `generation` is still the published one.
+    pub fn unchanged(&self, generation: u32) -> bool {
+        fence(Ordering::Acquire);
+        self.generation.load(Ordering::Relaxed) == generation
     }
 }
 
@@ -215,17 +482,11 @@ mod tests {
     fn attach_refuses_uninitialised_and_foreign_layouts() {
         let mut b = block();
         let p = aligned(&mut b);
-        assert_eq!(
-            unsafe { Channel::attach(p) }.err(),
-            Some(ChannelError::NotInitialised)
-        );
+        assert_eq!(unsafe { Channel::attach(p) }.err(), Some(ChannelError::NotInitialised));
         let c = unsafe { Channel::init(p) };
         assert!(unsafe { Channel::attach(p) }.is_ok());
         c.version.store(CHANNEL_VERSION + 1, Ordering::Relaxed);
-        assert_eq!(
-            unsafe { Channel::attach(p) }.err(),
-            Some(ChannelError::Layout)
-        );
+        assert_eq!(unsafe { Channel::attach(p) }.err(), Some(ChannelError::Layout));
     }
 
     #[test]
@@ -274,12 +535,100 @@ mod tests {
     fn corrupt_counters_are_refused_not_followed() {
         let mut b = block();
         let c = unsafe { Channel::init(aligned(&mut b)) };
-        c.segments
-            .head
-            .0
-            .store(SEGMENT_SLOTS as u32 + 1, Ordering::Relaxed);
+        c.segments.head.0.store(SEGMENT_SLOTS as u32 + 1, Ordering::Relaxed);
         assert_eq!(c.segments.pop(), Err(ChannelError::Corrupt));
         assert_eq!(c.segments.push(&record(0)), Err(ChannelError::Corrupt));
+    }
+
+    /// A clamped cubic: the trident's control polygon.
+    fn trident() -> (GeometryHeader, Vec<f64>) {
+        let knots = [0.0, 0.0, 0.0, 0.0, 0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 1.0];
+        let points = [
+            10.0, 0.0, 20.0, 27.0, 12.0, 8.0, 10.0, 20.0, 8.0, 8.0, 0.0, 27.0, 10.0, 0.0,
+        ];
+        let weights = [1.0; 7];
+        let mut values = Vec::new();
+        let mut desc = CurveDesc {
+            degree: 3,
+            dim: 2,
+            ..CurveDesc::default()
+        };
+        desc.knots_offset = values.len() as u32;
+        desc.knots_len = knots.len() as u32;
+        values.extend_from_slice(&knots);
+        desc.points_offset = values.len() as u32;
+        desc.points_len = points.len() as u32;
+        values.extend_from_slice(&points);
+        desc.weights_offset = values.len() as u32;
+        desc.weights_len = weights.len() as u32;
+        values.extend_from_slice(&weights);
+        let mut header = GeometryHeader {
+            curve_count: 1,
+            tip_axes: 2,
+            stop_accel: 1e4,
+            stop_jerk: 6e4,
+            ..GeometryHeader::default()
+        };
+        header.curves[0] = desc;
+        (header, values)
+    }
+
+    #[test]
+    fn geometry_publishes_and_validates() {
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        assert!(c.geometry.snapshot().is_none());
+        let (header, values) = trident();
+        let generation = c.geometry.publish(&header, &values).unwrap();
+        assert_eq!(generation, 2);
+        let (g, h, arena) = c.geometry.snapshot().unwrap();
+        assert_eq!((g, h), (generation, header));
+        let mut views: CurveViews = [None; MAX_CURVES];
+        validate_geometry(&h, arena, &mut views).unwrap();
+        let p = views[0].unwrap().view.point(1.0);
+        assert_eq!((p[0], p[1]), (10.0, 0.0));
+        assert!(c.geometry.unchanged(g));
+        assert_eq!(c.geometry.publish(&header, &values), Ok(4));
+        assert!(!c.geometry.unchanged(g));
+    }
+
+    #[test]
+    fn malformed_geometry_is_refused() {
+        let (header, values) = trident();
+        let mut views: CurveViews = [None; MAX_CURVES];
+        fn check<'a>(h: &GeometryHeader, v: &'a [f64], views: &mut CurveViews<'a>) -> Result<(), GeometryFault> {
+            validate_geometry(h, v, views).map(|_| ())
+        }
+        let mut h = header;
+        h.curves[0].weights_len = 8; // past the end of the values
+        assert_eq!(
+            check(&h, &values, &mut views),
+            Err(GeometryFault::OutOfBounds { curve: 0 })
+        );
+        let mut h = header;
+        h.curves[0].knots_offset = u32::MAX; // offset + len overflows
+        assert_eq!(
+            check(&h, &values, &mut views),
+            Err(GeometryFault::OutOfBounds { curve: 0 })
+        );
+        let mut h = header;
+        h.curve_count = MAX_CURVES as u32 + 1;
+        assert_eq!(check(&h, &values, &mut views), Err(GeometryFault::Header));
+        let mut h = header;
+        h.stop_jerk = f64::NAN;
+        assert_eq!(check(&h, &values, &mut views), Err(GeometryFault::StopLimits));
+        let mut v = values.clone();
+        v[5] = 0.1; // knots decrease
+        let mut views2: CurveViews = [None; MAX_CURVES];
+        assert!(matches!(
+            check(&header, &v, &mut views2),
+            Err(GeometryFault::Curve { curve: 0, .. })
+        ));
+        assert!(views2.iter().all(Option::is_none));
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        assert!(matches!(c.geometry.publish(&header, &v), Err(PublishError::Invalid(_))));
+        assert_eq!(c.geometry.generation(), 0);
     }
 
     #[test]

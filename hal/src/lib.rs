@@ -4,11 +4,13 @@
 //!
 //! * the realtime module `nurbs_interp` ([`module`]): built as this crate's `staticlib` and linked
 //!   by the Makefile into `nurbs_interp.so`, which `loadrt` dlopens into rtapi_app. Its exported
-//!   function `nurbs_interp.update` runs once per servo period: it reads its input pins, takes
-//!   segment records from the [`channel`] and writes the axis position pins. It never allocates,
-//!   locks, calls the OS or panics.
+//!   function `nurbs_interp.update` runs once per servo period: it takes the curve geometry and
+//!   the segment records from the [`channel`], runs the `nurbs_rtcore` interpolator and writes
+//!   the axis position pins. It never allocates, locks, calls the OS or panics.
 //! * the userspace planner `nurbs-planner` (`src/bin/nurbs-planner.rs`, `loadusr`): a HAL
-//!   userspace component that attaches to the same [`channel`] and keeps it filled.
+//!   userspace component that plans a toolpath with `nurbs_motion`, publishes its geometry to
+//!   the same [`channel`] (with the stop limits of `src/plan_geometry.rs`) and streams the
+//!   records into it.
 //!
 //! The C API is reached through [`sys`] only: the committed bindgen output ([`bindings`]) in a
 //! normal build, the in-process [`mock`] under `cargo test` or the `mock-hal` feature, so that
@@ -28,5 +30,9 @@ pub mod record;
 pub mod sys;
 pub mod user;
 
+#[cfg(test)]
+extern crate self as nurbs_hal;
+#[cfg(test)]
+mod plan_geometry;
 #[cfg(test)]
 mod tests;

@@ -15,9 +15,7 @@ use core::ffi::{c_char, c_int, c_long, c_uint, c_ulong, c_void, CStr};
 use std::cell::RefCell;
 use std::collections::VecDeque;
 
-use crate::bindings::{
-    hal_pin_dir_t, hal_stream_data, hal_stream_t, hal_type_t, msg_level_t, real_t,
-};
+use crate::bindings::{hal_pin_dir_t, hal_stream_data, hal_stream_t, hal_type_t, msg_level_t, real_t};
 use crate::sys::{HAL_BIT, HAL_FLOAT, HAL_S32, HAL_U32};
 
 const EINVAL: c_int = 22;
@@ -110,11 +108,7 @@ pub unsafe extern "C" fn hal_init(name: *const c_char) -> c_int {
         }
         let id = s.next_id;
         s.next_id += 1;
-        s.comps.push(Comp {
-            id,
-            name,
-            ready: false,
-        });
+        s.comps.push(Comp { id, name, ready: false });
         id
     })
 }
@@ -238,12 +232,7 @@ pub unsafe extern "C" fn hal_export_funct(
         if s.functs.iter().any(|f| f.name == name) {
             return -EEXIST;
         }
-        s.functs.push(Exported {
-            name,
-            funct,
-            arg,
-            comp,
-        });
+        s.functs.push(Exported { name, funct, arg, comp });
         0
     })
 }
@@ -293,15 +282,13 @@ pub unsafe extern "C" fn rtapi_shmem_getptr(shmem_id: c_int, ptr: *mut *mut c_vo
 
 /// Releases the id; the block itself stays (so pointers held by other parties stay valid).
 pub unsafe extern "C" fn rtapi_shmem_delete(shmem_id: c_int, _module_id: c_int) -> c_int {
-    with(
-        |s| match s.shmem_ids.iter().position(|(id, _)| *id == shmem_id) {
-            Some(i) => {
-                s.shmem_ids.remove(i);
-                0
-            }
-            None => -EINVAL,
-        },
-    )
+    with(|s| match s.shmem_ids.iter().position(|(id, _)| *id == shmem_id) {
+        Some(i) => {
+            s.shmem_ids.remove(i);
+            0
+        }
+        None => -EINVAL,
+    })
 }
 
 /// `rtapi_print_msg(level, "%s\n", msg)` (the only form the crate uses).
@@ -355,10 +342,7 @@ pub unsafe extern "C" fn hal_stream_element_count(stream: *mut hal_stream_t) -> 
     })
 }
 
-pub unsafe extern "C" fn hal_stream_element_type(
-    stream: *mut hal_stream_t,
-    idx: c_int,
-) -> hal_type_t {
+pub unsafe extern "C" fn hal_stream_element_type(stream: *mut hal_stream_t, idx: c_int) -> hal_type_t {
     let key = stream_key(stream);
     with(|s| {
         s.streams
@@ -371,11 +355,7 @@ pub unsafe extern "C" fn hal_stream_element_type(
 
 pub unsafe extern "C" fn hal_stream_readable(stream: *mut hal_stream_t) -> bool {
     let key = stream_key(stream);
-    with(|s| {
-        s.streams
-            .iter()
-            .any(|st| Some(st.key) == key && !st.samples.is_empty())
-    })
+    with(|s| s.streams.iter().any(|st| Some(st.key) == key && !st.samples.is_empty()))
 }
 
 pub unsafe extern "C" fn hal_stream_read(
@@ -475,12 +455,7 @@ pub fn set_pin(name: &str, value: Value) -> bool {
 /// The exported function `name`, to be called with [`call`] (looked up once, outside the loop,
 /// so that the calls themselves allocate nothing).
 pub fn funct(name: &str) -> Option<(Funct, *mut c_void)> {
-    with(|s| {
-        s.functs
-            .iter()
-            .find(|f| f.name == name)
-            .map(|f| (f.funct, f.arg))
-    })
+    with(|s| s.functs.iter().find(|f| f.name == name).map(|f| (f.funct, f.arg)))
 }
 
 /// Run an exported function for one period, as a HAL thread does.

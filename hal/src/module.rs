@@ -3,29 +3,62 @@
 //!
 //! `rtapi_app_main` creates the component, its pins (all instance state lives in `hal_malloc`'d
 //! memory, as in C components), the shared-memory [`Channel`] the planner writes to, and exports
-//! `nurbs_interp.update`. [`Instance::update`] runs every servo period: it reads the input pins,
-//! takes records from the channel, writes the output pins and nothing else. It never allocates,
-//! locks, calls the OS or panics; failures are pins (fault, underruns), not errors.
+//! `nurbs_interp.update`. [`Instance::update`] runs every servo period: it takes the curve
+//! geometry once the planner has published it (validated with `CurveView::new`), drives the
+//! `nurbs_rtcore` [`Interpolator`] with the segment records it pops from the channel (S-curve
+//! feed, RK2 predictor-corrector step of the curve parameter, NURBS evaluation) and writes the
+//! output pins. It never allocates, locks, calls the OS or panics (no indexing that can fail);
+//! failures are pins (fault, fault-code, underrun), not errors.
 //!
-//! Pins (spike set; the README documents the final list):
+//! Pins:
 //!
-//! | pin | type | dir | meaning |
-//! | --- | --- | --- | --- |
-//! | `nurbs_interp.enable` | bit | in | run; when false the outputs hold |
-//! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | axis position commands (mm) |
-//! | `nurbs_interp.active` | bit | out | a record was executed this period |
-//! | `nurbs_interp.fault` | bit | out | malformed channel or record sequence; latched |
-//! | `nurbs_interp.seq` | u32 | out | sequence number of the last record taken |
-//! | `nurbs_interp.records` | u32 | out | records taken so far |
-//! | `nurbs_interp.underruns` | u32 | out | enabled periods that found no data |
+//! | pin | type | dir | unit | meaning |
+//! | --- | --- | --- | --- | --- |
+//! | `nurbs_interp.enable` | bit | in | | run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine) |
+//! | `nurbs_interp.hold` | bit | in | | feed hold: ramp the plan's time scale to 0 (a jerk-limited stop on the path); false ramps back to 1 and the plan resumes where it stopped |
+//! | `nurbs_interp.abort` | bit | in | | stop as for hold, then discard the queue; the motion is over until a planner publishes a new geometry |
+//! | `nurbs_interp.ramp-time` | float | in | s | duration of the hold/resume ramp (default 2) |
+//! | `nurbs_interp.scale` | float | out | | current time scale (1: as planned, 0: held) |
+//! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | mm | axis position commands (`-z` is 0 on a 2-D path) |
+//! | `nurbs_interp.feed` | float | out | mm/s | path feed at this sample (the plan's, times `scale`) |
+//! | `nurbs_interp.u` | float | out | | curve parameter |
+//! | `nurbs_interp.curve` | u32 | out | | index of the path element (curve) |
+//! | `nurbs_interp.active` | bit | out | | a new sample was produced this period |
+//! | `nurbs_interp.done` | bit | out | | the last segment has been completed (at rest at its end) |
+//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record; latched, outputs hold |
+//! | `nurbs_interp.fault-code` | u32 | out | | why ([`FaultCode`]) |
+//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stopped on the path; latched |
+//! | `nurbs_interp.underruns` | u32 | out | | periods that needed a record during motion and found none |
+//! | `nurbs_interp.records` | u32 | out | | records taken so far |
+//! | `nurbs_interp.seq` | u32 | out | | sequence number of the last record taken |
+//! | `nurbs_interp.buffered` | float | out | s | motion time queued ahead of the current sample |
+//!
+//! Underrun: the records end at segment boundaries with zero tangential acceleration, so when
+//! the next record is missing the module appends a jerk-limited stop of its own (a three-phase
+//! S-curve from the feed at the segment end to rest, [`underrun_stop`]) and runs it through the
+//! same interpolator along the same curve: no jump, the feed ramps down to zero. Its
+//! deceleration and jerk come from the per-record stop table the planner published with the
+//! geometry: the planner ran this very stop from every boundary and chose limits under which it
+//! stays within the axis limits (`plan_geometry.rs`); the stop is compressed in time where it
+//! would otherwise pass a corner, critical point or the curve end faster than that point's
+//! feed cap. Afterwards the module holds that position; records arriving later are not run
+//! (they were planned from a feed the machine no longer has): resuming needs a new plan from the
+//! stop point (a new geometry publish resets the module).
+//!
+//! Hold and abort scale the plan's time ([`TimeScale`]): the path stays the planned one.
 
 use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
 
-use crate::channel::{Channel, ChannelError, CHANNEL_KEY};
+use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
+use nurbs_rtcore::CurveView;
+
+use nurbs_rtcore::scurve::SCurveTable;
+
+use crate::channel::{validate_geometry, Channel, CurveViews, GeometryHeader, ValidCurve, CHANNEL_KEY, MAX_CURVES};
 use crate::pins::Pin;
-use crate::record::SegmentRecord;
+use crate::record::{SegmentRecord, FLAG_LAST, PHASES};
 use crate::sys;
 
 /// Component name: must equal the module's file name (`loadrt` dlopens `NAME.so`).
@@ -38,18 +71,100 @@ static SHMEM_ID: AtomicI32 = AtomicI32::new(-1);
 const EINVAL: c_int = 22;
 const ENOMEM: c_int = 12;
 
+/// Values of the `fault-code` pin.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaultCode {
+    None = 0,
+    /// The channel header does not match this build, or its counters are inconsistent.
+    Channel = 1,
+    /// The published geometry does not validate.
+    Geometry = 2,
+    /// The geometry was re-published while a motion was running.
+    GeometryChanged = 3,
+    /// A record failed its structural check (non-finite, negative, inconsistent profile).
+    Record = 4,
+    /// A record's sequence number is not the next one (lost or repeated record).
+    Sequence = 5,
+    /// The interpolator refused a record (curve index without a curve).
+    BadRecord = 6,
+}
+
 /// The component's pins, in HAL shared memory.
 #[repr(C)]
 pub struct Pins {
     pub enable: Pin<bool>,
+    pub hold: Pin<bool>,
+    pub abort: Pin<bool>,
+    pub ramp_time: Pin<f64>,
+    pub scale: Pin<f64>,
     pub pos_cmd_x: Pin<f64>,
     pub pos_cmd_y: Pin<f64>,
     pub pos_cmd_z: Pin<f64>,
+    pub feed: Pin<f64>,
+    pub u: Pin<f64>,
+    pub curve: Pin<u32>,
     pub active: Pin<bool>,
+    pub done: Pin<bool>,
     pub fault: Pin<bool>,
-    pub seq: Pin<u32>,
-    pub records: Pin<u32>,
+    pub fault_code: Pin<u32>,
+    pub underrun: Pin<bool>,
     pub underruns: Pin<u32>,
+    pub records: Pin<u32>,
+    pub seq: Pin<u32>,
+    pub buffered: Pin<f64>,
+}
+
+/// The accepted curve geometry: views into the channel's arena, validated once.
+#[derive(Clone, Copy)]
+pub struct RtGeometry {
+    /// Generation of the channel geometry these views were made from (0: none).
+    generation: u32,
+    count: usize,
+    tip: usize,
+    stop_accel: f64,
+    stop_jerk: f64,
+    /// `(accel, jerk)` of the stop after each record, by sequence number.
+    stop_table: &'static [f64],
+    views: CurveViews<'static>,
+}
+
+impl RtGeometry {
+    const EMPTY: RtGeometry = RtGeometry {
+        generation: 0,
+        count: 0,
+        tip: 2,
+        stop_accel: 0.0,
+        stop_jerk: 0.0,
+        stop_table: &[],
+        views: [None; MAX_CURVES],
+    };
+
+    fn is_valid(&self) -> bool {
+        self.generation != 0
+    }
+
+    /// Deceleration and jerk of the stop after record `seq`.
+    fn stop_limits(&self, seq: u32) -> (f64, f64) {
+        let i = (seq as usize).saturating_mul(2);
+        match (self.stop_table.get(i), self.stop_table.get(i.saturating_add(1))) {
+            (Some(&a), Some(&j)) => (a, j),
+            _ => (self.stop_accel, self.stop_jerk),
+        }
+    }
+}
+
+impl CurveSet for RtGeometry {
+    fn curve(&self, index: usize) -> Option<CurveView<'_>> {
+        if index < self.count {
+            self.views.get(index).copied().flatten().map(|c| c.view)
+        } else {
+            None
+        }
+    }
+    fn tip_axes(&self) -> usize {
+        self.tip
+    }
 }
 
 /// Everything the update function touches: pins, the channel and plain-data state.
@@ -57,63 +172,425 @@ pub struct Pins {
 pub struct Instance {
     pub pins: Pins,
     channel: *const Channel,
+    geometry: RtGeometry,
+    interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
     records: u32,
     underruns: u32,
-    fault: bool,
-    // INTEGRATION POINT: the `nurbs_rtcore` interpolator state (plain data, fixed capacity)
-    // goes here, initialised in `create`.
+    /// Motion time of the records taken so far (s).
+    taken_time: f64,
+    /// The planner fell behind and the module ran (or runs) its own stop.
+    stopping: bool,
+    /// ... and that stop is over: at rest.
+    stopped: bool,
+    /// Time scale of the plan (1: as planned, 0: held) and its ramp.
+    scale: TimeScale,
+    /// Abort completed: at rest, queue discarded, nothing more runs until a new geometry.
+    aborted: bool,
+    fault: FaultCode,
+}
+
+/// Default of the `ramp-time` pin (s).
+pub const DEFAULT_RAMP_TIME: f64 = 2.0;
+
+/// Feed hold by time scaling: the plan runs at `r` times real time, `r` moving between 1 and 0
+/// along a quintic ramp (`10x^3 - 15x^4 + 6x^5`) over the ramp time, so the path is the planned
+/// one and the motion stays jerk-limited: velocity `v r`, acceleration `a r^2 + v r'`, jerk
+/// `j r^3 + 3 a r r' + v r''` with bounded `r'`, `r''` that are zero where a ramp starts and
+/// ends. A ramp always runs to its end before the next one starts (no kink in `r`). Not checked
+/// against the axis limits: where the plan itself runs at an axis jerk limit when the hold
+/// starts, the ramp's terms can add a little on top (see the hold test).
+///
+/// cbindgen:ignore
+#[derive(Clone, Copy, Debug)]
+pub struct TimeScale {
+    r: f64,
+    from: f64,
+    to: f64,
+    /// Ramp time elapsed and duration; `duration == 0`: no ramp running.
+    t: f64,
+    duration: f64,
+}
+
+impl TimeScale {
+    /// Running as planned (`r = 1`), no ramp.
+    pub const fn run() -> TimeScale {
+        TimeScale {
+            r: 1.0,
+            from: 1.0,
+            to: 1.0,
+            t: 0.0,
+            duration: 0.0,
+        }
+    }
+
+    pub fn value(&self) -> f64 {
+        self.r
+    }
+
+    /// Advance by `dt` towards `target` (0 or 1); returns the plan time that passes in this
+    /// period (exactly `dt` while running unscaled).
+    pub fn advance(&mut self, target: f64, ramp_time: f64, dt: f64) -> f64 {
+        let before = self.r;
+        if self.duration == 0.0 && self.r != target {
+            self.from = self.r;
+            self.to = target;
+            self.t = 0.0;
+            self.duration = if ramp_time.is_finite() && ramp_time > dt {
+                ramp_time
+            } else {
+                dt
+            };
+        }
+        if self.duration > 0.0 {
+            self.t += dt;
+            let x = (self.t / self.duration).min(1.0);
+            // Quintic smoothstep: r' and r'' are zero at both ends, so the scaled motion's
+            // acceleration and jerk do not jump when a ramp starts or ends.
+            let shape = x * x * x * (10.0 + x * (6.0 * x - 15.0));
+            self.r = self.from + (self.to - self.from) * shape;
+            if x >= 1.0 {
+                self.r = self.to;
+                self.duration = 0.0;
+            }
+        }
+        if before == 1.0 && self.r == 1.0 {
+            dt
+        } else {
+            0.5 * (before + self.r) * dt
+        }
+    }
+}
+
+/// What the record source saw while the interpolator pulled records.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Pull {
+    Fine,
+    Empty,
+    Fault(FaultCode),
+}
+
+/// Phase times `(t1, t2)` of a stop from `v0` to rest with deceleration `accel` and jerk `jerk`:
+/// jerk `-jerk` for `t1`, constant deceleration for `t2`, jerk `+jerk` for `t1`. The feed falls
+/// point-symmetrically, so the stop covers `v0 (2 t1 + t2) / 2`.
+fn stop_phases(v0: f64, accel: f64, jerk: f64) -> (f64, f64) {
+    if v0 * jerk <= accel * accel {
+        ((v0 / jerk).sqrt(), 0.0)
+    } else {
+        (accel / jerk, (v0 - accel * accel / jerk) / accel)
+    }
+}
+
+/// Distance of the stop of [`stop_phases`].
+pub fn stop_distance(v0: f64, accel: f64, jerk: f64) -> f64 {
+    let (t1, t2) = stop_phases(v0, accel, jerk);
+    v0 * (2.0 * t1 + t2) / 2.0
+}
+
+/// The jerk-limited stop appended after `last` when no next record comes: from the feed at the
+/// end of `last` (zero tangential acceleration there) to rest along the same curve, with
+/// deceleration `accel * k` and jerk `jerk * k^2`, i.e. the `(accel, jerk)` stop compressed in
+/// time by `k >= 1`.
+pub fn stop_record(last: &SegmentRecord, accel: f64, jerk: f64, k: f64) -> SegmentRecord {
+    let v0 = last.profile().table().end().v.max(0.0);
+    let j = jerk * k * k;
+    let (t1, t2) = stop_phases(v0, accel * k, j);
+    let (t1, t2, j) = if t1.is_finite() && t2.is_finite() && j.is_finite() && v0 > 0.0 {
+        (t1, t2, j)
+    } else {
+        (0.0, 0.0, 0.0) // no feed, or no room: stop where we are
+    };
+    let mut durations = [0.0; PHASES];
+    let mut jerks = [0.0; PHASES];
+    for (i, (d, jk)) in [(t1, -j), (t2, 0.0), (t1, j)].into_iter().enumerate() {
+        if let (Some(di), Some(ji)) = (durations.get_mut(i), jerks.get_mut(i)) {
+            *di = d;
+            *ji = jk;
+        }
+    }
+    let mut record = SegmentRecord {
+        seq: last.seq,
+        flags: last.flags & !FLAG_LAST,
+        u_start: last.u_end,
+        u_end: last.u_end,
+        s_start: last.s_start + last.length,
+        length: 0.0,
+        feed_start: v0,
+        durations,
+        jerks,
+    };
+    record.length = record.profile().table().end().s.max(0.0);
+    record
+}
+
+/// Distance into a stop profile at which its (falling) feed has come down to `v`.
+fn distance_at_feed(table: &SCurveTable, v: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, table.total_time());
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if table.state_at(mid).v > v {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    table.state_at(hi).s
+}
+
+/// The stop the module runs after `last` on `curve`: deceleration `accel` and jerk `jerk`,
+/// compressed in time just enough to pass every stop point of the curve (the planner's critical
+/// points, corners, the curve end) no faster than its feed cap. Bounded work: one pass over the
+/// curve's stop points, a 60-step bisection for each one the stop reaches too fast.
+pub fn underrun_stop(curve: Option<ValidCurve>, last: &SegmentRecord, accel: f64, jerk: f64) -> SegmentRecord {
+    let nominal = stop_record(last, accel, jerk, 1.0);
+    let table = nominal.profile().table();
+    let (v0, s0, reach) = (nominal.feed_start, nominal.s_start, nominal.length);
+    let mut k = 1.0f64;
+    for pair in curve.map_or(&[][..], |c| c.stops).chunks_exact(2) {
+        if let [s, cap] = *pair {
+            // Points within a micrometre are the one the last segment ends at: passed as planned.
+            let d = s - s0;
+            if d > 1e-3 && d < reach && cap < v0 {
+                // At scale k the feed at distance d is the nominal feed at distance k d.
+                k = k.max(distance_at_feed(&table, cap) / (0.999 * d));
+            }
+        }
+    }
+    stop_record(last, accel, jerk, k)
 }
 
 impl Instance {
     /// One servo period. `period_ns` is the thread's period.
-    pub fn update(&mut self, _period_ns: i64) {
-        if !self.pins.enable.get() || self.fault {
-            self.pins.active.set(false);
-            self.pins.fault.set(self.fault);
-            return;
-        }
+    pub fn update(&mut self, period_ns: i64) {
         // SAFETY: the channel block stays mapped until rtapi_app_exit, after the last period.
-        let channel = unsafe { &*self.channel };
-        // INTEGRATION POINT: the interpolator asks for the next record only when the current
-        // segment ends, and every period evaluates the S-curve, advances u (RK2-PC) and the NURBS.
-        // The spike takes one record per period and shows its fields on the position pins.
-        match channel.segments.pop() {
-            Ok(Some(record)) => self.execute(&record),
-            Ok(None) => {
-                self.underruns = self.underruns.wrapping_add(1);
-                self.pins.active.set(false);
-            }
-            Err(
-                ChannelError::NotInitialised
-                | ChannelError::Layout
-                | ChannelError::Corrupt
-                | ChannelError::Full,
-            ) => {
-                self.fault = true;
-                self.pins.active.set(false);
+        let channel: &'static Channel = unsafe { &*self.channel };
+        if self.fault == FaultCode::None && channel.check().is_err() {
+            self.fault = FaultCode::Channel;
+        }
+        if self.fault == FaultCode::None {
+            self.accept_geometry(channel);
+        }
+        let mut active = false;
+        if self.fault == FaultCode::None && self.pins.enable.get() && self.geometry.is_valid() {
+            let dt = period_ns as f64 / 1e9;
+            let abort = self.pins.abort.get();
+            let target = if self.pins.hold.get() || abort || self.aborted {
+                0.0
+            } else {
+                1.0
+            };
+            let before = self.scale.value();
+            let plan_dt = self.scale.advance(target, self.pins.ramp_time.get(), dt);
+            if self.aborted {
+                discard(channel, self.geometry.generation);
+            } else if before == 0.0 && self.scale.value() == 0.0 {
+                // Held (or aborted) at rest.
+                if abort && self.interp.record().is_some() {
+                    self.aborted = true;
+                    discard(channel, self.geometry.generation);
+                }
+            } else {
+                active = self.advance(channel, plan_dt);
             }
         }
-        self.pins.fault.set(self.fault);
-        self.pins.records.set(self.records);
-        self.pins.underruns.set(self.underruns);
+        if self.fault == FaultCode::None && (self.stopped || self.interp.is_finished()) {
+            // Over: what is still queued (or comes) belongs to a motion that will not run, and
+            // an empty ring tells a new planner that it may publish.
+            discard(channel, self.geometry.generation);
+        }
+        let pins = &self.pins;
+        pins.scale.set(self.scale.value());
+        pins.active.set(active);
+        pins.done.set(self.interp.is_finished());
+        pins.fault.set(self.fault != FaultCode::None);
+        pins.fault_code.set(self.fault as u32);
+        pins.underrun.set(self.stopping);
+        pins.underruns.set(self.underruns);
+        pins.records.set(self.records);
+        let buffered = if self.stopping {
+            0.0
+        } else {
+            (channel.planned_time() - self.taken_time).max(0.0) + self.interp.time_left_in_segment()
+        };
+        pins.buffered.set(buffered);
     }
 
-    fn execute(&mut self, record: &SegmentRecord) {
-        let pins = &self.pins;
-        if record.seq != self.next_seq {
-            self.fault = true;
-            pins.active.set(false);
+    /// A motion is loaded and may still move (not finished, aborted or stopped on underrun).
+    fn in_motion(&self) -> bool {
+        self.interp.record().is_some() && !self.interp.is_finished() && !self.aborted && !self.stopped
+    }
+
+    /// Take a newly published geometry (only while no motion runs), or fault.
+    fn accept_geometry(&mut self, channel: &'static Channel) {
+        let generation = channel.geometry.generation();
+        if generation == self.geometry.generation || generation & 1 == 1 {
+            return; // unchanged, or being written: look again next period
+        }
+        if self.in_motion() {
+            self.fault = FaultCode::GeometryChanged;
             return;
         }
-        self.next_seq = record.seq.wrapping_add(1);
-        self.records = self.records.wrapping_add(1);
-        pins.seq.set(record.seq);
-        pins.pos_cmd_x.set(record.s_start);
-        pins.pos_cmd_y.set(record.u_start);
-        pins.pos_cmd_z.set(record.feed_start);
-        pins.active.set(true);
+        let Some((generation, header, values)) = channel.geometry.snapshot() else {
+            return;
+        };
+        self.geometry.generation = 0;
+        match validate_geometry(&header, values, &mut self.geometry.views) {
+            Ok(table) if channel.geometry.unchanged(generation) => {
+                self.geometry.stop_table = table;
+                self.set_geometry(generation, &header);
+            }
+            Ok(_) => {} // rewritten while validating: again next period
+            Err(_) if !channel.geometry.unchanged(generation) => {}
+            Err(_) => self.fault = FaultCode::Geometry,
+        }
+    }
+
+    fn set_geometry(&mut self, generation: u32, header: &GeometryHeader) {
+        let g = &mut self.geometry;
+        g.count = header.curve_count as usize;
+        g.tip = header.tip_axes as usize;
+        g.stop_accel = header.stop_accel;
+        g.stop_jerk = header.stop_jerk;
+        g.generation = generation;
+        // A new geometry starts a new motion.
+        self.interp = Interpolator::new();
+        self.next_seq = 0;
+        self.taken_time = 0.0;
+        self.stopping = false;
+        self.stopped = false;
+        self.aborted = false;
+        self.scale = TimeScale::run();
+    }
+
+    /// Advance the interpolator by one period; true if it produced a sample.
+    fn advance(&mut self, channel: &Channel, dt: f64) -> bool {
+        let mut pull = Pull::Fine;
+        let step = {
+            let ring = &channel.segments;
+            let stopping = self.stopping;
+            let next_seq = &mut self.next_seq;
+            let records = &mut self.records;
+            let taken_time = &mut self.taken_time;
+            let pins = &self.pins;
+            let mut next = || -> Option<SegmentRecord> {
+                if stopping || pull != Pull::Fine {
+                    return None;
+                }
+                match ring.pop() {
+                    Ok(Some(r)) if r.seq != *next_seq => {
+                        pull = Pull::Fault(FaultCode::Sequence);
+                        None
+                    }
+                    Ok(Some(r)) => match check_record(&r) {
+                        Ok(()) => {
+                            *next_seq = r.seq.wrapping_add(1);
+                            *records = records.wrapping_add(1);
+                            *taken_time += r.profile().total_time();
+                            pins.seq.set(r.seq);
+                            Some(r)
+                        }
+                        Err(_) => {
+                            pull = Pull::Fault(FaultCode::Record);
+                            None
+                        }
+                    },
+                    Ok(None) => {
+                        pull = Pull::Empty;
+                        None
+                    }
+                    Err(_) => {
+                        pull = Pull::Fault(FaultCode::Channel);
+                        None
+                    }
+                }
+            };
+            self.interp.step(&self.geometry, dt, &mut next)
+        };
+        match (step, pull) {
+            (_, Pull::Fault(code)) => {
+                self.fault = code;
+                false
+            }
+            (Step::Sample(s), _) => {
+                self.output(&s);
+                true
+            }
+            (Step::Finished, _) => false,
+            (Step::BadRecord, _) => {
+                self.fault = FaultCode::BadRecord;
+                false
+            }
+            (Step::Starved, _) => {
+                let Some(last) = self.interp.record().copied() else {
+                    return false; // not started yet: waiting for the first record
+                };
+                self.underruns = self.underruns.wrapping_add(1);
+                if self.stopping {
+                    self.stopped = true;
+                    return false; // stopped: hold
+                }
+                self.stopping = true;
+                let curve = self.geometry.views.get(last.curve()).copied().flatten();
+                let (accel, jerk) = self.geometry.stop_limits(last.seq);
+                let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
+                match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
+                    Step::Sample(s) => {
+                        self.output(&s);
+                        true
+                    }
+                    Step::BadRecord => {
+                        self.fault = FaultCode::BadRecord;
+                        false
+                    }
+                    Step::Starved | Step::Finished => false,
+                }
+            }
+        }
+    }
+
+    fn output(&self, s: &Sample) {
+        let pins = &self.pins;
+        let [x, y, z, ..] = s.point;
+        pins.pos_cmd_x.set(x);
+        pins.pos_cmd_y.set(y);
+        pins.pos_cmd_z.set(if self.geometry.tip >= 3 { z } else { 0.0 });
+        // The path speed: the planned feed times the hold time scale (exactly the plan's feed
+        // when not scaled).
+        pins.feed.set(s.feed * self.scale.value());
+        pins.u.set(s.u);
+        pins.curve.set(s.curve as u32);
+    }
+}
+
+/// Rounding slack for a start feed: the planner hands on a segment's computed end feed, which
+/// can come out a few ulps below zero where the path stops (seen: -2.8e-14 mm/s).
+const FEED_ROUNDING: f64 = 1e-9;
+
+/// `SegmentRecord::check`, except that a start feed within [`FEED_ROUNDING`] below zero counts
+/// as zero. Only the check sees the adjusted copy: the record runs as sent, so the motion stays
+/// the one the planner simulated.
+fn check_record(r: &SegmentRecord) -> Result<(), nurbs_rtcore::RecordError> {
+    let mut checked = *r;
+    if (-FEED_ROUNDING..0.0).contains(&checked.feed_start) {
+        checked.feed_start = 0.0;
+    }
+    checked.check()
+}
+
+/// Drop every queued record of the motion of geometry `generation` (aborted, stopped on an
+/// underrun, or finished: nothing of that motion runs any more). Stops as soon as a new geometry
+/// is published: the planner publishes before it pushes, so a record seen after the publish
+/// (`len` acquires the ring's head first) is the new motion's and stays. Bounded: at most the
+/// ring's capacity.
+fn discard(channel: &Channel, generation: u32) {
+    for _ in 0..channel.segments.capacity() {
+        if channel.segments.is_empty() || channel.geometry.generation() != generation {
+            break;
+        }
+        if !matches!(channel.segments.pop(), Ok(Some(_))) {
+            break;
+        }
     }
 }
 
@@ -138,63 +615,36 @@ unsafe fn create(comp_id: c_int) -> c_int {
         return -ENOMEM;
     }
     let p = addr_of_mut!((*inst).pins);
-    let in_ = sys::HAL_IN;
-    let out = sys::HAL_OUT;
+    let (i, o) = (sys::HAL_IN, sys::HAL_OUT);
+    let id = comp_id;
     let results = [
-        Pin::create(
-            addr_of_mut!((*p).enable),
-            c"nurbs_interp.enable",
-            in_,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).pos_cmd_x),
-            c"nurbs_interp.pos-cmd-x",
-            out,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).pos_cmd_y),
-            c"nurbs_interp.pos-cmd-y",
-            out,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).pos_cmd_z),
-            c"nurbs_interp.pos-cmd-z",
-            out,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).active),
-            c"nurbs_interp.active",
-            out,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).fault),
-            c"nurbs_interp.fault",
-            out,
-            comp_id,
-        ),
-        Pin::create(addr_of_mut!((*p).seq), c"nurbs_interp.seq", out, comp_id),
-        Pin::create(
-            addr_of_mut!((*p).records),
-            c"nurbs_interp.records",
-            out,
-            comp_id,
-        ),
-        Pin::create(
-            addr_of_mut!((*p).underruns),
-            c"nurbs_interp.underruns",
-            out,
-            comp_id,
-        ),
+        Pin::create(addr_of_mut!((*p).enable), c"nurbs_interp.enable", i, id),
+        Pin::create(addr_of_mut!((*p).hold), c"nurbs_interp.hold", i, id),
+        Pin::create(addr_of_mut!((*p).abort), c"nurbs_interp.abort", i, id),
+        Pin::create(addr_of_mut!((*p).ramp_time), c"nurbs_interp.ramp-time", i, id),
+        Pin::create(addr_of_mut!((*p).scale), c"nurbs_interp.scale", o, id),
+        Pin::create(addr_of_mut!((*p).pos_cmd_x), c"nurbs_interp.pos-cmd-x", o, id),
+        Pin::create(addr_of_mut!((*p).pos_cmd_y), c"nurbs_interp.pos-cmd-y", o, id),
+        Pin::create(addr_of_mut!((*p).pos_cmd_z), c"nurbs_interp.pos-cmd-z", o, id),
+        Pin::create(addr_of_mut!((*p).feed), c"nurbs_interp.feed", o, id),
+        Pin::create(addr_of_mut!((*p).u), c"nurbs_interp.u", o, id),
+        Pin::create(addr_of_mut!((*p).curve), c"nurbs_interp.curve", o, id),
+        Pin::create(addr_of_mut!((*p).active), c"nurbs_interp.active", o, id),
+        Pin::create(addr_of_mut!((*p).done), c"nurbs_interp.done", o, id),
+        Pin::create(addr_of_mut!((*p).fault), c"nurbs_interp.fault", o, id),
+        Pin::create(addr_of_mut!((*p).fault_code), c"nurbs_interp.fault-code", o, id),
+        Pin::create(addr_of_mut!((*p).underrun), c"nurbs_interp.underrun", o, id),
+        Pin::create(addr_of_mut!((*p).underruns), c"nurbs_interp.underruns", o, id),
+        Pin::create(addr_of_mut!((*p).records), c"nurbs_interp.records", o, id),
+        Pin::create(addr_of_mut!((*p).seq), c"nurbs_interp.seq", o, id),
+        Pin::create(addr_of_mut!((*p).buffered), c"nurbs_interp.buffered", o, id),
     ];
     if let Some(&rc) = results.iter().find(|&&rc| rc < 0) {
         error(c"nurbs_interp: pin export failed");
         return rc;
     }
+    (*p).ramp_time.set(DEFAULT_RAMP_TIME);
+    (*p).scale.set(1.0);
 
     let shmem_id = sys::rtapi_shmem_new(CHANNEL_KEY, comp_id, Channel::SIZE as _);
     if shmem_id < 0 {
@@ -214,10 +664,17 @@ unsafe fn create(comp_id: c_int) -> c_int {
     let channel = Channel::init(block as *mut u8);
 
     addr_of_mut!((*inst).channel).write(channel);
+    addr_of_mut!((*inst).geometry).write(RtGeometry::EMPTY);
+    addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);
-    addr_of_mut!((*inst).fault).write(false);
+    addr_of_mut!((*inst).taken_time).write(0.0);
+    addr_of_mut!((*inst).stopping).write(false);
+    addr_of_mut!((*inst).stopped).write(false);
+    addr_of_mut!((*inst).scale).write(TimeScale::run());
+    addr_of_mut!((*inst).aborted).write(false);
+    addr_of_mut!((*inst).fault).write(FaultCode::None);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),

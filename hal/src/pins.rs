@@ -19,12 +19,7 @@ pub trait PinType: Copy {
     fn to_raw(self) -> Self::Raw;
     /// # Safety
     /// As `hal_pin_*_new`: `addr` in HAL shared memory, between `hal_init` and `hal_ready`.
-    unsafe fn new_pin(
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        addr: *mut *mut Self::Raw,
-        comp_id: c_int,
-    ) -> c_int;
+    unsafe fn new_pin(name: &CStr, dir: sys::hal_pin_dir_t, addr: *mut *mut Self::Raw, comp_id: c_int) -> c_int;
 }
 
 impl PinType for f64 {
@@ -35,12 +30,7 @@ impl PinType for f64 {
     fn to_raw(self) -> f64 {
         self
     }
-    unsafe fn new_pin(
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        addr: *mut *mut f64,
-        comp_id: c_int,
-    ) -> c_int {
+    unsafe fn new_pin(name: &CStr, dir: sys::hal_pin_dir_t, addr: *mut *mut f64, comp_id: c_int) -> c_int {
         sys::hal_pin_float_new(name.as_ptr(), dir, addr, comp_id)
     }
 }
@@ -54,12 +44,7 @@ impl PinType for bool {
     fn to_raw(self) -> u8 {
         self as u8
     }
-    unsafe fn new_pin(
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        addr: *mut *mut u8,
-        comp_id: c_int,
-    ) -> c_int {
+    unsafe fn new_pin(name: &CStr, dir: sys::hal_pin_dir_t, addr: *mut *mut u8, comp_id: c_int) -> c_int {
         sys::hal_pin_bit_new(name.as_ptr(), dir, addr as *mut *mut bool, comp_id)
     }
 }
@@ -72,12 +57,7 @@ impl PinType for u32 {
     fn to_raw(self) -> u32 {
         self
     }
-    unsafe fn new_pin(
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        addr: *mut *mut u32,
-        comp_id: c_int,
-    ) -> c_int {
+    unsafe fn new_pin(name: &CStr, dir: sys::hal_pin_dir_t, addr: *mut *mut u32, comp_id: c_int) -> c_int {
         sys::hal_pin_u32_new(name.as_ptr(), dir, addr, comp_id)
     }
 }
@@ -90,12 +70,7 @@ impl PinType for i32 {
     fn to_raw(self) -> i32 {
         self
     }
-    unsafe fn new_pin(
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        addr: *mut *mut i32,
-        comp_id: c_int,
-    ) -> c_int {
+    unsafe fn new_pin(name: &CStr, dir: sys::hal_pin_dir_t, addr: *mut *mut i32, comp_id: c_int) -> c_int {
         sys::hal_pin_s32_new(name.as_ptr(), dir, addr, comp_id)
     }
 }
@@ -112,12 +87,7 @@ impl<T: PinType> Pin<T> {
     /// # Safety
     /// `this` points into HAL shared memory (`hal_malloc`) and the call happens between
     /// `hal_init` and `hal_ready`.
-    pub unsafe fn create(
-        this: *mut Pin<T>,
-        name: &CStr,
-        dir: sys::hal_pin_dir_t,
-        comp_id: c_int,
-    ) -> c_int {
+    pub unsafe fn create(this: *mut Pin<T>, name: &CStr, dir: sys::hal_pin_dir_t, comp_id: c_int) -> c_int {
         T::new_pin(name, dir, this as *mut *mut T::Raw, comp_id)
     }
 
@@ -126,11 +96,7 @@ impl<T: PinType> Pin<T> {
     pub fn get(&self) -> T {
         // SAFETY: after a successful `create` HAL keeps the pointer valid while the component
         // exists; HAL itself may rewrite it (net/unlinkp), hence the volatile reloads.
-        unsafe {
-            T::from_raw(ptr::read_volatile(
-                ptr::read_volatile(self.value.get()) as *const T::Raw
-            ))
-        }
+        unsafe { T::from_raw(ptr::read_volatile(ptr::read_volatile(self.value.get()) as *const T::Raw)) }
     }
 
     #[inline]

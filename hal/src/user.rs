@@ -9,7 +9,7 @@ use std::ffi::CString;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::channel::{Channel, CHANNEL_KEY};
+use crate::channel::{Channel, CurveDesc, GeometryHeader, PublishError, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES};
 use crate::pins::{Pin, PinType};
 use crate::sys;
 
@@ -38,11 +38,7 @@ impl Component {
     }
 
     /// A pin `<component>.<suffix>` whose pointer lives in HAL shared memory.
-    pub fn pin<T: PinType>(
-        &self,
-        suffix: &str,
-        dir: sys::hal_pin_dir_t,
-    ) -> Result<&'static Pin<T>, String> {
+    pub fn pin<T: PinType>(&self, suffix: &str, dir: sys::hal_pin_dir_t) -> Result<&'static Pin<T>, String> {
         let full = format!("{}.{}", self.name, suffix);
         let c_name = CString::new(full.as_str()).map_err(|e| e.to_string())?;
         // SAFETY: hal_malloc'd storage for one pointer; the pin is created before hal_ready.
@@ -105,6 +101,109 @@ impl Drop for Component {
     }
 }
 
+/// Collects curves into the channel's geometry layout, then publishes them.
+pub struct GeometryBuilder {
+    header: GeometryHeader,
+    values: Vec<f64>,
+}
+
+impl GeometryBuilder {
+    /// `tip_axes`: tool-tip coordinates (2 or 3); `stop_accel`, `stop_jerk`: tangential limits of
+    /// the stop the module makes on an underrun.
+    pub fn new(tip_axes: usize, stop_accel: f64, stop_jerk: f64) -> GeometryBuilder {
+        GeometryBuilder {
+            header: GeometryHeader {
+                tip_axes: tip_axes as u32,
+                stop_accel,
+                stop_jerk,
+                ..GeometryHeader::default()
+            },
+            values: Vec::new(),
+        }
+    }
+
+    /// Append one curve (becomes curve number `curve_count()` - 1 of the records). `stops`:
+    /// `(s, feed cap)` pairs the module's underrun stop must respect (see [`CurveDesc`]).
+    pub fn add_curve(
+        &mut self,
+        degree: usize,
+        dim: usize,
+        knots: &[f64],
+        points: &[f64],
+        weights: &[f64],
+        stops: &[(f64, f64)],
+    ) -> Result<(), String> {
+        let index = self.header.curve_count as usize;
+        let Some(desc) = self.header.curves.get_mut(index) else {
+            return Err(format!("more than {MAX_CURVES} curves"));
+        };
+        let stops: Vec<f64> = stops.iter().flat_map(|&(s, f)| [s, f]).collect();
+        let total = self.values.len() + knots.len() + points.len() + weights.len() + stops.len();
+        if total > GEOMETRY_VALUES {
+            return Err(format!(
+                "geometry needs {total} values, the channel holds {GEOMETRY_VALUES}"
+            ));
+        }
+        let mut put = |data: &[f64]| -> (u32, u32) {
+            let offset = self.values.len() as u32;
+            self.values.extend_from_slice(data);
+            (offset, data.len() as u32)
+        };
+        let (knots_offset, knots_len) = put(knots);
+        let (points_offset, points_len) = put(points);
+        let (weights_offset, weights_len) = put(weights);
+        let (stops_offset, stops_len) = put(&stops);
+        *desc = CurveDesc {
+            degree: degree as u32,
+            dim: dim as u32,
+            knots_offset,
+            knots_len,
+            points_offset,
+            points_len,
+            weights_offset,
+            weights_len,
+            stops_offset,
+            stops_len,
+        };
+        self.header.curve_count += 1;
+        Ok(())
+    }
+
+    /// The per-record stop limits: `(accel, jerk)` of the stop after record k at index k.
+    pub fn set_stop_table(&mut self, table: &[(f64, f64)]) -> Result<(), String> {
+        let values: Vec<f64> = table.iter().flat_map(|&(a, j)| [a, j]).collect();
+        if self.values.len() + values.len() > GEOMETRY_VALUES {
+            return Err(format!(
+                "stop table of {} records does not fit the channel",
+                table.len()
+            ));
+        }
+        self.header.stop_table_offset = self.values.len() as u32;
+        self.header.stop_table_len = values.len() as u32;
+        self.values.extend_from_slice(&values);
+        Ok(())
+    }
+
+    pub fn header(&self) -> &GeometryHeader {
+        &self.header
+    }
+
+    pub fn values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// Validate and publish; the module takes it at its next period (if idle).
+    pub fn publish(&self, channel: &Channel) -> Result<u32, String> {
+        channel
+            .geometry
+            .publish(&self.header, &self.values)
+            .map_err(|e| match e {
+                PublishError::TooLarge => "geometry too large for the channel".to_owned(),
+                PublishError::Invalid(f) => format!("geometry refused: {f:?}"),
+            })
+    }
+}
+
 /// Set by SIGTERM/SIGINT; polled by the userspace main loops.
 pub static STOP: AtomicBool = AtomicBool::new(false);
 
@@ -151,9 +250,7 @@ impl StreamReader {
                 return Err(format!("hal_stream_attach({key:#x}): {rc}"));
             }
             let n = sys::hal_stream_element_count(&mut stream).max(0);
-            let types = (0..n)
-                .map(|i| sys::hal_stream_element_type(&mut stream, i))
-                .collect();
+            let types = (0..n).map(|i| sys::hal_stream_element_type(&mut stream, i)).collect();
             Ok(StreamReader { stream, types })
         }
     }
@@ -165,8 +262,7 @@ impl StreamReader {
             if !sys::hal_stream_readable(&mut self.stream) {
                 return Ok(None);
             }
-            let mut buf: Vec<sys::hal_stream_data> =
-                vec![sys::hal_stream_data { u: 0 }; self.types.len().max(1)];
+            let mut buf: Vec<sys::hal_stream_data> = vec![sys::hal_stream_data { u: 0 }; self.types.len().max(1)];
             let mut sampleno: u32 = 0;
             let rc = sys::hal_stream_read(&mut self.stream, buf.as_mut_ptr(), &mut sampleno);
             if rc < 0 {
@@ -178,9 +274,7 @@ impl StreamReader {
                 .zip(&buf)
                 .map(|(&t, v)| match t {
                     sys::HAL_FLOAT => StreamValue::Float(v.f),
-                    sys::HAL_BIT => {
-                        StreamValue::Bit(ptr::read(&v.u as *const u32 as *const u8) != 0)
-                    }
+                    sys::HAL_BIT => StreamValue::Bit(ptr::read(&v.u as *const u32 as *const u8) != 0),
                     sys::HAL_U32 => StreamValue::U32(v.u),
                     _ => StreamValue::S32(v.s),
                 })

@@ -4,7 +4,9 @@
 //! prints Rust's shortest round-trip form, so a check can compare positions bit for bit.
 //! Output: one line per sample, `SAMPLENO v0 v1 ...` (bits as 0/1).
 //!
-//! `loadusr -w nurbs-hal-record --samples N --out FILE [--channel C] [--timeout SECONDS]`
+//! `loadusr -w nurbs-hal-record (--samples N | --until-idle SECONDS) --out FILE [--channel C]
+//! [--timeout SECONDS]`: stop after N samples, or once no sample came for SECONDS after the
+//! first one (for runs whose sample count is not known in advance, e.g. an underrun stop).
 
 use std::io::Write;
 use std::process::ExitCode;
@@ -17,29 +19,28 @@ const SAMPLER_SHMEM_KEY: i32 = 0x4853_4130;
 
 fn run() -> Result<(), String> {
     let (mut samples, mut out, mut channel, mut timeout) = (None, None, 0i32, 30.0f64);
+    let mut until_idle: Option<f64> = None;
     let mut it = std::env::args().skip(1);
     while let Some(a) = it.next() {
         let mut value = || it.next().ok_or(format!("{a} needs a value"));
         match a.as_str() {
             "--samples" => samples = Some(value()?.parse::<u64>().map_err(|e| e.to_string())?),
             "--out" => out = Some(value()?),
-            "--channel" => {
-                channel = value()?
-                    .parse()
-                    .map_err(|e: std::num::ParseIntError| e.to_string())?
+            "--until-idle" => {
+                until_idle = Some(value()?.parse().map_err(|e: std::num::ParseFloatError| e.to_string())?)
             }
-            "--timeout" => {
-                timeout = value()?
-                    .parse()
-                    .map_err(|e: std::num::ParseFloatError| e.to_string())?
-            }
+            "--channel" => channel = value()?.parse().map_err(|e: std::num::ParseIntError| e.to_string())?,
+            "--timeout" => timeout = value()?.parse().map_err(|e: std::num::ParseFloatError| e.to_string())?,
             other => return Err(format!("unknown argument {other}")),
         }
     }
-    let samples = samples.ok_or("--samples N is required")?;
+    let samples = match (samples, until_idle) {
+        (Some(n), _) => n,
+        (None, Some(_)) => u64::MAX,
+        (None, None) => return Err("--samples N or --until-idle SECONDS is required".into()),
+    };
     let path = out.ok_or("--out FILE is required")?;
-    let mut file =
-        std::io::BufWriter::new(std::fs::File::create(&path).map_err(|e| format!("{path}: {e}"))?);
+    let mut file = std::io::BufWriter::new(std::fs::File::create(&path).map_err(|e| format!("{path}: {e}"))?);
 
     let comp = Component::new(&format!("nurbs-hal-record{channel}"))?;
     comp.ready()?;
@@ -67,8 +68,13 @@ fn run() -> Result<(), String> {
                 last_data = Instant::now();
             }
             None => {
+                if got > 0 && until_idle.is_some_and(|idle| last_data.elapsed().as_secs_f64() > idle) {
+                    break;
+                }
                 if last_data.elapsed().as_secs_f64() > timeout {
-                    return Err(format!("no data for {timeout} s after {got} of {samples} samples (rtapi_app dead?)"));
+                    return Err(format!(
+                        "no data for {timeout} s after {got} of {samples} samples (rtapi_app dead?)"
+                    ));
                 }
                 std::thread::sleep(Duration::from_micros(500));
             }

@@ -1,108 +1,267 @@
 //! `nurbs-planner`: the userspace planner component (`loadusr -W nurbs-planner ...`).
 //!
-//! SPIKE: streams synthetic segment records to the realtime module `nurbs_interp` through the
-//! shared-memory channel, keeping it full. INTEGRATION POINT: the planner of `nurbs_motion`
-//! produces the records (and the curve geometry) instead of `synthetic_record`.
+//! Reads a toolpath (JSON, G-code or DXF), plans it with `nurbs_motion::planner::plan`, publishes
+//! the curve geometry to the realtime module `nurbs_interp` through the shared-memory channel and
+//! streams the segment records into the channel's ring while motion runs, keeping at most
+//! `--margin` seconds of motion queued ahead of the module (and never more than the ring holds).
 //!
-//! Pins: `nurbs-planner.ready` (bit out: attached, first records queued), `.running` (bit out:
-//! records remain to be sent), `.error` (bit out), `.records-sent` (u32 out).
+//! ```text
+//! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
+//!               (--period S | --ini FILE) [--margin S]
+//! ```
+//! With `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
+//! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given on
+//! the command line win. The period must equal the servo thread's for the motion to be the one
+//! the planner checked.
+//!
+//! Pins: `nurbs-planner.ready` (bit out: geometry published, first records queued), `.running`
+//! (bit out: records remain to be sent), `.error` (bit out), `.records-sent` (u32 out),
+//! `.buffered` (float out, s: motion time queued in the ring).
 //! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send).
 
-use std::io::Write;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
-use nurbs_hal::channel::{ChannelError, SegmentRecord};
+use clap::Parser;
+use nurbs_hal::channel::{Channel, ChannelError, SegmentRecord};
 use nurbs_hal::sys::HAL_OUT;
 use nurbs_hal::user::{install_signal_handlers, stopped, Component};
 
+#[path = "../plan_geometry.rs"]
+mod plan_geometry;
+use nurbs_motion::planner::{plan, Limits, PlanOptions};
+use nurbs_motion::readers::read_toolpath;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "nurbs-planner",
+    about = "Plan a NURBS toolpath and stream it to nurbs_interp"
+)]
 struct Args {
-    records: u32,
-    dump: Option<String>,
+    /// Toolpath (.json, .ngc/.nc/.gcode/.tap, .dxf).
+    toolpath: PathBuf,
+    /// Programmed feed F (mm/s).
+    #[arg(long)]
+    feed: Option<f64>,
+    /// Axial acceleration limit(s) (mm/s^2), comma-separated in axis order.
+    #[arg(long, value_delimiter = ',')]
+    accel: Option<Vec<f64>>,
+    /// Axial jerk limit(s) (mm/s^3).
+    #[arg(long, value_delimiter = ',')]
+    jerk: Option<Vec<f64>>,
+    /// Axial velocity limit(s) (mm/s); default: the feed.
+    #[arg(long, value_delimiter = ',')]
+    vel: Option<Vec<f64>>,
+    /// Chord error tolerance (mm).
+    #[arg(long = "chord-tol")]
+    chord_tol: Option<f64>,
+    /// Servo period (s); must equal the servo thread's.
+    #[arg(long)]
+    period: Option<f64>,
+    /// LinuxCNC INI file for the period and limits not given as flags.
+    #[arg(long)]
+    ini: Option<PathBuf>,
+    /// Motion time (s) to keep queued ahead of the module.
+    #[arg(long, default_value_t = 2.0)]
+    margin: f64,
+    /// Largest tangential deceleration and jerk of the module's underrun stop, as a fraction of
+    /// the smallest axis acceleration and jerk. The planner runs the stop from every segment
+    /// boundary and lowers it where the axis limits need it.
+    #[arg(long, default_value_t = 1.0)]
+    stop_fraction: f64,
 }
 
-fn parse_args() -> Result<Args, String> {
-    let mut args = Args {
-        records: 1000,
-        dump: None,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--records" => {
-                args.records = it
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .ok_or("--records N")?
+/// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).
+struct Ini {
+    entries: Vec<(String, String, String)>,
+}
+
+impl Ini {
+    fn read(path: &Path) -> Result<Ini, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut section = String::new();
+        let mut entries = Vec::new();
+        for line in text.lines() {
+            let line = line.trim();
+            if line.starts_with('#') || line.starts_with(';') || line.is_empty() {
+                continue;
             }
-            "--dump" => args.dump = Some(it.next().ok_or("--dump FILE")?),
-            other => return Err(format!("unknown argument {other}")),
+            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+                section = name.trim().to_owned();
+            } else if let Some((k, v)) = line.split_once('=') {
+                entries.push((section.clone(), k.trim().to_owned(), v.trim().to_owned()));
+            }
+        }
+        Ok(Ini { entries })
+    }
+
+    fn number(&self, section: &str, key: &str) -> Result<Option<f64>, String> {
+        match self.entries.iter().find(|(s, k, _)| s == section && k == key) {
+            None => Ok(None),
+            Some((_, _, v)) => v
+                .parse()
+                .map(Some)
+                .map_err(|_| format!("[{section}]{key} = {v} is not a number")),
         }
     }
-    Ok(args)
+
+    /// One value per axis (X, Y[, Z]) if every axis has it.
+    fn per_axis(&self, key: &str, axes: usize) -> Result<Option<Vec<f64>>, String> {
+        let mut out = Vec::new();
+        for axis in ["AXIS_X", "AXIS_Y", "AXIS_Z"].iter().take(axes) {
+            match self.number(axis, key)? {
+                Some(v) => out.push(v),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
 }
 
-/// Deterministic values whose decimal expansions need all 17 digits.
-fn synthetic_record(seq: u32) -> SegmentRecord {
-    let k = seq as f64;
-    SegmentRecord {
-        seq,
-        s_start: k * 0.001 + k.sqrt() * 1e-7,
-        u_start: k / 3.0,
-        feed_start: 10.0 + k,
-        ..SegmentRecord::default()
+fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
+    let ini = args.ini.as_deref().map(Ini::read).transpose()?;
+    let from_ini = |section: &str, key: &str| -> Result<Option<f64>, String> {
+        ini.as_ref().map_or(Ok(None), |i| i.number(section, key))
+    };
+    let axis_ini =
+        |key: &str| -> Result<Option<Vec<f64>>, String> { ini.as_ref().map_or(Ok(None), |i| i.per_axis(key, axes)) };
+    let period = match args.period {
+        Some(p) => p,
+        None => from_ini("EMCMOT", "SERVO_PERIOD")?
+            .map(|ns| ns / 1e9)
+            .ok_or("no period: give --period or --ini with [EMCMOT]SERVO_PERIOD")?,
+    };
+    let need = |v: Option<Vec<f64>>, what: &str| v.ok_or(format!("no {what} limit given"));
+    let vel = args.vel.clone().or(axis_ini("MAX_VELOCITY")?);
+    let feed = match args.feed.or(from_ini("NURBS", "FEED")?) {
+        Some(f) => f,
+        None => vel
+            .as_ref()
+            .and_then(|v| v.iter().copied().reduce(f64::min))
+            .ok_or("no feed: give --feed, [NURBS]FEED or axis velocities")?,
+    };
+    Limits {
+        feed,
+        velocity: vel.unwrap_or_else(|| vec![feed]),
+        acceleration: need(args.accel.clone().or(axis_ini("MAX_ACCELERATION")?), "acceleration")?,
+        jerk: need(args.jerk.clone().or(axis_ini("MAX_JERK")?), "jerk")?,
+        chord_tolerance: args
+            .chord_tol
+            .or(from_ini("NURBS", "CHORD_TOLERANCE")?)
+            .ok_or("no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE")?,
+        period,
+    }
+    .for_axes(axes)
+    .map_err(|e| e.to_string())
+}
+
+/// Streams planned records into the ring within the time margin.
+struct Streamer<'a> {
+    channel: &'a Channel,
+    records: Vec<SegmentRecord>,
+    /// `ends[k]`: motion time of records 0..k.
+    ends: Vec<f64>,
+    sent: usize,
+    margin: f64,
+}
+
+impl Streamer<'_> {
+    /// Motion time of the sent records the module has not taken yet.
+    fn buffered(&self) -> f64 {
+        let taken = self.sent.saturating_sub(self.channel.segments.len());
+        self.ends.get(self.sent).copied().unwrap_or(0.0) - self.ends.get(taken).copied().unwrap_or(0.0)
+    }
+
+    fn fill(&mut self) -> Result<(), String> {
+        while let Some(record) = self.records.get(self.sent) {
+            if self.buffered() >= self.margin {
+                break;
+            }
+            match self.channel.segments.push(record) {
+                Ok(()) => self.sent += 1,
+                Err(ChannelError::Full) => break,
+                Err(e) => return Err(format!("channel: {e:?}")),
+            }
+            self.channel
+                .set_planned_time(self.ends.get(self.sent).copied().unwrap_or(0.0));
+        }
+        Ok(())
+    }
+
+    fn done(&self) -> bool {
+        self.sent >= self.records.len()
     }
 }
 
 fn run(args: &Args) -> Result<(), String> {
+    let toolpath = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
+    let limits = limits(args, toolpath.tip_dim())?;
+
     let comp = Component::new("nurbs-planner")?;
     let ready = comp.pin::<bool>("ready", HAL_OUT)?;
     let running = comp.pin::<bool>("running", HAL_OUT)?;
     let error = comp.pin::<bool>("error", HAL_OUT)?;
     let sent_pin = comp.pin::<u32>("records-sent", HAL_OUT)?;
+    let buffered_pin = comp.pin::<f64>("buffered", HAL_OUT)?;
     let result = (|| {
         let channel = comp.attach_channel(Duration::from_secs(5))?;
-        let mut dump = match &args.dump {
-            Some(path) => Some(std::io::BufWriter::new(
-                std::fs::File::create(path).map_err(|e| format!("{path}: {e}"))?,
-            )),
-            None => None,
-        };
-        let mut sent = 0u32;
-        let mut fill = |sent: &mut u32| -> Result<(), String> {
-            while *sent < args.records {
-                let record = synthetic_record(*sent);
-                match channel.segments.push(&record) {
-                    Ok(()) => {}
-                    Err(ChannelError::Full) => break,
-                    Err(e) => return Err(format!("channel: {e:?}")),
-                }
-                if let Some(d) = dump.as_mut() {
-                    writeln!(
-                        d,
-                        "{} {:?} {:?} {:?}",
-                        record.seq, record.s_start, record.u_start, record.feed_start
-                    )
-                    .map_err(|e| e.to_string())?;
-                }
-                *sent += 1;
+        let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?;
+        eprintln!(
+            "nurbs-planner: {} segments, motion {:.6} s, planned in {:.3} s",
+            plan.records.len(),
+            plan.motion_time,
+            plan.plan_time
+        );
+        let (geometry, stops) = plan_geometry::geometry(&toolpath, &plan, args.stop_fraction)?;
+        let worst = stops.iter().map(|c| c.ratio).fold(0.0, f64::max);
+        eprintln!(
+            "nurbs-planner: underrun stops checked after every segment: worst {:.4} x an axis limit{}",
+            worst,
+            if worst <= 1.0 {
+                ""
+            } else {
+                " (EXCEEDS the limits at some boundary)"
             }
-            Ok(())
+        );
+        // A motion of an earlier planner may still be queued: the module empties the ring once
+        // that motion is over (finished, aborted or stopped), and refuses a new geometry before.
+        let waited = std::time::Instant::now();
+        while !channel.segments.is_empty() {
+            if stopped() || waited.elapsed() > Duration::from_secs(10) {
+                return Err("the channel still holds records of a running motion".into());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        geometry.publish(channel)?;
+        let mut ends = vec![0.0];
+        let mut t = 0.0;
+        for r in &plan.records {
+            t += r.profile().total_time();
+            ends.push(t);
+        }
+        let mut streamer = Streamer {
+            channel,
+            records: plan.records,
+            ends,
+            sent: 0,
+            margin: args.margin,
         };
-        // Queue what fits before hal_ready, so `loadusr -W` returns with data in place.
-        fill(&mut sent)?;
-        sent_pin.set(sent);
-        running.set(sent < args.records);
+        // Queue what the margin allows before hal_ready, so `loadusr -W` returns with data in
+        // place and the servo thread can start at once.
+        streamer.fill()?;
+        let show = |s: &Streamer| {
+            sent_pin.set(s.sent as u32);
+            running.set(!s.done());
+            buffered_pin.set(s.buffered());
+        };
+        show(&streamer);
         ready.set(true);
         comp.ready()?;
         while !stopped() {
-            fill(&mut sent)?;
-            sent_pin.set(sent);
-            running.set(sent < args.records);
+            streamer.fill()?;
+            show(&streamer);
             std::thread::sleep(Duration::from_millis(1));
-        }
-        if let Some(d) = dump.as_mut() {
-            d.flush().map_err(|e| e.to_string())?;
         }
         Ok(())
     })();
@@ -115,13 +274,7 @@ fn run(args: &Args) -> Result<(), String> {
 
 fn main() -> ExitCode {
     install_signal_handlers();
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("nurbs-planner: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    let args = Args::parse();
     match run(&args) {
         Ok(()) => {
             eprintln!("nurbs-planner: stopped by signal, exiting cleanly");

@@ -1,0 +1,86 @@
+//! Per-period cost of `nurbs_interp.update`: `cargo bench -p nurbs-hal --features mock-hal`.
+//!
+//! The module runs on the in-process mock HAL (pins are plain memory there, as in HAL), fed with
+//! the butterfly's plan; every measured call is one servo period of the running motion (a
+//! finished motion is restarted outside the measurement).
+
+use std::time::{Duration, Instant};
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nurbs_hal::channel::Channel;
+use nurbs_hal::mock::{self, Value};
+use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
+use nurbs_hal::record::SegmentRecord;
+use nurbs_hal::user::Component;
+use nurbs_motion::planner::{plan, Limits, PlanOptions};
+use nurbs_motion::readers::read_toolpath;
+
+#[path = "../src/plan_geometry.rs"]
+#[allow(dead_code)]
+mod plan_geometry;
+
+const PERIOD_NS: i64 = 250_000;
+
+fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize {
+    while let Some(r) = records.get(from) {
+        if channel.segments.push(r).is_err() {
+            break;
+        }
+        from += 1;
+    }
+    from
+}
+
+fn done() -> bool {
+    matches!(mock::pin("nurbs_interp.done"), Some(Value::Bit(true)))
+}
+
+fn bench_update(c: &mut Criterion) {
+    for name in ["trident", "butterfly"] {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../examples")
+            .join(format!("{name}.json"));
+        let toolpath = read_toolpath(&path).unwrap();
+        let limits = Limits::uniform(toolpath.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
+        let (geometry, _) = plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+
+        mock::reset();
+        assert_eq!(unsafe { rtapi_app_main() }, 0);
+        let planner = Component::new("nurbs-planner").unwrap();
+        let channel = planner.attach_channel(Duration::ZERO).unwrap();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        let update = mock::funct("nurbs_interp.update").unwrap();
+        let mut sent = 0;
+        let restart = |sent: &mut usize| {
+            // A new geometry generation restarts the motion from the first record.
+            while channel.segments.pop().ok().flatten().is_some() {}
+            geometry.publish(channel).unwrap();
+            unsafe { mock::call(update, PERIOD_NS as _) }; // takes the geometry
+            *sent = 0;
+        };
+        restart(&mut sent);
+        c.bench_function(&format!("update/{name}"), |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    if done() {
+                        restart(&mut sent);
+                    }
+                    if channel.segments.len() < 64 {
+                        sent = fill(channel, &plan.records, sent);
+                    }
+                    let t = Instant::now();
+                    unsafe { mock::call(update, PERIOD_NS as _) };
+                    total += t.elapsed();
+                }
+                total
+            })
+        });
+        drop(planner);
+        unsafe { rtapi_app_exit() };
+    }
+}
+
+criterion_group!(benches, bench_update);
+criterion_main!(benches);

@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""Check the samples of test_underrun.sh: the planner was unloaded mid-path.
+
+- the samples start as the offline plan, equal to --tol mm, up to a segment boundary;
+- then the module's own stop: the feed never rises and ends at rest (below J dt^2 / 2);
+- underrun set, no fault, not done; the recorded setpoints go to a CSV for `nurbs-plan verify`
+  (which must find no violation but the missing end of the path).
+"""
+import argparse
+import csv
+import sys
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--expected", required=True)
+    ap.add_argument("--samples", required=True)
+    ap.add_argument("--period", type=float, required=True)
+    ap.add_argument("--jerk", type=float, required=True)
+    ap.add_argument("--tol", type=float, default=1e-9)
+    ap.add_argument("--recorded-csv", required=True)
+    a = ap.parse_args()
+
+    with open(a.expected) as f:
+        rows = list(csv.DictReader(f))
+    axes = [c for c in ("x", "y", "z") if rows and c in rows[0]]
+    samples = []
+    with open(a.samples) as f:
+        for line in f:
+            v = line.split()
+            samples.append({
+                "n": int(v[0]), "x": float(v[1]), "y": float(v[2]), "z": float(v[3]),
+                "u": float(v[4]), "feed": float(v[5]), "curve": int(v[6]), "underruns": int(v[7]),
+                "fault_code": int(v[8]), "done": v[9] == "1", "fault": v[10] == "1",
+                "underrun": v[11] == "1",
+            })
+    errors = []
+    for i in range(1, len(samples)):
+        if samples[i]["n"] != samples[i - 1]["n"] + 1:
+            errors.append(f"sample numbers jump at {i}")
+            break
+    planned = 0
+    for s, r in zip(samples, rows):
+        if max(abs(s[c] - float(r[c])) for c in axes) > a.tol:
+            break
+        planned += 1
+    if not 1000 <= planned < len(rows) - 1:
+        errors.append(f"{planned} samples follow the plan (of {len(rows)}): not a mid-path cut")
+    stop = samples[planned:]
+    if len(stop) < 2:
+        errors.append(f"only {len(stop)} samples after the cut: no stop ramp")
+    for k in range(1, len(stop)):
+        if stop[k]["feed"] > stop[k - 1]["feed"] + 1e-9:
+            errors.append(f"feed rises during the stop at sample {planned + k}")
+            break
+    rest = a.jerk * a.period ** 2 / 2
+    last = samples[-1] if samples else None
+    if last is None or abs(last["feed"]) > rest:
+        errors.append(f"not at rest at the end: feed {last and last['feed']}")
+    if last is None or not last["underrun"] or last["fault"] or last["done"]:
+        errors.append(f"end state: {last}")
+    if any(s["fault"] for s in samples):
+        errors.append("fault during the run")
+
+    with open(a.recorded_csv, "w") as f:
+        f.write("t,u," + ",".join(axes) + ",feed,element\n")
+        for j, s in enumerate(samples):
+            f.write(f"{j * a.period!r},{s['u']!r}," + ",".join(repr(s[c]) for c in axes)
+                    + f",{s['feed']!r},{s['curve']}\n")
+    if errors:
+        print("FAIL:\n  " + "\n  ".join(errors))
+        sys.exit(1)
+    print(f"ok: {planned} planned samples, then a {len(stop)}-sample stop from "
+          f"{stop[0]['feed']:.3f} mm/s to {last['feed']:.2e} mm/s; underruns={last['underruns']}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,30 @@
+#!/bin/bash
+# path_test.sh TOOLPATH: the product end to end in real LinuxCNC. nurbs-planner plans TOOLPATH
+# and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
+# thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full
+# precision. Checks (check_path.py, nurbs-plan verify): the samples are the offline
+# `nurbs-plan plan` setpoints (count, and every position to 1e-9 mm), zero axial violations by
+# finite differences, the motion ends at C(1) and the planner exits cleanly on SIGTERM.
+here=$(cd "$(dirname "$0")" && pwd)
+source "$here/lib.sh"
+
+toolpath=$(realpath "$1")
+PERIOD=0.00025
+LIMITS="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001"
+
+work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
+chmod 755 "$work"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
+SAMPLES=$(($(wc -l <"$work/offline.csv") - 1))
+sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD|g" \
+    -e "s|@SAMPLES@|$SAMPLES|g" -e "s|@WORK@|$work|g" \
+    "$here/path.hal.in" >"$work/path.hal"
+
+hal_session "$work/path.hal" "$work/halrun.log"
+cat "$work/halrun.log"
+python3 "$here/check_path.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
+    --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv"
+nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD
+grep -q "nurbs-planner: stopped by signal, exiting cleanly" "$work/halrun.log" || {
+    echo "nurbs-planner did not exit cleanly on SIGTERM"; exit 1; }
+rm -rf "$work"

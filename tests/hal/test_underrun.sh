@@ -1,0 +1,37 @@
+#!/bin/bash
+# Underrun in real LinuxCNC: nurbs-planner streams the butterfly with a 0.1 s margin (limits and
+# period from halfiles/sim.ini, the same as $LIMITS below) and is unloaded (SIGTERM) after 1 s; nurbs_interp runs out of records mid-path and stops on the path
+# with its own jerk-limited ramp. Checks (check_underrun.py, nurbs-plan verify): the samples are
+# the offline plan up to the cut, then a stop with a never-rising feed that ends at rest, no
+# position jump and no axial violation (verify's only complaint: the path's end is not reached),
+# underrun set, no fault. The stop limits are the planner's per-boundary choice (plan_geometry.rs).
+here=$(cd "$(dirname "$0")" && pwd)
+source "$here/lib.sh"
+
+toolpath=$(realpath "$here/../../examples/butterfly.json")
+PERIOD=0.00025
+JERK=6e4
+LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
+
+work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
+chmod 755 "$work"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
+sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
+    -e "s|@MARGIN@|0.1|g" -e "s|@KILL_AFTER@|1|g" -e "s|@WORK@|$work|g" \
+    "$here/underrun.hal.in" >"$work/underrun.hal"
+
+hal_session "$work/underrun.hal" "$work/halrun.log"
+cat "$work/halrun.log"
+python3 "$here/check_underrun.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
+    --period $PERIOD --jerk $JERK --recorded-csv "$work/recorded.csv"
+verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
+echo "$verify"
+violations=$(grep "^VIOLATION" <<<"$verify" | grep -v "the last setpoint is not the end of the path" || true)
+if [ -n "$violations" ]; then
+    echo "the stop violates the limits:"; echo "$violations"; exit 1
+fi
+grep -q "^VIOLATION: the last setpoint is not the end of the path" <<<"$verify" || {
+    echo "expected the motion to stop before the end of the path"; exit 1; }
+grep -q "nurbs-planner: stopped by signal, exiting cleanly" "$work/halrun.log" || {
+    echo "nurbs-planner did not exit cleanly on SIGTERM"; exit 1; }
+rm -rf "$work"
