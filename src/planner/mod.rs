@@ -5,6 +5,7 @@
 pub mod axial;
 pub mod erwinski;
 pub mod flf;
+mod quick_check;
 mod limits;
 pub mod scurve_fit;
 pub mod simulate;
