@@ -5,8 +5,8 @@
 pub mod axial;
 pub mod erwinski;
 pub mod flf;
-mod quick_check;
 mod limits;
+mod quick_check;
 pub mod scurve_fit;
 pub mod simulate;
 pub mod verify;
