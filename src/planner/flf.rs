@@ -134,16 +134,6 @@ impl FlfScan {
         scan
     }
 
-    /// Speed cap at `u`, linearly interpolated between the (uniform) samples.
-    pub fn speed_cap_at(&self, u: f64) -> f64 {
-        let n = self.u.len() - 1;
-        let (a, b) = (self.u[0], self.u[n]);
-        let x = ((u - a) / (b - a) * n as f64).clamp(0.0, n as f64);
-        let i = (x.floor() as usize).min(n - 1);
-        let f = x - i as f64;
-        self.speed[i] * (1.0 - f) + self.speed[i + 1] * f
-    }
-
     /// Smallest speed cap among the samples strictly inside `(u0, u1)`, with its parameter.
     pub fn min_speed_cap_between(&self, u0: f64, u1: f64) -> Option<(f64, f64)> {
         let i0 = self.u.partition_point(|&u| u <= u0);
