@@ -42,6 +42,10 @@ enum Command {
         /// Summary JSON (motion time, plan time, peaks per axis).
         #[arg(long)]
         summary: Option<PathBuf>,
+        /// Feedrate planner: `erwinski` (segment records, streaming) or `vpop` (constraint
+        /// intersection at the servo period, seed 003).
+        #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
+        planner: PlannerKind,
     },
     /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
     Verify {
@@ -50,6 +54,13 @@ enum Command {
         #[command(flatten)]
         limits: LimitArgs,
     },
+}
+
+/// Which feedrate planner `plan` runs.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlannerKind {
+    Erwinski,
+    Vpop,
 }
 
 /// Limit flags shared by `plan` and `verify` (mm, s). Axis lists are comma-separated in axis
@@ -100,11 +111,13 @@ pub fn run() -> ExitCode {
             limits,
             out,
             summary,
+            planner,
         } => plan::run(plan::PlanArgs {
             toolpath: &toolpath,
             limits: &limits,
             out: &out,
             summary: summary.as_deref(),
+            planner,
         }),
         Command::Verify {
             setpoints,

@@ -48,8 +48,125 @@ pub fn read_rows(path: &Path, tip: usize) -> Result<Vec<Row>, String> {
     Ok(rows)
 }
 
+/// Columns `names` of a CSV with a header, as numbers.
+fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').map(str::trim).collect();
+    let cols: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            header
+                .iter()
+                .position(|h| h == n)
+                .ok_or_else(|| format!("{}: no column {n}", path.display()))
+        })
+        .collect::<Result<_, _>>()?;
+    let mut out = Vec::new();
+    for (i, line) in lines.enumerate() {
+        if line.trim().is_empty() {
+            continue;
+        }
+        let f: Vec<&str> = line.split(',').collect();
+        out.push(
+            cols.iter()
+                .map(|&c| {
+                    f.get(c)
+                        .and_then(|v| v.trim().parse::<f64>().ok())
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| format!("{}:{}: column {} is not a number", path.display(), i + 2, c + 1))
+                })
+                .collect::<Result<Vec<f64>, String>>()?,
+        );
+    }
+    Ok(out)
+}
+
+/// 5-axis setpoints (`--planner vpop` on a two-curve toolpath): joint limits in order x y z a c
+/// by finite differences; the tool tip columns against the curve (distance, chord error, feed,
+/// end points) and against the forward kinematics of the joints.
+fn run_five_axis(
+    setpoints: &Path,
+    toolpath: &crate::geometry::Toolpath,
+    limits: &LimitArgs,
+) -> Result<bool, Box<dyn std::error::Error>> {
+    use crate::planner::axial::FiniteDifferences;
+    use crate::planner::verify::SLACK;
+    let joint_limits = limits.limits(5)?;
+    let joints = read_columns(setpoints, &["x", "y", "z", "a", "c"])?;
+    let tips = read_columns(setpoints, &["tip_x", "tip_y", "tip_z"])?;
+    let base = read_rows(setpoints, 0)?;
+    let mut fd = FiniteDifferences::new(5, joint_limits.period);
+    let machine = crate::kinematics::Xyzac::default();
+    let mut fk_error: f64 = 0.0;
+    for (q, t) in joints.iter().zip(&tips) {
+        fd.push(q, &joint_limits);
+        let (tip, _) = machine.forward(q);
+        for i in 0..3 {
+            fk_error = fk_error.max((tip[i] - t[i]).abs());
+        }
+    }
+    fd.finish(&joint_limits);
+    let mut violations = Vec::new();
+    let names = ["x", "y", "z", "a", "c"];
+    for i in 0..5 {
+        for (what, peak, limit) in [
+            ("velocity", fd.peaks.vel[i], joint_limits.velocity[i]),
+            ("acceleration", fd.peaks.acc[i], joint_limits.acceleration[i]),
+            ("jerk", fd.peaks.jerk[i], joint_limits.jerk[i]),
+        ] {
+            if peak > limit * (1.0 + SLACK) {
+                violations.push(format!("axis {}: {what} {peak:.6} exceeds limit {limit}", names[i]));
+            }
+        }
+    }
+    if fk_error > 1e-6 {
+        violations.push(format!(
+            "tool tip columns are {fk_error:.3e} mm off the joints' tool tip"
+        ));
+    }
+    let tip_limits = crate::planner::Limits {
+        velocity: vec![f64::MAX; 3],
+        acceleration: vec![f64::MAX; 3],
+        jerk: vec![f64::MAX; 3],
+        ..joint_limits.clone()
+    };
+    let rows: Vec<Row> = base
+        .iter()
+        .zip(&tips)
+        .map(|(r, t)| Row {
+            q: t.clone(),
+            ..r.clone()
+        })
+        .collect();
+    let curves = PathCurves::new(toolpath);
+    let report = verify(&curves, &tip_limits, &rows);
+    violations.extend(report.violations);
+    println!(
+        "{} setpoints ({:.6} s), joints x y z a c: max |v| {:?}, |a| {:?}, |jerk| {:?}; tool tip: max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
+        report.rows,
+        report.rows.saturating_sub(1) as f64 * joint_limits.period,
+        &fd.peaks.vel[..5],
+        &fd.peaks.acc[..5],
+        &fd.peaks.jerk[..5],
+        report.max_feed,
+        report.max_chord_error,
+        report.max_distance_to_curve,
+    );
+    for v in &violations {
+        println!("VIOLATION: {v}");
+    }
+    if violations.is_empty() {
+        println!("OK: no violation");
+    }
+    Ok(violations.is_empty())
+}
+
 pub fn run(setpoints: &Path, toolpath: &Path, limits: &LimitArgs) -> Result<bool, Box<dyn std::error::Error>> {
     let toolpath = read_toolpath(toolpath)?;
+    if read_columns(setpoints, &["a", "c", "tip_x"]).is_ok() {
+        return run_five_axis(setpoints, &toolpath, limits);
+    }
     let limits = limits.limits(toolpath.tip_dim())?;
     let rows = read_rows(setpoints, toolpath.tip_dim())?;
     let curves = PathCurves::new(&toolpath);

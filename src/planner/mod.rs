@@ -3,6 +3,7 @@
 //! exceeds an axis limit.
 
 pub mod axial;
+pub mod corner;
 pub mod erwinski;
 pub mod flf;
 mod limits;
@@ -10,6 +11,7 @@ mod quick_check;
 pub mod scurve_fit;
 pub mod simulate;
 pub mod verify;
+pub mod vpop;
 
 pub use erwinski::{plan, Plan, PlanError, PlanOptions};
 pub use limits::{Limits, LimitsError};

@@ -122,7 +122,7 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
 }
 
 /// Largest distance between the curve on `(u0, u1)` and the chord from `a` to `b`.
-fn chord_error(
+pub fn chord_error(
     view: &nurbs_rtcore::CurveView,
     tip: usize,
     u0: f64,

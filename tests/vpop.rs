@@ -1,0 +1,331 @@
+//! VPOp planner (seed 003): every plan is checked with the project's verifier (finite
+//! differences at the servo period, relative slack 1e-6, at rest before the first and after the
+//! last row; feed; chord error; distance to the curve; end points).
+
+use nurbs_motion::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use nurbs_motion::planner::verify::{verify, Report, Row};
+use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan};
+use nurbs_motion::planner::{Limits, PathCurves};
+use nurbs_motion::readers::read_toolpath;
+use std::path::Path;
+
+fn example(name: &str) -> Toolpath {
+    read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)).unwrap()
+}
+
+fn rows(plan: &VpopPlan, tip: usize) -> Vec<Row> {
+    plan.points
+        .iter()
+        .enumerate()
+        .map(|(j, p)| Row {
+            t: j as f64 * plan.limits.period,
+            curve: p.element,
+            u: p.u,
+            q: p.tip[..tip].to_vec(),
+        })
+        .collect()
+}
+
+fn check(tp: &Toolpath, plan: &VpopPlan) -> Report {
+    let report = verify(&PathCurves::new(tp), &plan.limits, &rows(plan, tp.tip_dim()));
+    assert!(report.violations.is_empty(), "violations: {:?}", report.violations);
+    report
+}
+
+fn vpop_limits() -> Limits {
+    Limits {
+        feed: 166.667,
+        velocity: vec![500.0, 500.0],
+        acceleration: vec![2500.0, 3000.0],
+        jerk: vec![5000.0, 5000.0],
+        chord_tolerance: 0.02,
+        period: 0.006,
+    }
+}
+
+#[test]
+fn trident_vpop_limits() {
+    let tp = example("trident.json");
+    let plan = plan_tip(&tp, &vpop_limits(), SearchOptions::default()).unwrap();
+    let r = check(&tp, &plan);
+    eprintln!(
+        "trident VPOp limits: {:.3} s, planned in {:.1} ms, {:?}, peaks jerk {:?}",
+        plan.motion_time,
+        plan.plan_time * 1e3,
+        plan.stats,
+        &r.peaks.jerk[..2]
+    );
+    // Physical lower bound 1.650 s, best known 1.668 s, paper 2.3 s; the goal of
+    // 1.75 s is not reached yet (measured 1.998 s).
+    assert!(plan.motion_time >= 1.650, "{}", plan.motion_time);
+    assert!(plan.motion_time <= 2.1, "{}", plan.motion_time);
+    // The plan uses the jerk limit: checked against 1 % less it must fail.
+    let mut tighter = plan.limits.clone();
+    tighter.jerk = tighter.jerk.iter().map(|j| 0.99 * j).collect();
+    let r = verify(&PathCurves::new(&tp), &tighter, &rows(&plan, 2));
+    assert!(!r.violations.is_empty());
+}
+
+/// A straight line from rest to rest: ends exactly at the end point, and takes at least the
+/// time of a one-axis jerk-limited move over that distance (the tangential limits here equal the
+/// X axis limits, the Y axis does not move).
+#[test]
+fn straight_line_rest_to_rest() {
+    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![30.0, 0.0]], None).unwrap();
+    let tp = Toolpath {
+        elements: vec![PathElement {
+            kind: ElementKind::Polyline,
+            curve,
+            feed: None,
+            source_line: None,
+        }],
+    };
+    let limits = Limits::uniform(2, 100.0, 1000.0, 10000.0, 0.01, 0.001);
+    let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
+    let r = check(&tp, &plan);
+    // Continuous time-optimal rest-to-rest move: cruise at F, accel phases F/A + A/J.
+    let (f, a, j) = (100.0, 1000.0, 10000.0);
+    let t_opt = 30.0 / f + f / a + a / j;
+    eprintln!(
+        "line: {:.4} s vs continuous optimum {:.4} s, peak feed {}",
+        plan.motion_time, t_opt, r.max_feed
+    );
+    assert!(plan.motion_time >= t_opt - 2.0 * limits.period);
+    assert!(plan.motion_time <= 1.1 * t_opt, "{} vs {t_opt}", plan.motion_time);
+    assert!(r.max_feed > 0.99 * f);
+}
+
+/// Slow: about 3 minutes of planning on this 2-core machine (measured 3.831 s of motion, best
+/// known 3.163 s, lower bound 2.404 s); run with `--include-ignored`.
+#[test]
+#[ignore]
+fn butterfly_lab_set_1() {
+    let tp = example("butterfly.json");
+    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
+    check(&tp, &plan);
+    eprintln!(
+        "butterfly lab set 1: {:.4} s, planned in {:.1} ms, {:?}",
+        plan.motion_time,
+        plan.plan_time * 1e3,
+        plan.stats
+    );
+    assert!(plan.motion_time >= 2.404);
+}
+
+/// Open pocket (two curves) on the XYZAC machine with the paper's Table 1 limits (joint order
+/// x, y, z, a, c; rotary in degrees): the joint setpoints pass the finite-difference check, and
+/// the tool tip recovered by forward kinematics lies on the programmed curve (verifier: distance,
+/// chord error, tool-tip feed, end points).
+#[test]
+fn open_pocket_five_axis_table_1() {
+    use nurbs_motion::kinematics::Xyzac;
+    use nurbs_motion::planner::axial::FiniteDifferences;
+    use nurbs_motion::planner::verify::SLACK;
+    use nurbs_motion::planner::vpop::plan_five_axis;
+    let tp = example("open_pocket.json");
+    let limits = Limits {
+        feed: 83.333,
+        velocity: vec![500.0, 500.0, 500.0, 90.0, 120.0],
+        acceleration: vec![2500.0, 3000.0, 2100.0, 298.8, 298.8],
+        jerk: vec![5000.0, 5000.0, 50000.0, 1800.0, 36000.0],
+        chord_tolerance: 0.02,
+        period: 0.006,
+    };
+    let machine = Xyzac::default();
+    let plan = plan_five_axis(&tp, machine, &limits, SearchOptions::default()).unwrap();
+    let mut fd = FiniteDifferences::new(5, limits.period);
+    for p in &plan.points {
+        fd.push(&p.q[..5], &limits);
+        let (tip, _) = machine.forward(&p.q[..5]);
+        for i in 0..3 {
+            assert!((tip[i] - p.tip[i]).abs() < 1e-9, "{tip:?} vs {:?}", p.tip);
+        }
+    }
+    fd.finish(&limits);
+    for i in 0..5 {
+        assert!(
+            fd.peaks.vel[i] <= limits.velocity[i] * (1.0 + SLACK),
+            "axis {i} v {}",
+            fd.peaks.vel[i]
+        );
+        assert!(
+            fd.peaks.acc[i] <= limits.acceleration[i] * (1.0 + SLACK),
+            "axis {i} a {}",
+            fd.peaks.acc[i]
+        );
+        assert!(
+            fd.peaks.jerk[i] <= limits.jerk[i] * (1.0 + SLACK),
+            "axis {i} j {}",
+            fd.peaks.jerk[i]
+        );
+    }
+    let tip_limits = Limits {
+        velocity: vec![1e12; 3],
+        acceleration: vec![1e12; 3],
+        jerk: vec![1e12; 3],
+        ..limits.clone()
+    };
+    let r = verify(&PathCurves::new(&tp), &tip_limits, &rows(&plan, 3));
+    assert!(r.violations.is_empty(), "{:?}", r.violations);
+    eprintln!(
+        "open pocket 5-axis: {:.3} s, planned in {:.1} ms, joint peaks v {:?} a {:?} j {:?}",
+        plan.motion_time,
+        plan.plan_time * 1e3,
+        &fd.peaks.vel[..5],
+        &fd.peaks.acc[..5],
+        &fd.peaks.jerk[..5]
+    );
+    // The tool-tip length at the programmed feed is a lower bound.
+    assert!(plan.motion_time >= 98.168 / 83.333);
+}
+
+/// G1 path (fan_5axis tool tip, 25 points): corners rounded with five-point cubic B-splines
+/// inside the contour tolerance, planned as one motion with the VPOp limits (3 axes).
+#[test]
+fn fan_5axis_tip_polyline_rounded() {
+    use nurbs_motion::planner::corner::round_toolpath;
+    let raw = example("fan_5axis.json");
+    let eps = 0.02;
+    let rounded = round_toolpath(&raw, eps).unwrap();
+    assert!(rounded.corners >= 20, "{} corners", rounded.corners);
+    assert!(rounded.max_deviation <= eps, "{}", rounded.max_deviation);
+    // Uses the tolerance where the segments are long enough.
+    assert!(rounded.max_deviation >= 0.9 * eps, "{}", rounded.max_deviation);
+    let tp = rounded.toolpath;
+    let limits = Limits {
+        feed: 166.667,
+        velocity: vec![500.0, 500.0, 500.0],
+        acceleration: vec![2500.0, 3000.0, 2100.0],
+        jerk: vec![5000.0, 5000.0, 50000.0],
+        chord_tolerance: eps,
+        period: 0.006,
+    };
+    let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
+    check(&tp, &plan);
+    // Every setpoint is within the rounding deviation plus nothing else of the programmed
+    // polyline (setpoints lie on the rounded path).
+    let verts: Vec<[f64; 3]> = (0..raw.elements[0].curve.control_point_count())
+        .map(|k| {
+            let c = raw.elements[0].curve.control_point(k);
+            [c[0], c[1], c[2]]
+        })
+        .collect();
+    let seg = |x: &[f64; 3], a: &[f64; 3], b: &[f64; 3]| {
+        let ab: Vec<f64> = (0..3).map(|i| b[i] - a[i]).collect();
+        let ax: Vec<f64> = (0..3).map(|i| x[i] - a[i]).collect();
+        let l2: f64 = ab.iter().map(|v| v * v).sum();
+        let t = (ax.iter().zip(&ab).map(|(p, q)| p * q).sum::<f64>() / l2).clamp(0.0, 1.0);
+        (0..3).map(|i| (ax[i] - t * ab[i]).powi(2)).sum::<f64>().sqrt()
+    };
+    let dev = plan
+        .points
+        .iter()
+        .map(|p| {
+            verts
+                .windows(2)
+                .map(|w| seg(&p.tip, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    eprintln!(
+        "fan_5axis tip G1: {} corners, rounding deviation {:.5} mm, setpoint deviation {:.5} mm, {:.3} s, planned in {:.1} ms",
+        rounded.corners,
+        rounded.max_deviation,
+        dev,
+        plan.motion_time,
+        plan.plan_time * 1e3
+    );
+    assert!(dev <= eps * (1.0 + 1e-9), "{dev}");
+    // At least the length at the programmed feed.
+    assert!(plan.motion_time >= 342.0 / 166.667);
+}
+
+/// `nurbs-plan plan --planner vpop` writes a CSV that `nurbs-plan verify` accepts, and rejects
+/// against a tighter jerk limit; a two-curve toolpath is planned on the XYZAC machine
+/// (columns t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element) and verified per joint.
+#[test]
+fn cli_plan_vpop_and_verify() {
+    use std::process::Command;
+    let bin = env!("CARGO_BIN_EXE_nurbs-plan");
+    let dir = std::env::temp_dir().join(format!("vpop-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ex = |n: &str| Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(n);
+    let run = |args: &[&str]| Command::new(bin).args(args).output().unwrap();
+    let trident = ex("trident.json");
+    let out = dir.join("trident.csv");
+    let lim = [
+        "--feed",
+        "166.667",
+        "--vel",
+        "500,500",
+        "--accel",
+        "2500,3000",
+        "--jerk",
+        "5000,5000",
+        "--chord-tol",
+        "0.02",
+        "--period",
+        "0.006",
+    ];
+    let mut args = vec![
+        "plan",
+        trident.to_str().unwrap(),
+        "--planner",
+        "vpop",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(lim);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let head = std::fs::read_to_string(&out).unwrap();
+    assert!(head.starts_with("t,u,x,y,feed,element\n"));
+    let mut args = vec!["verify", out.to_str().unwrap(), trident.to_str().unwrap()];
+    args.extend(lim);
+    assert!(run(&args).status.success());
+    let mut tight = args.clone();
+    let k = tight.iter().position(|a| *a == "5000,5000").unwrap();
+    tight[k] = "4950,4950";
+    assert!(!run(&tight).status.success());
+
+    let pocket = ex("open_pocket.json");
+    let out5 = dir.join("pocket.csv");
+    let lim5 = [
+        "--feed",
+        "83.333",
+        "--vel",
+        "500,500,500,90,120",
+        "--accel",
+        "2500,3000,2100,298.8,298.8",
+        "--jerk",
+        "5000,5000,50000,1800,36000",
+        "--chord-tol",
+        "0.02",
+        "--period",
+        "0.006",
+    ];
+    let mut args = vec![
+        "plan",
+        pocket.to_str().unwrap(),
+        "--planner",
+        "vpop",
+        "--out",
+        out5.to_str().unwrap(),
+    ];
+    args.extend(lim5);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::read_to_string(&out5)
+        .unwrap()
+        .starts_with("t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element\n"));
+    let mut args = vec!["verify", out5.to_str().unwrap(), pocket.to_str().unwrap()];
+    args.extend(lim5);
+    let o = run(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
+    let mut tight = args.clone();
+    let k = tight.iter().position(|a| *a == "500,500,500,90,120").unwrap();
+    tight[k] = "500,500,500,90,100";
+    assert!(!run(&tight).status.success());
+    std::fs::remove_dir_all(&dir).ok();
+}
