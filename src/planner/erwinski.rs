@@ -590,21 +590,7 @@ fn sagitta(
     a: &nurbs_rtcore::executor::Sample,
     b: &nurbs_rtcore::executor::Sample,
 ) -> f64 {
-    let m = view.point(0.5 * (a.u + b.u));
-    let ab = nurbs_rtcore::math::sub(&b.point, &a.point);
-    let am = nurbs_rtcore::math::sub(&m, &a.point);
-    let len2 = dot(&ab, &ab, tip);
-    let t = if len2 > 0.0 {
-        (dot(&am, &ab, tip) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let mut e = 0.0;
-    for i in 0..tip {
-        let d = am[i] - t * ab[i];
-        e += d * d;
-    }
-    e.sqrt()
+    super::verify::distance_to_chord(&view.point(0.5 * (a.u + b.u)), &a.point, &b.point, tip)
 }
 
 /// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the

@@ -121,6 +121,29 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
     report
 }
 
+/// Distance from `p` to the segment from `a` to `b` (first `tip` coordinates).
+pub fn distance_to_chord(
+    p: &nurbs_rtcore::Vector,
+    a: &nurbs_rtcore::Vector,
+    b: &nurbs_rtcore::Vector,
+    tip: usize,
+) -> f64 {
+    let ab = sub(b, a);
+    let ap = sub(p, a);
+    let len2 = nurbs_rtcore::math::dot(&ab, &ab, tip);
+    let t = if len2 > 0.0 {
+        (nurbs_rtcore::math::dot(&ap, &ab, tip) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let mut e = 0.0;
+    for i in 0..tip {
+        let d = ap[i] - t * ab[i];
+        e += d * d;
+    }
+    e.sqrt()
+}
+
 /// Largest distance between the curve on `(u0, u1)` and the chord from `a` to `b`.
 pub fn chord_error(
     view: &nurbs_rtcore::CurveView,
@@ -130,23 +153,7 @@ pub fn chord_error(
     a: &nurbs_rtcore::Vector,
     b: &nurbs_rtcore::Vector,
 ) -> f64 {
-    let ab = sub(b, a);
-    let len2 = nurbs_rtcore::math::dot(&ab, &ab, tip);
-    let dist = |u: f64| {
-        let p = view.point(u);
-        let ap = sub(&p, a);
-        let t = if len2 > 0.0 {
-            (nurbs_rtcore::math::dot(&ap, &ab, tip) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let mut e = 0.0;
-        for i in 0..tip {
-            let d = ap[i] - t * ab[i];
-            e += d * d;
-        }
-        e.sqrt()
-    };
+    let dist = |u: f64| distance_to_chord(&view.point(u), a, b, tip);
     const N: usize = 8;
     let mut best = (0.0, u0);
     for k in 1..N {
