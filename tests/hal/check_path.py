@@ -9,9 +9,10 @@
 - writes the recorded setpoints as a CSV in the offline format for `nurbs-plan verify`.
 """
 import argparse
-import csv
 import json
 import sys
+
+from samples import read_plan, read_samples, sample_gap, write_recorded_csv
 
 
 def main():
@@ -24,27 +25,15 @@ def main():
     ap.add_argument("--recorded-csv", required=True)
     a = ap.parse_args()
 
-    with open(a.expected) as f:
-        rows = list(csv.DictReader(f))
-    axes = [c for c in ("x", "y", "z") if rows and c in rows[0]]
-    samples = []
-    with open(a.samples) as f:
-        for line in f:
-            v = line.split()
-            samples.append({
-                "n": int(v[0]), "x": float(v[1]), "y": float(v[2]), "z": float(v[3]),
-                "u": float(v[4]), "feed": float(v[5]), "curve": int(v[6]), "underruns": int(v[7]),
-                "fault_code": int(v[8]), "done": v[9] == "1", "fault": v[10] == "1",
-                "underrun": v[11] == "1",
-            })
+    rows, axes = read_plan(a.expected)
+    samples = read_samples(a.samples)
 
     errors = []
     if len(samples) != len(rows):
         errors.append(f"{len(samples)} samples, offline plan has {len(rows)}")
-    for i in range(1, len(samples)):
-        if samples[i]["n"] != samples[i - 1]["n"] + 1:
-            errors.append(f"sample numbers jump at {i}: {samples[i - 1]['n']} -> {samples[i]['n']}")
-            break
+    gap = sample_gap(samples)
+    if gap:
+        errors.append(gap)
     worst = {k: 0.0 for k in axes + ["u", "feed"]}
     for k, (s, r) in enumerate(zip(samples, rows)):
         if s["fault"] or s["underrun"] or s["underruns"]:
@@ -74,11 +63,7 @@ def main():
         if dist > a.tol:
             errors.append(f"ends at {[last[c] for c in axes]}, C(1) = {end} (off by {dist:.3e} mm)")
 
-    with open(a.recorded_csv, "w") as f:
-        f.write("t,u," + ",".join(axes) + ",feed,element\n")
-        for j, s in enumerate(samples):
-            f.write(f"{j * a.period!r},{s['u']!r}," + ",".join(repr(s[c]) for c in axes)
-                    + f",{s['feed']!r},{s['curve']}\n")
+    write_recorded_csv(a.recorded_csv, samples, axes, a.period)
 
     if errors:
         print("FAIL:\n  " + "\n  ".join(errors))

@@ -7,8 +7,9 @@
   (which must find no violation but the missing end of the path).
 """
 import argparse
-import csv
 import sys
+
+from samples import planned_prefix, read_plan, read_samples, sample_gap, write_recorded_csv
 
 
 def main():
@@ -21,29 +22,13 @@ def main():
     ap.add_argument("--recorded-csv", required=True)
     a = ap.parse_args()
 
-    with open(a.expected) as f:
-        rows = list(csv.DictReader(f))
-    axes = [c for c in ("x", "y", "z") if rows and c in rows[0]]
-    samples = []
-    with open(a.samples) as f:
-        for line in f:
-            v = line.split()
-            samples.append({
-                "n": int(v[0]), "x": float(v[1]), "y": float(v[2]), "z": float(v[3]),
-                "u": float(v[4]), "feed": float(v[5]), "curve": int(v[6]), "underruns": int(v[7]),
-                "fault_code": int(v[8]), "done": v[9] == "1", "fault": v[10] == "1",
-                "underrun": v[11] == "1",
-            })
+    rows, axes = read_plan(a.expected)
+    samples = read_samples(a.samples)
     errors = []
-    for i in range(1, len(samples)):
-        if samples[i]["n"] != samples[i - 1]["n"] + 1:
-            errors.append(f"sample numbers jump at {i}")
-            break
-    planned = 0
-    for s, r in zip(samples, rows):
-        if max(abs(s[c] - float(r[c])) for c in axes) > a.tol:
-            break
-        planned += 1
+    gap = sample_gap(samples)
+    if gap:
+        errors.append(gap)
+    planned = planned_prefix(samples, rows, axes, a.tol)
     if not 1000 <= planned < len(rows) - 1:
         errors.append(f"{planned} samples follow the plan (of {len(rows)}): not a mid-path cut")
     stop = samples[planned:]
@@ -62,11 +47,7 @@ def main():
     if any(s["fault"] for s in samples):
         errors.append("fault during the run")
 
-    with open(a.recorded_csv, "w") as f:
-        f.write("t,u," + ",".join(axes) + ",feed,element\n")
-        for j, s in enumerate(samples):
-            f.write(f"{j * a.period!r},{s['u']!r}," + ",".join(repr(s[c]) for c in axes)
-                    + f",{s['feed']!r},{s['curve']}\n")
+    write_recorded_csv(a.recorded_csv, samples, axes, a.period)
     if errors:
         print("FAIL:\n  " + "\n  ".join(errors))
         sys.exit(1)
