@@ -44,8 +44,6 @@ pub struct Plan {
     pub records: Vec<SegmentRecord>,
     /// Critical points per curve (after refinement), as (curve, point).
     pub critical_points: Vec<(usize, CriticalPoint)>,
-    /// FLF scans per curve (for plots and reports).
-    pub scans: Vec<FlfScan>,
     pub motion_time: f64,
     /// Wall time spent planning (s) and until the first record was ready (s).
     pub plan_time: f64,
@@ -334,7 +332,6 @@ pub fn plan(
     Ok(Plan {
         records,
         critical_points: criticals,
-        scans,
         motion_time,
         plan_time: started.elapsed().as_secs_f64(),
         first_record_time,

@@ -114,7 +114,6 @@ pub struct FlfScan {
     pub u: Vec<f64>,
     pub value: Vec<f64>,
     pub speed: Vec<f64>,
-    pub components: Vec<FlfValue>,
 }
 
 impl FlfScan {
@@ -129,7 +128,6 @@ impl FlfScan {
             scan.u.push(u);
             scan.value.push(f.value());
             scan.speed.push(f.speed_cap());
-            scan.components.push(f);
         }
         scan
     }

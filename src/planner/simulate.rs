@@ -10,7 +10,6 @@ use nurbs_rtcore::SegmentRecord;
 pub struct SimState {
     pub interp: Interpolator,
     pub check: FiniteDifferences,
-    pub time: f64,
     pub samples: usize,
     /// The last sample produced (chord checks span segment boundaries).
     pub last_sample: Option<Sample>,
@@ -21,7 +20,6 @@ impl SimState {
         SimState {
             interp: Interpolator::new(),
             check: FiniteDifferences::new(axes, period),
-            time: 0.0,
             samples: 0,
             last_sample: None,
         }
