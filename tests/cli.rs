@@ -122,3 +122,117 @@ fn plan_then_verify_and_verify_catches_a_jump() {
     assert!(String::from_utf8_lossy(&bad.stdout).contains("VIOLATION"));
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Width, height and colour type from a PNG's signature and IHDR chunk.
+fn png_header(bytes: &[u8]) -> (u32, u32, u8) {
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    (be(16), be(20), bytes[25])
+}
+
+/// RGB pixels of a PNG (8-bit RGB, as `--plot` writes).
+fn png_pixels(path: &Path) -> Vec<[u8; 3]> {
+    let mut reader = png::Decoder::new(std::fs::File::open(path).unwrap())
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgb);
+    buf[..info.buffer_size()]
+        .chunks(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect()
+}
+
+fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
+    let mut cmd = bin();
+    cmd.arg("plan")
+        .arg(example("trident.json"))
+        .args(["--planner", planner]);
+    if planner == "vpop" {
+        // Seed 003's limits (coarse period, per-axis accelerations): a fast VPOp run.
+        cmd.args([
+            "--feed",
+            "166.667",
+            "--vel",
+            "500",
+            "--accel",
+            "2500,3000",
+            "--jerk",
+            "5000",
+        ]);
+        cmd.args(["--chord-tol", "0.02", "--period", "0.006"]);
+    } else {
+        cmd.args([
+            "--feed",
+            "2500",
+            "--accel",
+            "1e4",
+            "--jerk",
+            "6e4",
+            "--chord-tol",
+            "0.001",
+        ]);
+        cmd.args(["--period", "0.001"]);
+    }
+    cmd.arg("--out").arg(csv).arg("--plot").arg(png);
+    cmd
+}
+
+#[test]
+fn plan_draws_the_profile_as_a_png() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-plot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    const FEED: [u8; 3] = [31, 119, 180];
+    const CRITICAL: [u8; 3] = [128, 0, 128];
+    const CHORD_CAP: [u8; 3] = [255, 127, 14];
+    for planner in ["erwinski", "vpop"] {
+        let (csv, png) = (dir.join(format!("{planner}.csv")), dir.join(format!("{planner}.png")));
+        let out = plot_args(planner, &csv, &png).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{planner}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(std::fs::metadata(&csv).unwrap().len() > 1000);
+        let bytes = std::fs::read(&png).unwrap();
+        assert_eq!(png_header(&bytes), (1600, 1800, 2), "{planner}: 1600x1800 RGB");
+        // Three panels of curves, grids and text compress to far more than a blank image.
+        assert!(bytes.len() > 30_000, "{planner}: {} bytes", bytes.len());
+        let pixels = png_pixels(&png);
+        assert_eq!(pixels.len(), 1600 * 1800);
+        let count = |c: [u8; 3]| pixels.iter().filter(|p| **p == c).count();
+        let ink = pixels.iter().filter(|p| **p != [255, 255, 255]).count();
+        assert!(ink > pixels.len() / 50, "{planner}: only {ink} non-white pixels");
+        assert!(count(FEED) > 2000, "{planner}: feed curve / x axis missing");
+        assert!(count(CHORD_CAP) > 50, "{planner}: FLF chord cap missing");
+        let critical = count(CRITICAL);
+        if planner == "erwinski" {
+            assert!(critical > 50, "critical points missing");
+        } else {
+            assert_eq!(critical, 0, "VPOp has no critical points");
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn an_unwritable_plot_fails_after_the_csv_is_written() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-plot-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("trident.csv");
+    let png = dir.join("no-such-dir").join("profile.png");
+    let out = plot_args("erwinski", &csv, &png).output().unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("cannot write plot") && err.contains("profile.png"),
+        "{err}"
+    );
+    assert!(
+        std::fs::metadata(&csv).unwrap().len() > 1000,
+        "the CSV is still written"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

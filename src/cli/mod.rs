@@ -2,6 +2,7 @@
 
 mod inspect;
 mod plan;
+mod plot;
 mod verify;
 
 pub use verify::read_rows;
@@ -46,6 +47,11 @@ enum Command {
         /// intersection at the servo period, seed 003).
         #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
         planner: PlannerKind,
+        /// Also draw the profile as a PNG (paper 000, Fig. 5): feedrate with the feedrate limit
+        /// function's components and the critical points, axial accelerations and axial jerks
+        /// (the finite differences `verify` checks) with their limits, over the curve parameter.
+        #[arg(long, value_name = "PNG")]
+        plot: Option<PathBuf>,
     },
     /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
     Verify {
@@ -112,12 +118,14 @@ pub fn run() -> ExitCode {
             out,
             summary,
             planner,
+            plot,
         } => plan::run(plan::PlanArgs {
             toolpath: &toolpath,
             limits: &limits,
             out: &out,
             summary: summary.as_deref(),
             planner,
+            plot: plot.as_deref(),
         }),
         Command::Verify {
             setpoints,

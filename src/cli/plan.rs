@@ -1,5 +1,6 @@
+use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
-use crate::planner::axial::FiniteDifferences;
+use crate::planner::axial::{FiniteDifferences, MAX_AXES};
 use crate::planner::simulate::setpoints;
 use crate::planner::{plan, PathCurves, PlanOptions};
 use crate::readers::read_toolpath;
@@ -12,6 +13,31 @@ pub struct PlanArgs<'a> {
     pub out: &'a Path,
     pub summary: Option<&'a Path>,
     pub planner: PlannerKind,
+    pub plot: Option<&'a Path>,
+}
+
+/// Figure title: file, planner, limits and motion time.
+fn plot_title(args: &PlanArgs, planner: &str, limits: &crate::planner::Limits, motion_time: f64) -> String {
+    let name = args.toolpath.file_name().map_or_else(
+        || args.toolpath.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    let list = |v: &[f64]| {
+        if v.iter().all(|x| *x == v[0]) {
+            format!("{}", v[0])
+        } else {
+            v.iter().map(|x| format!("{x}")).collect::<Vec<_>>().join("/")
+        }
+    };
+    format!(
+        "{name}, {planner}: F {} mm/s, A {} mm/s², J {} mm/s³, chord {} mm, T {} ms; motion {:.4} s",
+        limits.feed,
+        list(&limits.acceleration),
+        list(&limits.jerk),
+        limits.chord_tolerance,
+        limits.period * 1e3,
+        motion_time
+    )
 }
 
 pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
@@ -70,6 +96,32 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         });
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
+    if let Some(path) = args.plot {
+        let points: Vec<PlotSample> = samples
+            .iter()
+            .map(|s| {
+                let mut q = [0.0; MAX_AXES];
+                q[..tip].copy_from_slice(&s.point[..tip]);
+                PlotSample {
+                    curve: s.curve,
+                    u: s.u,
+                    feed: s.feed,
+                    q,
+                }
+            })
+            .collect();
+        let profile = Profile {
+            toolpath: &toolpath,
+            limits: &plan.limits,
+            axes: &names[..tip],
+            rotary_from: tip,
+            samples: &points,
+            flf: true,
+            critical_points: &plan.critical_points,
+            title: plot_title(&args, "erwinski planner", &plan.limits, motion_time),
+        };
+        write_png(path, &profile)?;
+    }
     Ok(())
 }
 
@@ -101,10 +153,21 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let mut check = FiniteDifferences::new(axes, plan.limits.period);
     let mut prev: Option<[f64; 3]> = None;
+    let mut points = Vec::new();
     for (j, p) in plan.points.iter().enumerate() {
         let feed = prev.map_or(0.0, |a| {
             crate::planner::vpop::constraints::tip_distance(&p.tip, &a, tip) / plan.limits.period
         });
+        if args.plot.is_some() {
+            let mut q = [0.0; MAX_AXES];
+            q[..axes].copy_from_slice(&p.q[..axes]);
+            points.push(PlotSample {
+                curve: p.element,
+                u: p.u,
+                feed,
+                q,
+            });
+        }
         write!(out, "{:?},{:?}", j as f64 * plan.limits.period, p.u)?;
         if five {
             for c in p.q[..5].iter().chain(&p.tip) {
@@ -150,6 +213,25 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
+    }
+    if let Some(path) = args.plot {
+        let names: &[&str] = if five {
+            &["x", "y", "z", "a", "c"]
+        } else {
+            &["x", "y", "z"][..tip]
+        };
+        let profile = Profile {
+            toolpath: &toolpath,
+            limits: &plan.limits,
+            axes: names,
+            rotary_from: if five { 3 } else { axes },
+            samples: &points,
+            // The FLF is a tool-tip construction: on the 5-axis machine the limits are joint limits.
+            flf: !five,
+            critical_points: &[],
+            title: plot_title(&args, "VPOp planner", &plan.limits, plan.motion_time),
+        };
+        write_png(path, &profile)?;
     }
     Ok(())
 }
