@@ -213,6 +213,51 @@ fn clip_below(points: &[(f64, f64)], top: f64) -> Vec<Vec<(f64, f64)>> {
     runs
 }
 
+/// Columns a sampled curve is thinned to (about one per pixel of the plot width).
+const COLUMNS: usize = 1500;
+
+/// Thins a curve whose x never decreases to the first, lowest, highest and last point of each
+/// of `COLUMNS` columns over `[x0, x1]`: every peak stays, and thousands of sub-pixel segments
+/// do not smear a wide line.
+fn decimate(points: impl Iterator<Item = (f64, f64)>, x0: f64, x1: f64) -> Vec<(f64, f64)> {
+    let width = (x1 - x0).max(f64::MIN_POSITIVE);
+    let column = |x: f64| ((x - x0) / width * COLUMNS as f64).floor().clamp(0.0, COLUMNS as f64) as usize;
+    let mut out = Vec::new();
+    let mut group: Vec<(f64, f64)> = Vec::new();
+    let flush = |group: &mut Vec<(f64, f64)>, out: &mut Vec<(f64, f64)>| {
+        if group.is_empty() {
+            return;
+        }
+        let lo = (0..group.len())
+            .min_by(|a, b| group[*a].1.total_cmp(&group[*b].1))
+            .unwrap();
+        let hi = (0..group.len())
+            .max_by(|a, b| group[*a].1.total_cmp(&group[*b].1))
+            .unwrap();
+        let mut keep = [0, lo, hi, group.len() - 1];
+        keep.sort_unstable();
+        let mut last = usize::MAX;
+        for k in keep {
+            if k != last {
+                out.push(group[k]);
+                last = k;
+            }
+        }
+        group.clear();
+    };
+    let mut current = usize::MAX;
+    for (x, y) in points {
+        let c = column(x);
+        if c != current {
+            flush(&mut group, &mut out);
+            current = c;
+        }
+        group.push((x, y));
+    }
+    flush(&mut group, &mut out);
+    out
+}
+
 /// Tick label: integers for large values, a few decimals for small ones.
 fn tick(v: &f64) -> String {
     let a = v.abs();
@@ -344,10 +389,20 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
             }
         }
     }
+    // A wide line drawn from sub-pixel segments comes out frayed: two 2-pixel lines half a
+    // pixel above and below make a clean 3-pixel one.
+    let feed = decimate(xs.iter().zip(p.samples).map(|(x, s)| (*x, s.feed)), x0, x1);
+    let half_pixel = 0.5 * top / chart.plotting_area().dim_in_pixel().1.max(1) as f64;
     chart
         .draw_series(LineSeries::new(
-            xs.iter().zip(p.samples).map(|(x, s)| (*x, s.feed)),
-            FEED_COLOR.stroke_width(3),
+            feed.iter().map(|(x, y)| (*x, y - half_pixel)),
+            FEED_COLOR.stroke_width(2),
+        ))
+        .map_err(draw_err)?;
+    chart
+        .draw_series(LineSeries::new(
+            feed.iter().map(|(x, y)| (*x, y + half_pixel)),
+            FEED_COLOR.stroke_width(2),
         ))
         .map_err(draw_err)?
         .label("planned feedrate")
@@ -404,7 +459,7 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
             let color = axis_color(i);
             chart
                 .draw_series(LineSeries::new(
-                    diffs.iter().enumerate().map(|(j, s)| (x_of(j), s[d][i])),
+                    decimate(diffs.iter().enumerate().map(|(j, s)| (x_of(j), s[d][i])), x0, x1),
                     color.stroke_width(if d == 1 { 2 } else { 1 }),
                 ))
                 .map_err(draw_err)?
@@ -514,6 +569,18 @@ mod tests {
                 assert_eq!(fd.peaks.jerk[i], d[j][2][i].abs());
             }
         }
+    }
+
+    #[test]
+    fn decimation_keeps_the_peaks() {
+        let n = 100_000;
+        let pts: Vec<(f64, f64)> = (0..n)
+            .map(|k| (k as f64 / n as f64, if k == 4321 { 9.0 } else { (k as f64).sin() }))
+            .collect();
+        let d = decimate(pts.iter().copied(), 0.0, 1.0);
+        assert!(d.len() <= 4 * COLUMNS && d.len() > COLUMNS);
+        assert!(d.contains(&pts[4321]) && d.contains(&pts[0]) && d.contains(&pts[n - 1]));
+        assert!(d.windows(2).all(|w| w[0].0 <= w[1].0));
     }
 
     #[test]
