@@ -326,7 +326,17 @@ pub fn write_png(path: &Path, profile: &Profile) -> Result<(), PlotError> {
 
 fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), PlotError> {
     root.fill(&WHITE).map_err(draw_err)?;
-    let root = root.titled(&p.title, (FONT, 24).into_font()).map_err(draw_err)?;
+    // The largest title font (24 px down to 12) that fits the width.
+    let size = (12..=24)
+        .rev()
+        .find(|size| {
+            root.estimate_text_size(&p.title, &TextStyle::from((FONT, *size as f64).into_font()))
+                .is_ok_and(|(w, _)| w + 40 <= WIDTH)
+        })
+        .unwrap_or(12);
+    let root = root
+        .titled(&p.title, (FONT, size as f64).into_font())
+        .map_err(draw_err)?;
     let panels = root.split_evenly((3, 1));
     let param = Parameter::new(p.toolpath);
     let (x0, x1) = param.range();
@@ -348,7 +358,9 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
         .fold(0.0, f64::max);
     let top = (feed_max * 1.8).min(p.limits.feed * 1.15);
     let top = if top > 0.0 { top } else { p.limits.feed };
-    let caption = if p.flf && p.limits.feed > top {
+    let caption = if !p.flf {
+        "(a) feedrate (no feedrate limit function: the limits are joint limits)".to_string()
+    } else if p.limits.feed > top {
         format!(
             "(a) feedrate and feedrate limit function (programmed feed {} mm/s is above the view)",
             tick(&p.limits.feed)
