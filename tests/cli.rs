@@ -214,6 +214,45 @@ fn plan_draws_the_profile_as_a_png() {
             assert_eq!(critical, 0, "VPOp has no critical points");
         }
     }
+    // Several path elements (NURBS, lines, NURBS): plotted over element index + normalised u.
+    let ngc = dir.join("multi.ngc");
+    std::fs::write(
+        &ngc,
+        "G21 G90 G17\nG0 X0 Y0\nF3000\nG5.2 X10 Y10 P1\nX20 Y0 P1\nX30 Y10 P1\nX35 Y0 P1\nG5.3\n\
+         G1 X40 Y10\nG1 X40 Y0\nG5.2 X45 Y-10 P2\nX50 Y0 P1\nX55 Y5 P1\nX60 Y0 P1\nG5.3\n",
+    )
+    .unwrap();
+    let png = dir.join("multi.png");
+    let out = bin()
+        .arg("plan")
+        .arg(&ngc)
+        .args([
+            "--feed",
+            "2500",
+            "--accel",
+            "1e4",
+            "--jerk",
+            "6e4",
+            "--chord-tol",
+            "0.001",
+        ])
+        .args(["--period", "0.001", "--out"])
+        .arg(dir.join("multi.csv"))
+        .arg("--plot")
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "multi.ngc: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(png_header(&std::fs::read(&png).unwrap()), (1600, 1800, 2));
+    let pixels = png_pixels(&png);
+    assert!(
+        pixels.iter().filter(|p| **p == FEED).count() > 2000,
+        "multi.ngc: feed curve missing"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
