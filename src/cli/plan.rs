@@ -121,6 +121,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             title: plot_title(&args, "erwinski planner", &plan.limits, motion_time),
         };
         write_png(path, &profile)?;
+        eprintln!("plot written to {}", path.display());
     }
     Ok(())
 }
@@ -232,6 +233,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             title: plot_title(&args, "VPOp planner", &plan.limits, plan.motion_time),
         };
         write_png(path, &profile)?;
+        eprintln!("plot written to {}", path.display());
     }
     Ok(())
 }
