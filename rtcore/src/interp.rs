@@ -53,7 +53,8 @@ fn speed_at(curve: &CurveView, tip_axes: usize, u: f64) -> f64 {
 }
 
 /// RK2 predictor-corrector step from `cur` to arc length `s_target` (eq. 1-9, see module doc).
-/// Bounded work: at most 3 + 2 * MAX_CORRECTIONS curve evaluations (5 in the normal case).
+/// Bounded work: at most 2 + (1 + MAX_CORRECTIONS) * (2 MAX_PANELS) curve evaluations (5 in the
+/// normal case, where the step stays in one knot span and one correction suffices).
 pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64) -> PathCursor {
     let (u_lo, u_hi) = (curve.u_min(), curve.u_max());
     let ds = s_target - cur.s;
@@ -65,10 +66,27 @@ pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target
     let u_trial = (cur.u + k1 * ds).clamp(u_lo, u_hi);
     let k2 = 1.0 / speed_at(curve, tip_axes, u_trial).max(MIN_SPEED);
     let u_pred = (cur.u + 0.5 * (k1 + k2) * ds).clamp(u_lo, u_hi);
-    // Arc length actually covered by the prediction, by Simpson's rule.
+    // Arc length actually covered by the prediction, by Simpson's rule, piecewise over the knot
+    // spans crossed: at a knot |C'| may have a kink or (C0 knot, e.g. two collinear lines of a
+    // rational polyline) a jump, which a single Simpson panel across it would misjudge.
+    let knots = curve.knots();
+    let first_knot = curve.find_span(cur.u) + 1;
     let simpson = |u: f64, end_speed: f64| {
-        let mid = speed_at(curve, tip_axes, 0.5 * (cur.u + u));
-        (u - cur.u) / 6.0 * (cur.speed + 4.0 * mid + end_speed)
+        let panel = |a: f64, b: f64, speed_a: f64, speed_b: f64| {
+            (b - a) / 6.0 * (speed_a + 4.0 * speed_at(curve, tip_axes, 0.5 * (a + b)) + speed_b)
+        };
+        let (mut a, mut speed_a, mut total) = (cur.u, cur.speed, 0.0);
+        let mut k = first_knot;
+        // Bounded: at most MAX_PANELS - 1 knots are split off; beyond that (many tiny spans
+        // within one period) the last panel spans the rest.
+        while k < knots.len() && knots[k] < u && knots[k] > a && k < first_knot + MAX_PANELS - 1 {
+            let b = knots[k];
+            total += panel(a, b, speed_a, norm(&curve.derivatives_left(b, 1)[1], tip_axes));
+            a = b;
+            speed_a = speed_at(curve, tip_axes, b);
+            k += 1;
+        }
+        total + panel(a, u, speed_a, end_speed)
     };
     let mut d = curve.derivatives(u_pred, 1);
     let mut u = u_pred;
@@ -109,8 +127,14 @@ pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target
     }
 }
 
-/// Corrector iterations at most (two curve evaluations each); one in the normal case.
-const MAX_CORRECTIONS: usize = 6;
+/// Simpson panels at most per arc-length measurement (one per knot span crossed).
+const MAX_PANELS: usize = 4;
+
+/// Corrector iterations at most (two curve evaluations each); one in the normal case. Where
+/// |C'| nearly vanishes the predictor can overshoot to the end of the curve and the bracket
+/// must shrink by bisection from the whole parameter range: 48 halvings reach the f64
+/// resolution of u, so the step converges there too (a cusp at the start of a curve needed 20).
+const MAX_CORRECTIONS: usize = 48;
 
 /// Second-order Taylor step of u(s) by the arc-length increment `ds`.
 pub fn sot_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {

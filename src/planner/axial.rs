@@ -16,6 +16,8 @@ pub struct AxialPeaks {
     pub vel: [f64; MAX_AXES],
     pub acc: [f64; MAX_AXES],
     pub jerk: [f64; MAX_AXES],
+    /// Path speed: the norm of the axis velocities (what `verify` compares with the feed).
+    pub feed: f64,
     /// Sum over samples and axes of the relative excess of acceleration / jerk (eq. 22-23,
     /// positive parts only; eq. 23's last term is divided by the Y jerk limit, not acceleration).
     pub acc_violation: f64,
@@ -57,8 +59,10 @@ impl FiniteDifferences {
         }
         let [q3, q2, q1] = self.history;
         let dt = self.dt;
+        let mut speed2 = 0.0;
         for i in 0..n {
             let v0 = (p[i] - q1[i]) / dt;
+            speed2 += v0 * v0;
             let v1 = (q1[i] - q2[i]) / dt;
             let v2 = (q2[i] - q3[i]) / dt;
             let a0 = (v0 - v1) / dt;
@@ -72,6 +76,7 @@ impl FiniteDifferences {
             pk.acc_violation += (a0.abs() / limits.acceleration[i] - 1.0).max(0.0);
             pk.jerk_violation += (j0.abs() / limits.jerk[i] - 1.0).max(0.0);
         }
+        self.peaks.feed = self.peaks.feed.max(speed2.sqrt());
         self.peaks.samples += 1;
         self.history = [q2, q1, p];
     }

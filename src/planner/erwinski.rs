@@ -124,6 +124,12 @@ pub fn plan(
         return Err(PlanError::MixedDimensions);
     }
     let limits = limits.for_axes(tip)?;
+    // Feed caps a hair below the programmed feed: the sampled path speed (chord / period) then
+    // stays below it through rounding, with no retry of the segment.
+    let planning = Limits {
+        feed: limits.feed * (1.0 - FEED_HEADROOM),
+        ..limits.clone()
+    };
     let curves = PathCurves::new(toolpath);
     let tables: Vec<ArcLengthTable> = toolpath
         .elements
@@ -136,9 +142,9 @@ pub fn plan(
     let mut criticals = Vec::new();
     let mut nodes: Vec<Node> = Vec::new();
     for (c, element) in toolpath.elements.iter().enumerate() {
-        let mut lim = limits.clone();
+        let mut lim = planning.clone();
         if let Some(f) = element.feed {
-            lim.feed = lim.feed.min(f);
+            lim.feed = lim.feed.min(f * (1.0 - FEED_HEADROOM));
         }
         let view = curves.view(c);
         let scan = FlfScan::new(view, tip, &lim, options.samples_per_control_point);
@@ -148,7 +154,7 @@ pub fn plan(
             v.speed_cap().min(options.flf_margin * v.accel.min(v.jerk))
         };
         let (u0, u1) = (view.u_min(), view.u_max());
-        let start_cap = if c == 0 { 0.0 } else { join_cap(&curves, &limits, c) };
+        let start_cap = if c == 0 { 0.0 } else { join_cap(&curves, &planning, c) };
         match nodes.last_mut() {
             Some(last) => {
                 last.start_curve = c;
@@ -198,7 +204,7 @@ pub fn plan(
         let end_cap = if c + 1 == toolpath.elements.len() {
             0.0
         } else {
-            join_cap(&curves, &limits, c + 1)
+            join_cap(&curves, &planning, c + 1)
         };
         nodes.push(Node {
             end_curve: c,
@@ -221,7 +227,9 @@ pub fn plan(
         let scan = &scans[a.start_curve];
         let dip = scan.min_speed_cap_between(a.start_u, b.end_u);
         match dip {
-            Some((m, u)) if m < a.cap.max(b.cap) && u > a.start_u && u < b.end_u && m < a.cap.min(b.cap) => {
+            // A dip below both end caps gets a node; any other dip only lowers the segment's
+            // peak (below), and the exact check of the segment lowers it further if needed.
+            Some((m, u)) if m < a.cap.min(b.cap) && u > a.start_u && u < b.end_u => {
                 let c = a.start_curve;
                 let s = tables[c].length_to(&toolpath.elements[c].curve, u);
                 nodes.insert(
@@ -250,7 +258,7 @@ pub fn plan(
     // Look-ahead, and step 4: a critical point whose feed is bound by reachability (the segments
     // around it are too short to reach its cap) is dropped and its segments merged, so the
     // acceleration need not return to zero there. Hard nodes (ends, joins, corners) stay.
-    let (lengths, feeds) = loop {
+    let (mut lengths, feeds) = loop {
         let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
         let feeds = look_ahead(&nodes, &lengths, acc, jerk);
         let before = nodes.len();
@@ -264,18 +272,18 @@ pub fn plan(
             break (lengths, feeds);
         }
     };
-    let peak_caps: Vec<f64> = nodes
+    let mut peak_caps: Vec<f64> = nodes
         .windows(2)
         .map(|w| {
-            limits
-                .feed
-                .min(toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY))
+            let programmed = toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY);
+            planning.feed.min(programmed * (1.0 - FEED_HEADROOM))
         })
         .collect();
     let mut feeds = feeds;
 
     // Segment by segment with axial checks and back-tracking.
-    let nseg = lengths.len();
+    let mut nseg = lengths.len();
+    let mut splits = 0usize;
     let mut records: Vec<SegmentRecord> = Vec::with_capacity(nseg);
     let mut states: Vec<SimState> = vec![SimState::start(tip, limits.period)];
     let mut start_feeds: Vec<f64> = vec![0.0];
@@ -309,7 +317,43 @@ pub fn plan(
                 start_feeds.push(end_v);
                 k += 1;
             }
-            Err(start_max) => {
+            Err(SegmentFailure::Split { u, cap }) if splits < MAX_SPLITS => {
+                // Step 4 in reverse: a point inside the segment needs a lower feed than the
+                // profile gives it (a speed cap between FLF samples, or the fall towards a
+                // cusp outrunning its chord cap): it becomes a node of its own.
+                splits += 1;
+                let c = nodes[k].start_curve;
+                let s = tables[c].length_to(&toolpath.elements[c].curve, u);
+                let end_s = nodes[k + 1].end_s;
+                nodes.insert(
+                    k + 1,
+                    Node {
+                        end_curve: c,
+                        end_u: u,
+                        end_s: s,
+                        start_curve: c,
+                        start_u: u,
+                        start_s: s,
+                        cap,
+                        hard: true,
+                    },
+                );
+                lengths[k] = s - nodes[k].start_s;
+                lengths.insert(k + 1, end_s - s);
+                feeds.insert(k + 1, cap);
+                peak_caps.insert(k + 1, peak_caps[k]);
+                nseg += 1;
+                let reachable = reachable_feed(cap, lengths[k], acc, jerk, start_feeds[k]);
+                if reachable < start_feeds[k] && k > 0 {
+                    feeds[k] = reachable;
+                    k -= 1;
+                }
+            }
+            Err(failure) => {
+                let start_max = match failure {
+                    SegmentFailure::StartTooFast(v) => v,
+                    SegmentFailure::Split { .. } => START_FEED_STEP * start_feeds[k],
+                };
                 backtracks += 1;
                 if k == 0 || backtracks > 50 * nseg + 100 {
                     return Err(PlanError::Infeasible {
@@ -338,6 +382,20 @@ pub fn plan(
         limits,
     })
 }
+
+/// Nodes inserted at most by segment splits (each one makes a segment shorter).
+const MAX_SPLITS: usize = 10_000;
+
+/// Why a segment could not be planned.
+enum SegmentFailure {
+    /// Not from this start feed: retry with the previous segment ending at most this fast.
+    StartTooFast(f64),
+    /// A point inside must be passed at most at feed `cap`: make it a node.
+    Split { u: f64, cap: f64 },
+}
+
+/// Relative headroom of the planned feed below the programmed feed.
+const FEED_HEADROOM: f64 = 1e-7;
 
 /// A node is kept when the look-ahead reaches at least this fraction of its cap.
 const MERGE_TOLERANCE: f64 = 0.999;
@@ -440,6 +498,7 @@ fn join_cap(curves: &PathCurves, limits: &Limits, c: usize) -> f64 {
     )
 }
 
+#[derive(Clone, Copy)]
 struct SegmentContext<'a> {
     curves: &'a PathCurves<'a>,
     limits: &'a Limits,
@@ -460,9 +519,26 @@ struct Trial {
     state: SimState,
     /// Worst peak / limit ratio (> 1 is a violation), eq. 22-23 sums, duration.
     ratio: f64,
+    /// How far the speed caps (feed, axial velocity, chord error) are exceeded, as a factor on
+    /// the feed: lower jerk or acceleration cannot cure that, a lower peak feed can. Above 1
+    /// only through interpolation error or an FLF dip between scan samples.
+    speed_ratio: f64,
+    /// Curve parameter where the speed caps are exceeded most.
+    speed_u: f64,
+    /// Sampled path speed there.
+    speed_at: f64,
+    /// Within the first or last periods of the segment, or between.
+    speed_where: Where,
     acc_violation: f64,
     jerk_violation: f64,
     duration: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Where {
+    Start,
+    Inside,
+    End,
 }
 
 /// What the golden-section search compares.
@@ -524,15 +600,32 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     let tip = ctx.limits.velocity.len();
     let mut prev: Option<nurbs_rtcore::executor::Sample> = from.last_sample;
     let mut last_sample = from.last_sample;
-    let eps = 0.9 * ctx.limits.chord_tolerance;
+    let eps = super::flf::CHORD_MARGIN * ctx.limits.chord_tolerance;
+    let (period, feed) = (ctx.limits.period, ctx.limits.feed);
+    let mut worst_speed = (0.0f64, ctx.node_start.start_u, 0.0, 0usize);
+    let mut count = 0usize;
     let sink = &mut |s: &nurbs_rtcore::executor::Sample| {
         if let Some(p) = prev {
+            let mut ratio = 0.0f64;
+            let mut step2 = 0.0;
+            for i in 0..tip {
+                let d = s.point[i] - p.point[i];
+                step2 += d * d;
+                ratio = ratio.max(d.abs() / period / ctx.limits.velocity[i]);
+            }
+            ratio = ratio.max(step2.sqrt() / period / feed);
             if p.curve == s.curve && s.u > p.u {
                 if let Some(view) = ctx.curves.curve(s.curve) {
-                    chord_ratio = chord_ratio.max(sagitta(&view, tip, &p, s) / eps);
+                    let r = sagitta(&view, tip, &p, s) / eps;
+                    chord_ratio = chord_ratio.max(r);
+                    ratio = ratio.max(r.sqrt());
                 }
             }
+            if ratio > worst_speed.0 {
+                worst_speed = (ratio, s.u, step2.sqrt() / period, count);
+            }
         }
+        count += 1;
         prev = Some(*s);
         last_sample = Some(*s);
     };
@@ -540,13 +633,24 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         return None;
     }
     let check: &FiniteDifferences = &state.check;
-    let ratio = check.worst_ratio(ctx.limits).max(chord_ratio);
+    let ratio = check
+        .worst_ratio(ctx.limits)
+        .max(chord_ratio)
+        .max(check.peaks.feed / feed);
     state.last_sample = last_sample;
     let n = check.peaks.samples.max(1) as f64;
     Some(Trial {
         record,
         state,
         ratio,
+        speed_ratio: worst_speed.0,
+        speed_u: worst_speed.1,
+        speed_at: worst_speed.2,
+        speed_where: match worst_speed.3 {
+            i if i <= 2 => Where::Start,
+            i if i + 3 >= count => Where::End,
+            _ => Where::Inside,
+        },
         acc_violation: check.peaks.acc_violation / n,
         jerk_violation: check.peaks.jerk_violation / n,
         duration: profile.total_time(),
@@ -652,14 +756,41 @@ fn solve_segment(
     v0: f64,
     v1_target: f64,
     from: &SimState,
-) -> Result<(SegmentRecord, SimState), f64> {
+) -> Result<(SegmentRecord, SimState), SegmentFailure> {
     let both = |accel: f64, jerk: f64| Ramp { accel, jerk };
+    let mut local = *ctx;
+    let ctx = &mut local;
     let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
     for _attempt in 0..40 {
         let nominal = both(ctx.accel, ctx.jerk);
         if let Some(t) = trial(ctx, from, v0, v1, nominal, nominal) {
             if t.ok() {
                 return Ok((t.record, t.state));
+            }
+            if t.speed_ratio > 1.0 {
+                // A speed cap (feed, axial velocity, chord error) is exceeded; lower jerk or
+                // acceleration would not help. Lower the feed where it happens: the start feed
+                // (previous segment), the end feed, a new node inside, or the peak.
+                let factor = (1.0 - 1e-6) / t.speed_ratio;
+                // At an end whose feed is well below the sampled speed, the profile rises or
+                // falls within a period or two there: the cure is a lower peak, not end feed.
+                let near = |v: f64| v >= 0.5 * t.speed_at;
+                match t.speed_where {
+                    Where::Start if near(v0) => return Err(SegmentFailure::StartTooFast(v0 * factor)),
+                    Where::End if near(v1) => v1 *= factor,
+                    Where::Inside if t.speed_at < ctx.peak_cap * SPLIT_BELOW_PEAK => {
+                        let cap = (1.0 - 1e-3) * t.speed_at * factor;
+                        return Err(SegmentFailure::Split { u: t.speed_u, cap });
+                    }
+                    _ => {
+                        ctx.peak_cap = ctx.peak_cap.min(t.speed_at) * factor;
+                        if v0 > ctx.peak_cap {
+                            return Err(SegmentFailure::StartTooFast(ctx.peak_cap));
+                        }
+                        v1 = v1.min(ctx.peak_cap);
+                    }
+                }
+                // Then on to the searches with the new feeds (an axial excess may remain).
             }
         }
         // Steps 3-7 on the estimate.
@@ -712,5 +843,9 @@ fn solve_segment(
         }
         v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
     }
-    Err(START_FEED_STEP * v0)
+    Err(SegmentFailure::StartTooFast(START_FEED_STEP * v0))
 }
+
+/// A speed excess inside a segment is split off as a node when the profile there is below this
+/// fraction of the peak (at the peak, lowering the peak is the cure).
+const SPLIT_BELOW_PEAK: f64 = 0.99;

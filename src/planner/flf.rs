@@ -13,6 +13,10 @@ use super::Limits;
 use nurbs_rtcore::math::dot;
 use nurbs_rtcore::{CurveView, Vector};
 
+/// Fraction of the chord tolerance the planner plans for: its per-period check measures the
+/// sagitta at the middle parameter only, `verify` searches the whole step for the largest one.
+pub const CHORD_MARGIN: f64 = 0.9;
+
 /// The components of the FLF at one parameter value (mm/s).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FlfValue {
@@ -88,11 +92,13 @@ pub fn flf(curve: &CurveView, tip: usize, limits: &Limits, u: f64) -> FlfValue {
     }
     // Eq. 10: the chord of an arc of radius rho with sagitta eps is 2 sqrt(rho^2 - (rho-eps)^2),
     // covered in one period. Below rho = eps the chord is at most the diameter.
-    let eps = limits.chord_tolerance;
+    let eps = CHORD_MARGIN * limits.chord_tolerance;
     if kappa2 > 0.0 {
         let rho = 1.0 / kappa2.sqrt();
+        // rho^2 - (rho - eps)^2 written as eps (2 rho - eps): the difference of squares cancels
+        // to 0 on a straight line (rho ~ 1e15 from rounding) and would stop the motion there.
         let half_chord = if rho > eps {
-            (rho * rho - (rho - eps) * (rho - eps)).sqrt()
+            (eps * (2.0 * rho - eps)).sqrt()
         } else {
             rho
         };

@@ -42,6 +42,9 @@ pub fn reachable_feed(v_from: f64, length: f64, accel: f64, jerk: f64, cap: f64)
     lo
 }
 
+/// Halvings of the peak-feed bisection at most: the paper's 30, more only for slivers.
+const MAX_HALVINGS: i32 = 60;
+
 /// Why no profile fits.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FitError {
@@ -65,7 +68,7 @@ pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> 
 
 /// Profile from `v0` to `v1` over `length` with peak feed at most `v_max`, the rise with `up`
 /// and the fall with `down`. When the full peak does not fit, the peak is found by bisection
-/// (eq. 20-21; at most 30 iterations or until the step is below 0.001 mm/s) and the remaining
+/// (eq. 20-21; at most 30 iterations or until the step is below 0.001 mm/s, more only for a sliver whose peak is below that) and the remaining
 /// distance is cruised at that peak.
 pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp) -> Result<SCurve, FitError> {
     let v_floor = v0.max(v1);
@@ -81,14 +84,17 @@ pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp
         let delta = v_max - v_floor;
         let mut f = 0.5 * (v_max + v_floor);
         let mut best = v_floor;
-        for k in 1..=30 {
+        for k in 1..=MAX_HALVINGS {
             if total(f) <= length {
                 best = best.max(f);
                 f += delta / 2f64.powi(k + 1);
             } else {
                 f -= delta / 2f64.powi(k + 1);
             }
-            if delta / 2f64.powi(k + 1) < 1e-3 {
+            // The paper stops at 0.001 mm/s; a segment too short to reach that above its floor
+            // (a sliver between two corners) needs more halvings, or its peak would stay at the
+            // floor and the profile would not cover its length.
+            if delta / 2f64.powi(k + 1) < 1e-3 && best > v_floor {
                 break;
             }
         }
