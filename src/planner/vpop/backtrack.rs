@@ -97,31 +97,32 @@ impl Search<'_, '_, '_> {
     /// The next point of the deceleration sequence (exactly feasible, chord error checked).
     fn brake_step(&self, h: &History) -> Option<PathPoint> {
         let target = self.brake_target(h);
-        let direct = self.stepper.path.eval(target);
-        // The target itself is feasible most of the time: no interval needed.
-        let p = if self.stepper.feasible(h, &direct, self.stepper.step_cap(h, CHORD_SCALE)) {
-            direct
-        } else {
-            let (lo, hi) = self.stepper.interval(h, CHORD_SCALE)?;
-            if target <= lo.w {
-                lo
-            } else if target >= hi.w {
-                hi
-            } else {
-                lo
+        let cap = self.stepper.step_cap(h, CHORD_SCALE);
+        // The target itself is feasible most of the time; otherwise it is projected onto the
+        // linearised feasible interval (a few Newton corrections), and only then is the whole
+        // interval searched.
+        let p = match self.stepper.project(h, target, cap) {
+            Some(p) => p,
+            None => {
+                let (lo, hi) = self.stepper.interval(h, CHORD_SCALE)?;
+                if target >= hi.w {
+                    hi
+                } else {
+                    lo
+                }
             }
         };
         self.chord_ok(h.current(), &p).then_some(p)
     }
 
-    /// Chord error within the tolerance: measured exactly unless the curvature at both ends
-    /// puts the estimate kappa l^2 / 8 below a hundredth of the tolerance.
+    /// Chord error within the tolerance: measured exactly unless the tabulated curvature over
+    /// the step puts the estimate kappa l^2 / 8 below half the tolerance.
     fn chord_ok(&self, a: &PathPoint, b: &PathPoint) -> bool {
         let path = self.stepper.path;
         let eps = self.stepper.limits.chord_tolerance;
         let l = super::constraints::tip_distance(&a.tip, &b.tip, path.tip_dim());
-        let kappa = path.curvature(a.w).max(path.curvature(b.w));
-        kappa * l * l / 8.0 < 0.01 * eps || path.chord_error(a, b) <= eps
+        let kappa = path.max_curvature(a.w, b.w);
+        kappa * l * l / 8.0 < 0.5 * eps || path.chord_error(a, b) <= eps
     }
 
     /// Next position of a jerk-limited stop in path coordinates.
