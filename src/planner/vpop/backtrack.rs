@@ -349,7 +349,10 @@ impl Search<'_, '_, '_> {
                 let Some((_, hi)) = self.stepper.interval(&h, scale) else {
                     if careful {
                         // The state is safe: its deceleration sequence continues it.
-                        chosen = self.brake_next(&h).filter(|p| path.chord_error(h.current(), p) <= eps);
+                        chosen = self
+                            .brake_next(&h)
+                            .filter(|p| !(h.is_rest() && p.w == h.current().w))
+                            .filter(|p| path.chord_error(h.current(), p) <= eps);
                         checked = chosen.is_some();
                     }
                     break;
