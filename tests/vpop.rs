@@ -56,9 +56,9 @@ fn trident_vpop_limits() {
         &r.peaks.jerk[..2]
     );
     // Physical lower bound 1.650 s, best known 1.668 s, paper 2.3 s; the goal of
-    // 1.75 s is not reached yet (measured 1.998 s).
+    // 1.75 s is not reached yet (measured 1.950 s).
     assert!(plan.motion_time >= 1.650, "{}", plan.motion_time);
-    assert!(plan.motion_time <= 2.1, "{}", plan.motion_time);
+    assert!(plan.motion_time <= 2.0, "{}", plan.motion_time);
     // The plan uses the jerk limit: checked against 1 % less it must fail.
     let mut tighter = plan.limits.clone();
     tighter.jerk = tighter.jerk.iter().map(|j| 0.99 * j).collect();
@@ -95,10 +95,10 @@ fn straight_line_rest_to_rest() {
     assert!(r.max_feed > 0.99 * f);
 }
 
-/// Slow: about 3 minutes of planning on this 2-core machine (measured 3.831 s of motion, best
-/// known 3.163 s, lower bound 2.404 s); run with `--include-ignored`.
+/// Butterfly, Erwinski lab set 1 (dt 0.25 ms, about 15 000 periods): measured 3.817 s of
+/// motion (best known 3.163 s, lower bound 2.404 s), planned in about 7 s on this 2-core machine
+/// (release build).
 #[test]
-#[ignore]
 fn butterfly_lab_set_1() {
     let tp = example("butterfly.json");
     let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
@@ -111,6 +111,7 @@ fn butterfly_lab_set_1() {
         plan.stats
     );
     assert!(plan.motion_time >= 2.404);
+    assert!(plan.motion_time <= 3.9, "{}", plan.motion_time);
 }
 
 /// Open pocket (two curves) on the XYZAC machine with the paper's Table 1 limits (joint order

@@ -40,6 +40,9 @@ pub struct SearchOptions {
     /// The switching curve of a deceleration assumes only this share of that jerk to release
     /// the deceleration (margin for the curvature terms of the axis jerk).
     pub switch_fraction: f64,
+    /// Share of the chord-error step cap (estimate kappa l^2 / 8) used as a first cap; the
+    /// committed steps are checked with the exact chord error.
+    pub chord_scale: f64,
 }
 
 impl Default for SearchOptions {
@@ -49,6 +52,7 @@ impl Default for SearchOptions {
             max_steps: 20_000_000,
             brake_fraction: 0.9,
             switch_fraction: 0.5,
+            chord_scale: 0.9,
         }
     }
 }
@@ -57,9 +61,9 @@ pub struct Search<'s, 'p, 'a> {
     pub stepper: &'s Stepper<'p, 'a>,
     pub options: SearchOptions,
     pub stats: SearchStats,
+    /// Where in [deceleration point, s_max] the last careful step found its position.
+    pub last_fraction: Option<f64>,
 }
-
-const CHORD_SCALE: f64 = 0.9;
 
 impl Search<'_, '_, '_> {
     fn history(points: &[PathPoint], k: usize) -> History {
@@ -86,7 +90,12 @@ impl Search<'_, '_, '_> {
                 return true;
             }
             self.stats.brake_steps += 1;
-            let Some(p) = self.brake_step(&h) else {
+            let (target, jw) = self.brake_target(&h);
+            if self.finish_point(&h, jw).is_some() {
+                // Checked to rest (three periods).
+                return true;
+            }
+            let Some(p) = self.brake_step_to(&h, target) else {
                 return false;
             };
             h.push(p);
@@ -94,45 +103,107 @@ impl Search<'_, '_, '_> {
         false
     }
 
-    /// The next point of the deceleration sequence (exactly feasible, chord error checked).
-    fn brake_step(&self, h: &History) -> Option<PathPoint> {
-        let target = self.brake_target(h);
-        let direct = self.stepper.path.eval(target);
-        // The target itself is feasible most of the time: no interval needed.
-        let p = if self.stepper.feasible(h, &direct, self.stepper.step_cap(h, CHORD_SCALE)) {
-            direct
+    /// A position S from which the machine comes to rest in three periods (next position S,
+    /// then staying at S), exactly checked: the S that minimises the largest path-space jerk of
+    /// the three steps, then S = current position, each tried when that jerk is within a
+    /// multiple of the tangential estimate `jw`.
+    fn finish_point(&self, h: &History, jw: f64) -> Option<PathPoint> {
+        let [p2, p1, p0] = h.p;
+        let (v0, v1) = (p0.w - p1.w, p1.w - p2.w);
+        if v0 < 0.0 {
+            return None;
+        }
+        let c = 2.0 * v0 - v1;
+        // Third differences of the three steps for S = p0 + d: d - c, v0 - 2d, d.
+        let worst = |d: f64| (d - c).abs().max((v0 - 2.0 * d).abs()).max(d.abs());
+        let (d, m) = [0.0, 0.5 * c, v0 / 3.0, v0, (v0 + c) / 3.0, v0 - c]
+            .into_iter()
+            .filter(|d| *d >= 0.0)
+            .map(|d| (d, worst(d)))
+            .fold((0.0, f64::INFINITY), |b, x| if x.1 < b.1 { x } else { b });
+        let dt = self.stepper.limits.period;
+        let screen = 4.0 * jw * dt * dt * dt;
+        for (d, m) in [(d, m), (0.0, worst(0.0))] {
+            if m <= screen {
+                if let Some(p) = self.finishes_at(h, p0.w + d) {
+                    return Some(p);
+                }
+            }
+        }
+        None
+    }
+
+    /// Exact check of stopping at `w`: the step there, then three equal samples.
+    fn finishes_at(&self, h: &History, w: f64) -> Option<PathPoint> {
+        let p = if w == h.current().w {
+            *h.current()
         } else {
-            let (lo, hi) = self.stepper.interval(h, CHORD_SCALE)?;
-            if target <= lo.w {
-                lo
-            } else if target >= hi.w {
-                hi
-            } else {
-                lo
+            self.stepper.path.eval(w)
+        };
+        let mut n = *h;
+        let cap = self.stepper.step_cap(&n, self.options.chord_scale);
+        if !(self.stepper.feasible(&n, &p, cap) && self.chord_ok(h.current(), &p)) {
+            return None;
+        }
+        for _ in 0..3 {
+            n.push(p);
+            if !self.stepper.feasible(&n, &p, f64::INFINITY) {
+                return None;
+            }
+        }
+        Some(p)
+    }
+
+    /// The next point of the deceleration sequence: the three-period stop when it is
+    /// feasible, otherwise the step towards the jerk-limited stop.
+    fn brake_next(&self, h: &History) -> Option<PathPoint> {
+        let (target, jw) = self.brake_target(h);
+        if let Some(p) = self.finish_point(h, jw) {
+            return Some(p);
+        }
+        self.brake_step_to(h, target)
+    }
+
+    /// The deceleration sequence's next point aiming at `target`.
+    fn brake_step_to(&self, h: &History, target: f64) -> Option<PathPoint> {
+        let cap = self.stepper.step_cap(h, self.options.chord_scale);
+        // The target itself is feasible most of the time; otherwise it is projected onto the
+        // linearised feasible interval (a few Newton corrections), and only then is the whole
+        // interval searched.
+        let p = match self.stepper.project(h, target, cap) {
+            Some(p) => p,
+            None => {
+                let (lo, hi) = self.stepper.interval(h, self.options.chord_scale)?;
+                if target >= hi.w {
+                    hi
+                } else {
+                    lo
+                }
             }
         };
         self.chord_ok(h.current(), &p).then_some(p)
     }
 
-    /// Chord error within the tolerance: measured exactly unless the curvature at both ends
-    /// puts the estimate kappa l^2 / 8 below a hundredth of the tolerance.
+    /// Chord error within the tolerance: measured exactly unless the tabulated curvature over
+    /// the step puts the estimate kappa l^2 / 8 below half the tolerance.
     fn chord_ok(&self, a: &PathPoint, b: &PathPoint) -> bool {
         let path = self.stepper.path;
         let eps = self.stepper.limits.chord_tolerance;
         let l = super::constraints::tip_distance(&a.tip, &b.tip, path.tip_dim());
-        let kappa = path.curvature(a.w).max(path.curvature(b.w));
-        kappa * l * l / 8.0 < 0.01 * eps || path.chord_error(a, b) <= eps
+        let kappa = path.max_curvature(a.w, b.w);
+        kappa * l * l / 8.0 < 0.5 * eps || path.chord_error(a, b) <= eps
     }
 
-    /// Next position of a jerk-limited stop in path coordinates.
-    fn brake_target(&self, h: &History) -> f64 {
+    /// Next position of a jerk-limited stop in path coordinates, and the tangential jerk
+    /// estimated from the joint limits at the current point.
+    fn brake_target(&self, h: &History) -> (f64, f64) {
         let dt = self.stepper.limits.period;
         let [p2, p1, p0] = h.p;
         let v = (p0.w - p1.w) / dt;
         let v1 = (p1.w - p2.w) / dt;
         let a = (v - v1) / dt;
         if v <= 0.0 {
-            return p0.w;
+            return (p0.w, 0.0);
         }
         let (dq, _) = self.stepper.path.derivative(p0.w);
         let l = self.stepper.limits;
@@ -144,15 +215,12 @@ impl Search<'_, '_, '_> {
                 aw = aw.min(l.acceleration[i] / d);
             }
         }
+        let full = jw;
         let (jw, aw) = (self.options.brake_fraction * jw, self.options.brake_fraction * aw);
-        let desired = -(2.0 * self.options.switch_fraction * jw * v).sqrt();
-        let a_next = desired.clamp(a - jw * dt, a + jw * dt).max(-aw);
+        let a_next = stop_acceleration(v, a, jw, aw, self.options.switch_fraction * jw, dt);
         let v_next = v + a_next * dt;
-        if v_next <= 0.0 {
-            p0.w
-        } else {
-            p0.w + v_next * dt
-        }
+        let w = if v_next <= 0.0 { p0.w } else { p0.w + v_next * dt };
+        (w, full)
     }
 
     fn brakes_after(&mut self, h: &History, p: PathPoint) -> bool {
@@ -165,24 +233,80 @@ impl Search<'_, '_, '_> {
     /// between the deceleration sequence's own next point (safe when `h` is) and `hi`; also
     /// says whether that is `hi` itself.
     fn largest_safe(&mut self, h: &History, hi: PathPoint, cap_scale: f64) -> Option<(PathPoint, bool)> {
+        let resolution = 0.5f64.powi(self.options.bisections as i32);
+        // Mostly the deceleration sequence itself is the largest safe choice, step after step:
+        // then the smallest step above it is tried first (one deceleration sequence per step).
+        let small_first = self.last_fraction.is_some_and(|f| f <= resolution);
         if self.chord_ok(h.current(), &hi) && self.brakes_after(h, hi) {
             return Some((hi, true));
         }
         let cap = self.stepper.step_cap(h, cap_scale);
-        let mut good = self.brake_step(h)?;
-        let mut bad = hi.w;
-        for _ in 0..self.options.bisections {
-            let mid = 0.5 * (good.w + bad);
-            if mid <= good.w || mid >= bad {
-                break;
+        let base = self.brake_next(h)?;
+        let width = hi.w - base.w;
+        if width.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            return Some((base, false));
+        }
+        // Fractions of [base, hi]: `lo` safe, `up` not; resolution 2^-bisections. The search
+        // starts at the previous step's fraction (it moves little from step to step) and
+        // widens from there before bisecting.
+        let mut good = base;
+        let (mut lo, mut up) = (0.0f64, 1.0f64);
+        let test = |search: &mut Self, f: f64, good: &mut PathPoint| {
+            let p = search.stepper.path.eval(base.w + f * width);
+            let ok = p.w > base.w
+                && p.w < hi.w
+                && search.stepper.feasible(h, &p, cap)
+                && search.chord_ok(h.current(), &p)
+                && search.brakes_after(h, p);
+            if ok {
+                *good = p;
             }
-            let p = self.stepper.path.eval(mid);
-            if self.stepper.feasible(h, &p, cap) && self.chord_ok(h.current(), &p) && self.brakes_after(h, p) {
-                good = p;
+            ok
+        };
+        if small_first {
+            if test(self, resolution, &mut good) {
+                lo = resolution;
+            } else if test(self, 0.5, &mut good) {
+                // Safety is not monotone in the step: a longer step can be safe again.
+                lo = 0.5;
             } else {
-                bad = mid;
+                self.last_fraction = Some(0.0);
+                return Some((base, false));
+            }
+        } else if let Some(f) = self.last_fraction.filter(|f| *f > resolution && *f < 1.0 - resolution) {
+            let mut step = 4.0 * resolution;
+            if test(self, f, &mut good) {
+                lo = f;
+                while lo + step < up {
+                    if test(self, lo + step, &mut good) {
+                        lo += step;
+                        step *= 2.0;
+                    } else {
+                        up = lo + step;
+                        break;
+                    }
+                }
+            } else {
+                up = f;
+                while up - step > lo {
+                    if test(self, up - step, &mut good) {
+                        lo = up - step;
+                        break;
+                    }
+                    up -= step;
+                    step *= 2.0;
+                }
             }
         }
+        while up - lo > resolution {
+            let mid = 0.5 * (lo + up);
+            if test(self, mid, &mut good) {
+                lo = mid;
+            } else {
+                up = mid;
+            }
+        }
+        self.last_fraction = Some(lo);
         Some((good, false))
     }
 
@@ -220,9 +344,17 @@ impl Search<'_, '_, '_> {
             let mut chosen = None;
             let mut checked = false;
             let mut was_max = false;
-            let mut scale = CHORD_SCALE;
+            let mut scale = self.options.chord_scale;
             for _ in 0..10 {
                 let Some((_, hi)) = self.stepper.interval(&h, scale) else {
+                    if careful {
+                        // The state is safe: its deceleration sequence continues it.
+                        chosen = self
+                            .brake_next(&h)
+                            .filter(|p| !(h.is_rest() && p.w == h.current().w))
+                            .filter(|p| path.chord_error(h.current(), p) <= eps);
+                        checked = chosen.is_some();
+                    }
                     break;
                 };
                 let p = if careful {
@@ -277,9 +409,79 @@ impl Search<'_, '_, '_> {
                     points.truncate(good + 1);
                     safe = good;
                     careful = true;
+                    self.last_fraction = None;
                 }
             }
         }
         Ok(points)
     }
+}
+
+/// Next acceleration of the fastest discrete stop in path coordinates: the most negative jerk
+/// in `[-jw, jw]` (acceleration kept above `-aw`) after which releasing the deceleration with
+/// jerk `jr` (by backward differences, period `dt`) brings the acceleration to zero before
+/// the velocity crosses zero: the discrete counterpart of the switching curve
+/// s̈ = -sqrt(2 jr ṡ), which in continuous form overshoots by a step and then stops with a
+/// jerk far over the limit.
+fn stop_acceleration(v: f64, a: f64, jw: f64, aw: f64, jr: f64, dt: f64) -> f64 {
+    let ok = |j: f64| {
+        let a1 = a + j * dt;
+        let v1 = v + a1 * dt;
+        if v1 < 0.0 {
+            return false;
+        }
+        if a1 >= 0.0 {
+            return true;
+        }
+        // Release: a1 + k jr dt for k = 1 .. n - 1, then zero.
+        let n = (-a1 / (jr * dt)).ceil();
+        let loss = dt * ((n - 1.0) * a1 + jr * dt * (n - 1.0) * n / 2.0);
+        v1 + loss >= 0.0
+    };
+    let hi = jw;
+    let lo = (-jw).max((-aw - a) / dt).min(hi);
+    if ok(lo) {
+        return a + lo * dt;
+    }
+    if !ok(hi) {
+        return a + hi * dt;
+    }
+    // Closed form: with x = -a1 released in n steps ((n - 1) jr dt < x <= n jr dt), the
+    // condition reads x <= (v + jr dt^2 n (n - 1) / 2) / (n dt); n from the continuous root.
+    let xc = jr * (-dt + (dt * dt + 2.0 * v / jr).sqrt());
+    let n0 = (xc / (jr * dt)).ceil().max(1.0);
+    let mut x_best = f64::NEG_INFINITY;
+    for n in [n0 - 1.0, n0, n0 + 1.0] {
+        if n < 1.0 {
+            continue;
+        }
+        let x = ((v + jr * dt * dt * n * (n - 1.0) / 2.0) / (n * dt)).min(n * jr * dt);
+        if x > (n - 1.0) * jr * dt {
+            x_best = x_best.max(x);
+        }
+    }
+    if x_best.is_finite() {
+        let j = ((-x_best - a) / dt).clamp(lo, hi);
+        // Rounding: step up by a few ulps of the range until the condition holds.
+        let mut jj = j;
+        for k in 0..4 {
+            if ok(jj) {
+                return a + jj * dt;
+            }
+            jj = (j + (hi - lo) * 1e-12 * (1 << (4 * k)) as f64).min(hi);
+        }
+    }
+    let (mut bad, mut good) = (lo, hi);
+    for _ in 0..60 {
+        let mid = 0.5 * (bad + good);
+        if mid <= bad || mid >= good {
+            break;
+        }
+        if ok(mid) {
+            good = mid;
+        } else {
+            bad = mid;
+        }
+    }
+    a + good * dt
 }

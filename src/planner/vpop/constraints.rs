@@ -68,9 +68,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         let cur = h.current();
         let pred = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.end);
         let reach = (2.0 * pred - cur.w).min(self.end);
-        let kappa = (0..=4)
-            .map(|k| self.path.curvature(cur.w + (reach - cur.w) * k as f64 / 4.0))
-            .fold(0.0, f64::max);
+        let kappa = self.path.max_curvature(cur.w, reach);
         let chord = if kappa > 0.0 {
             chord_scale * (8.0 * self.limits.chord_tolerance / kappa).sqrt()
         } else {
@@ -137,8 +135,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         cap: f64,
         skip_weak: bool,
     ) -> (f64, f64, PathPoint) {
-        let p = self.path.eval(w0);
-        let (dq, dtip) = self.path.derivative(w0);
+        let (p, dq, dtip) = self.path.eval_d(w0);
         let mut a = h.current().w;
         let mut b = self.end;
         let strongest = (0..self.axes).map(|i| dq[i].abs()).fold(0.0, f64::max);
@@ -170,6 +167,35 @@ impl<'p, 'a> Stepper<'p, 'a> {
             b = b.min(w0 + (cap * (1.0 - TARGET_MARGIN) - dist) / rate);
         }
         (a, b, p)
+    }
+
+    /// A feasible next point near `target`: the target itself, or the target clamped into the
+    /// constraints linearised at the last estimate (up to four corrections); `None` when that
+    /// does not find an exactly feasible point.
+    pub fn project(&self, h: &History, target: f64, cap: f64) -> Option<PathPoint> {
+        let cur = h.current().w;
+        let p = self.path.eval(target.clamp(cur, self.end));
+        if self.feasible(h, &p, cap) {
+            return Some(p);
+        }
+        let bx = self.target_box(h)?;
+        let mut w = p.w;
+        for _ in 0..4 {
+            let (a, b, _) = self.linear_interval(h, &bx, w, cap, false);
+            if a.is_nan() || b.is_nan() || a > b {
+                return None;
+            }
+            let next = target.clamp(a, b).clamp(cur, self.end);
+            if next == w {
+                return None;
+            }
+            w = next;
+            let p = self.path.eval(w);
+            if self.feasible(h, &p, cap) {
+                return Some(p);
+            }
+        }
+        None
     }
 
     /// Lowest and highest exactly feasible next points, or `None` when the intersection is

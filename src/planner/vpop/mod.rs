@@ -86,6 +86,7 @@ pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<
         stepper: &stepper,
         options,
         stats: SearchStats::default(),
+        last_fraction: None,
     };
     let points = search.run().map_err(VpopError::Search)?;
     let stats = search.stats;

@@ -6,7 +6,7 @@
 use crate::geometry::Toolpath;
 use crate::kinematics::Xyzac;
 use crate::planner::axial::MAX_AXES;
-use nurbs_rtcore::CurveView;
+use nurbs_rtcore::{CurveView, MAX_DIM};
 
 /// Joint positions, tool tip, and where on the toolpath they are.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -22,6 +22,10 @@ pub struct PathPoint {
 pub struct JointPath<'a> {
     views: Vec<CurveView<'a>>,
     spans: Vec<(f64, f64)>,
+    /// Power-basis copy of every element (the planner's evaluator).
+    fast: Vec<PowerCurve>,
+    /// Upper estimate of the tool-tip curvature over cells of `w` (range maximum table).
+    kappa: CurvatureTable,
     tip: usize,
     kinematics: Option<(Xyzac, Vec<f64>)>,
 }
@@ -34,10 +38,15 @@ impl<'a> JointPath<'a> {
     pub fn tip(toolpath: &'a Toolpath) -> Self {
         let views: Vec<CurveView<'a>> = toolpath.elements.iter().map(|e| e.curve.view()).collect();
         let spans = views.iter().map(|v| (v.u_min(), v.u_max())).collect();
+        let fast: Vec<PowerCurve> = views.iter().map(PowerCurve::new).collect();
+        let tip = toolpath.tip_dim();
+        let kappa = CurvatureTable::new(&fast, tip);
         JointPath {
             views,
             spans,
-            tip: toolpath.tip_dim(),
+            fast,
+            kappa,
+            tip,
             kinematics: None,
         }
     }
@@ -99,20 +108,18 @@ impl<'a> JointPath<'a> {
 
     fn tip_and_axis(&self, w: f64) -> ([f64; 3], [f64; 3]) {
         let (e, u) = self.locate(w);
-        let p = self.views[e].point(u);
+        let p = self.fast[e].eval(u, 0)[0];
         let mut tip = [0.0; 3];
         tip[..self.tip].copy_from_slice(&p[..self.tip]);
         let mut axis = [0.0, 0.0, 1.0];
-        if self.views[e].dim() == 2 * self.tip && self.tip == 3 {
+        if self.fast[e].dim == 2 * self.tip && self.tip == 3 {
             axis = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
         }
         (tip, axis)
     }
 
-    /// Joint positions and tool tip at `w`.
-    pub fn eval(&self, w: f64) -> PathPoint {
-        let (element, u) = self.locate(w);
-        let p = self.views[element].point(u);
+    /// Joint positions and tool tip from a curve point at `w`.
+    fn point_at(&self, w: f64, element: usize, u: f64, p: &[f64; MAX_DIM]) -> PathPoint {
         let mut tip = [0.0; 3];
         tip[..self.tip].copy_from_slice(&p[..self.tip]);
         let mut q = [0.0; MAX_AXES];
@@ -128,12 +135,37 @@ impl<'a> JointPath<'a> {
         PathPoint { w, element, u, q, tip }
     }
 
+    /// Joint positions and tool tip at `w`.
+    pub fn eval(&self, w: f64) -> PathPoint {
+        let (element, u) = self.locate(w);
+        let p = self.fast[element].eval(u, 0)[0];
+        self.point_at(w, element, u, &p)
+    }
+
+    /// [`Self::eval`] and [`Self::derivative`] in one evaluation.
+    pub fn eval_d(&self, w: f64) -> (PathPoint, [f64; MAX_AXES], [f64; 3]) {
+        let (e, u) = self.locate(w);
+        if self.kinematics.is_some() {
+            let (dq, dt) = self.derivative(w);
+            return (self.eval(w), dq, dt);
+        }
+        let d = self.fast[e].eval(u, 1);
+        let (a, b) = self.spans[e];
+        let mut dq = [0.0; MAX_AXES];
+        let mut dt = [0.0; 3];
+        for i in 0..self.tip {
+            dq[i] = d[1][i] * (b - a);
+            dt[i] = d[1][i] * (b - a);
+        }
+        (self.point_at(w, e, u, &d[0]), dq, dt)
+    }
+
     /// dq/dw and d(tip)/dw at `w` (analytic for tip paths, central differences on the machine).
     pub fn derivative(&self, w: f64) -> ([f64; MAX_AXES], [f64; 3]) {
         let (e, u) = self.locate(w);
         let (a, b) = self.spans[e];
         if self.kinematics.is_none() {
-            let d = self.views[e].derivatives(u, 1)[1];
+            let d = self.fast[e].eval(u, 1)[1];
             let mut dq = [0.0; MAX_AXES];
             let mut dt = [0.0; 3];
             for i in 0..self.tip {
@@ -160,15 +192,13 @@ impl<'a> JointPath<'a> {
     /// Tool-tip curvature at `w` (1/mm).
     pub fn curvature(&self, w: f64) -> f64 {
         let (e, u) = self.locate(w);
-        let d = self.views[e].derivatives(u, 2);
-        let n = self.tip;
-        let dot = |x: &nurbs_rtcore::Vector, y: &nurbs_rtcore::Vector| (0..n).map(|i| x[i] * y[i]).sum::<f64>();
-        let s2 = dot(&d[1], &d[1]);
-        if s2 == 0.0 {
-            return f64::INFINITY;
-        }
-        let cross2 = (s2 * dot(&d[2], &d[2]) - dot(&d[1], &d[2]).powi(2)).max(0.0);
-        cross2.sqrt() / (s2 * s2.sqrt())
+        curvature_of(&self.fast[e].eval(u, 2), self.tip)
+    }
+
+    /// Upper estimate of the tool-tip curvature on `[w0, w1]` (tabulated maxima of the cells
+    /// the interval touches).
+    pub fn max_curvature(&self, w0: f64, w1: f64) -> f64 {
+        self.kappa.max(w0.min(w1), w0.max(w1))
     }
 
     /// Largest distance between the tip curve on `(a, b)` and the chord between their tips,
@@ -182,5 +212,290 @@ impl<'a> JointPath<'a> {
         pa[..3].copy_from_slice(&a.tip);
         pb[..3].copy_from_slice(&b.tip);
         crate::planner::verify::chord_error(&self.views[a.element], self.tip, a.u, b.u, &pa, &pb)
+    }
+}
+
+/// Curvature of the first `n` coordinates from a point and its first two derivatives.
+fn curvature_of(d: &[[f64; MAX_DIM]; 3], n: usize) -> f64 {
+    let dot = |x: &[f64; MAX_DIM], y: &[f64; MAX_DIM]| (0..n).map(|i| x[i] * y[i]).sum::<f64>();
+    let s2 = dot(&d[1], &d[1]);
+    if s2 == 0.0 {
+        return f64::INFINITY;
+    }
+    let cross2 = (s2 * dot(&d[2], &d[2]) - dot(&d[1], &d[2]).powi(2)).max(0.0);
+    cross2.sqrt() / (s2 * s2.sqrt())
+}
+
+/// Highest degree the power basis holds.
+const MAX_ORDER: usize = nurbs_rtcore::MAX_DEGREE + 1;
+
+/// One knot span as polynomials in `t = (u - u0) / (u1 - u0)`: homogeneous coordinates
+/// (weighted point, then weight), coefficient `k` of `t^k`.
+#[derive(Clone, Copy)]
+struct PowerSpan {
+    u0: f64,
+    inv: f64,
+    coef: [[f64; MAX_DIM + 1]; MAX_ORDER],
+}
+
+/// A NURBS curve converted span by span to the power basis: the same curve (to rounding) as
+/// the de Boor evaluation of [`CurveView`], evaluated by Horner's rule.
+pub struct PowerCurve {
+    degree: usize,
+    dim: usize,
+    /// Start parameter of every non-empty span.
+    starts: Vec<f64>,
+    spans: Vec<PowerSpan>,
+}
+
+impl PowerCurve {
+    pub fn new(view: &CurveView) -> Self {
+        let p = view.degree();
+        let dim = view.dim();
+        let knots = view.knots();
+        let (pts, ws) = (view.points(), view.weights());
+        let n = ws.len();
+        let mut spans = Vec::new();
+        for i in p..n {
+            let (u0, u1) = (knots[i], knots[i + 1]);
+            if u1 <= u0 {
+                continue;
+            }
+            // Homogeneous values at p + 1 nodes, then the Vandermonde system for the
+            // coefficients (size <= 8, partial pivoting).
+            let m = p + 1;
+            let mut mat = [[0.0f64; MAX_ORDER]; MAX_ORDER];
+            let mut rhs = [[0.0f64; MAX_DIM + 1]; MAX_ORDER];
+            for k in 0..m {
+                let t = if p == 0 { 0.5 } else { k as f64 / p as f64 };
+                let u = u0 + (u1 - u0) * t;
+                let nb = basis(knots, i, p, u);
+                for j in 0..=p {
+                    let c = i - p + j;
+                    let wn = nb[j] * ws[c];
+                    for d in 0..dim {
+                        rhs[k][d] += wn * pts[c * dim + d];
+                    }
+                    rhs[k][dim] += wn;
+                }
+                let mut tk = 1.0;
+                for entry in mat[k].iter_mut().take(m) {
+                    *entry = tk;
+                    tk *= t;
+                }
+            }
+            for col in 0..m {
+                let piv = (col..m)
+                    .max_by(|&a, &b| mat[a][col].abs().total_cmp(&mat[b][col].abs()))
+                    .unwrap_or(col);
+                mat.swap(col, piv);
+                rhs.swap(col, piv);
+                for r in 0..m {
+                    if r != col {
+                        let f = mat[r][col] / mat[col][col];
+                        if f != 0.0 {
+                            for c in col..m {
+                                mat[r][c] -= f * mat[col][c];
+                            }
+                            for d in 0..=dim {
+                                rhs[r][d] -= f * rhs[col][d];
+                            }
+                        }
+                    }
+                }
+            }
+            let mut coef = [[0.0; MAX_DIM + 1]; MAX_ORDER];
+            for k in 0..m {
+                for d in 0..=dim {
+                    coef[k][d] = rhs[k][d] / mat[k][k];
+                }
+            }
+            spans.push(PowerSpan {
+                u0,
+                inv: 1.0 / (u1 - u0),
+                coef,
+            });
+        }
+        PowerCurve {
+            degree: p,
+            dim,
+            starts: spans.iter().map(|s| s.u0).collect(),
+            spans,
+        }
+    }
+
+    /// Point and derivatives with respect to `u` up to `order` (<= 2); higher entries zero.
+    pub fn eval(&self, u: f64, order: usize) -> [[f64; MAX_DIM]; 3] {
+        let k = self.starts.partition_point(|&s| s <= u).saturating_sub(1);
+        let s = &self.spans[k];
+        let t = (u - s.u0) * s.inv;
+        let p = self.degree;
+        let m = self.dim + 1;
+        // Horner with derivatives: f, f', f''/2 of every homogeneous coordinate.
+        let mut f = [0.0; MAX_DIM + 1];
+        let mut f1 = [0.0; MAX_DIM + 1];
+        let mut f2 = [0.0; MAX_DIM + 1];
+        f[..m].copy_from_slice(&s.coef[p][..m]);
+        for c in s.coef[..p].iter().rev() {
+            for d in 0..m {
+                if order >= 2 {
+                    f2[d] = f2[d] * t + f1[d];
+                }
+                if order >= 1 {
+                    f1[d] = f1[d] * t + f[d];
+                }
+                f[d] = f[d] * t + c[d];
+            }
+        }
+        let dim = self.dim;
+        let mut out = [[0.0; MAX_DIM]; 3];
+        let w = f[dim];
+        for d in 0..dim {
+            out[0][d] = f[d] / w;
+        }
+        if order >= 1 {
+            let w1 = f1[dim] * s.inv;
+            for d in 0..dim {
+                out[1][d] = (f1[d] * s.inv - w1 * out[0][d]) / w;
+            }
+            if order >= 2 {
+                let w2 = 2.0 * f2[dim] * s.inv * s.inv;
+                for d in 0..dim {
+                    out[2][d] = (2.0 * f2[d] * s.inv * s.inv - 2.0 * w1 * out[1][d] - w2 * out[0][d]) / w;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Non-zero B-spline basis functions of degree `p` at `u` in span `i` (A2.2).
+fn basis(knots: &[f64], i: usize, p: usize, u: f64) -> [f64; MAX_ORDER] {
+    let mut n = [0.0; MAX_ORDER];
+    let mut left = [0.0; MAX_ORDER];
+    let mut right = [0.0; MAX_ORDER];
+    n[0] = 1.0;
+    for j in 1..=p {
+        left[j] = u - knots[i + 1 - j];
+        right[j] = knots[i + j] - u;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let temp = n[r] / (right[r + 1] + left[j - r]);
+            n[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        n[j] = saved;
+    }
+    n
+}
+
+/// Cells of `w` per element of the curvature table (at least; more on curves with many spans).
+const KAPPA_CELLS: usize = 2048;
+/// Curvature samples per cell.
+const KAPPA_SAMPLES: usize = 4;
+
+/// Range-maximum table of the curvature over cells of `w`.
+struct CurvatureTable {
+    cells_per_element: Vec<usize>,
+    /// First cell of every element.
+    offset: Vec<usize>,
+    /// `levels[k][c]`: largest curvature over cells `c .. c + 2^k`.
+    levels: Vec<Vec<f64>>,
+}
+
+impl CurvatureTable {
+    fn new(curves: &[PowerCurve], tip: usize) -> Self {
+        let mut cells_per_element = Vec::new();
+        let mut offset = Vec::new();
+        let mut base = Vec::new();
+        for c in curves {
+            let cells = KAPPA_CELLS.max(16 * c.spans.len());
+            offset.push(base.len());
+            cells_per_element.push(cells);
+            let (u_min, u_max) = (c.starts[0], {
+                let s = c.spans.last().unwrap_or(&c.spans[0]);
+                s.u0 + 1.0 / s.inv
+            });
+            for k in 0..cells {
+                let mut m: f64 = 0.0;
+                for j in 0..=KAPPA_SAMPLES {
+                    let f = (k as f64 + j as f64 / KAPPA_SAMPLES as f64) / cells as f64;
+                    let u = (u_min + (u_max - u_min) * f).min(u_max);
+                    let kappa = curvature_of(&c.eval(u, 2), tip);
+                    // A zero speed (cusp) gives infinity: kept, the caps then stop there.
+                    m = m.max(kappa);
+                }
+                base.push(m);
+            }
+        }
+        let mut levels = vec![base];
+        let mut width = 1;
+        while 2 * width <= levels[0].len() {
+            let prev = levels.last().unwrap_or(&levels[0]);
+            let next: Vec<f64> = (0..prev.len() - width).map(|i| prev[i].max(prev[i + width])).collect();
+            levels.push(next);
+            width *= 2;
+        }
+        CurvatureTable {
+            cells_per_element,
+            offset,
+            levels,
+        }
+    }
+
+    fn cell(&self, w: f64) -> usize {
+        let n = self.offset.len();
+        let w = w.clamp(0.0, n as f64);
+        let e = (w.floor() as usize).min(n - 1);
+        let cells = self.cells_per_element[e];
+        let k = (((w - e as f64) * cells as f64) as usize).min(cells - 1);
+        self.offset[e] + k
+    }
+
+    fn max(&self, w0: f64, w1: f64) -> f64 {
+        let (a, b) = (self.cell(w0), self.cell(w1));
+        let len = b - a + 1;
+        let k = (usize::BITS - 1 - len.leading_zeros()) as usize;
+        let lvl = &self.levels[k];
+        lvl[a].max(lvl[b + 1 - (1 << k)])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::readers::read_toolpath;
+
+    /// The power basis reproduces the de Boor evaluation (points, first and second
+    /// derivatives) on every bundled curve.
+    #[test]
+    fn power_basis_matches_de_boor() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples");
+        for name in [
+            "trident.json",
+            "butterfly.json",
+            "fan.json",
+            "open_pocket.json",
+            "fan_5axis.json",
+        ] {
+            let tp = read_toolpath(&dir.join(name)).unwrap();
+            for e in &tp.elements {
+                let view = e.curve.view();
+                let fast = PowerCurve::new(&view);
+                let scale = view.points().iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                for k in 0..=997 {
+                    let u = view.u_min() + (view.u_max() - view.u_min()) * k as f64 / 997.0;
+                    let exact = view.derivatives(u, 2);
+                    let got = fast.eval(u, 2);
+                    for d in 0..view.dim() {
+                        assert!((exact[0][d] - got[0][d]).abs() <= 1e-12 * scale, "{name} u {u}");
+                        let s1 = exact[1][..view.dim()].iter().fold(scale, |m, v| m.max(v.abs()));
+                        assert!((exact[1][d] - got[1][d]).abs() <= 1e-9 * s1, "{name} u {u} d1");
+                        let s2 = exact[2][..view.dim()].iter().fold(scale, |m, v| m.max(v.abs()));
+                        assert!((exact[2][d] - got[2][d]).abs() <= 1e-7 * s2, "{name} u {u} d2");
+                    }
+                }
+            }
+        }
     }
 }
