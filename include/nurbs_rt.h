@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 2
+#define CHANNEL_VERSION 3
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -40,6 +40,13 @@
  * (51 planar control points, 208 values) about 300 times over.
  */
 #define GEOMETRY_VALUES (1 << 16)
+
+/**
+ * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
+ * Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
+ * re-published copy of the geometry that rounds differently.
+ */
+#define RESUME_TOLERANCE 1e-9
 
 /**
  * Default of the `ramp-time` pin (s).

@@ -17,6 +17,7 @@
 //! | `nurbs_interp.enable` | bit | in | | run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine) |
 //! | `nurbs_interp.hold` | bit | in | | feed hold: ramp the plan's time scale to 0 (a jerk-limited stop on the path); false ramps back to 1 and the plan resumes where it stopped |
 //! | `nurbs_interp.abort` | bit | in | | stop as for hold, then discard the queue; the motion is over until a planner publishes a new geometry |
+//! | `nurbs_interp.resume` | bit | in | | after an underrun stop: a rising edge starts the plan from the stop point once one is queued (`resume-ready`); an edge without it is ignored |
 //! | `nurbs_interp.ramp-time` | float | in | s | duration of the hold/resume ramp (default 2) |
 //! | `nurbs_interp.scale` | float | out | | current time scale (1: as planned, 0: held) |
 //! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | mm | axis position commands (`-z` is 0 on a 2-D path) |
@@ -25,9 +26,10 @@
 //! | `nurbs_interp.curve` | u32 | out | | index of the path element (curve) |
 //! | `nurbs_interp.active` | bit | out | | a new sample was produced this period |
 //! | `nurbs_interp.done` | bit | out | | the last segment has been completed (at rest at its end) |
-//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record; latched, outputs hold |
+//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record, or a resumed plan that does not start where the machine stands; latched, outputs hold |
 //! | `nurbs_interp.fault-code` | u32 | out | | why ([`FaultCode`]) |
-//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stopped on the path; latched |
+//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stopped on the path; set until the resumed motion starts (or an abort) |
+//! | `nurbs_interp.resume-ready` | bit | out | | stopped after an underrun, a plan from the stop point is queued: `resume` will start it |
 //! | `nurbs_interp.underruns` | u32 | out | | periods that needed a record during motion and found none |
 //! | `nurbs_interp.records` | u32 | out | | records taken so far |
 //! | `nurbs_interp.seq` | u32 | out | | sequence number of the last record taken |
@@ -42,8 +44,19 @@
 //! stays within the axis limits (`plan_geometry.rs`); the stop is compressed in time where it
 //! would otherwise pass a corner, critical point or the curve end faster than that point's
 //! feed cap. Afterwards the module holds that position; records arriving later are not run
-//! (they were planned from a feed the machine no longer has): resuming needs a new plan from the
-//! stop point (a new geometry publish resets the module).
+//! (they were planned from a feed the machine no longer has).
+//!
+//! Resume after an underrun: at rest, the module publishes where it stands in the channel
+//! ([`crate::channel::StopStatus`]: element, parameter `u`, arc length `s`, position, the last
+//! record's sequence number). A planner (the running `nurbs-planner` when it notices, or one
+//! started afterwards) plans the rest of the path from rest at exactly that point
+//! (`PlanOptions::start`) and publishes it as a new geometry with its own records (sequence
+//! from 0) and stop table. The module takes it but does not move until a rising edge on
+//! `resume` (with records queued: `resume-ready`); then it runs the new plan with a fresh
+//! interpolator. The first record must start at rest at exactly the held element, `u` and `s`,
+//! and its first sample must be the held position (within [`RESUME_TOLERANCE`]); otherwise
+//! nothing moves and the module faults ([`FaultCode::ResumePoint`]). `abort` while stopped
+//! ends the stopped motion: the next geometry is a new motion from its own first record.
 //!
 //! Hold and abort scale the plan's time ([`TimeScale`]): the path stays the planned one.
 
@@ -56,7 +69,9 @@ use nurbs_rtcore::CurveView;
 
 use nurbs_rtcore::scurve::SCurveTable;
 
-use crate::channel::{validate_geometry, Channel, CurveViews, GeometryHeader, ValidCurve, CHANNEL_KEY, MAX_CURVES};
+use crate::channel::{
+    validate_geometry, Channel, CurveViews, GeometryHeader, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
+};
 use crate::pins::Pin;
 use crate::record::{SegmentRecord, FLAG_LAST, PHASES};
 use crate::sys;
@@ -88,6 +103,9 @@ pub enum FaultCode {
     Sequence = 5,
     /// The interpolator refused a record (curve index without a curve).
     BadRecord = 6,
+    /// After an underrun stop, the first record of the resumed motion does not start at rest
+    /// exactly where the machine stands (element, parameter, position): refused, position held.
+    ResumePoint = 7,
 }
 
 /// The component's pins, in HAL shared memory.
@@ -96,6 +114,7 @@ pub struct Pins {
     pub enable: Pin<bool>,
     pub hold: Pin<bool>,
     pub abort: Pin<bool>,
+    pub resume: Pin<bool>,
     pub ramp_time: Pin<f64>,
     pub scale: Pin<f64>,
     pub pos_cmd_x: Pin<f64>,
@@ -113,6 +132,7 @@ pub struct Pins {
     pub records: Pin<u32>,
     pub seq: Pin<u32>,
     pub buffered: Pin<f64>,
+    pub resume_ready: Pin<bool>,
 }
 
 /// The accepted curve geometry: views into the channel's arena, validated once.
@@ -167,6 +187,20 @@ impl CurveSet for RtGeometry {
     }
 }
 
+/// Where the machine stands after an underrun stop (what a resumed plan must start from).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Held {
+    pub curve: usize,
+    pub u: f64,
+    pub s: f64,
+    pub point: [f64; 3],
+}
+
+/// Largest distance (mm) between where the machine stands and a resumed motion's first sample.
+/// Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
+/// re-published copy of the geometry that rounds differently.
+pub const RESUME_TOLERANCE: f64 = 1e-9;
+
 /// Everything the update function touches: pins, the channel and plain-data state.
 #[repr(C)]
 pub struct Instance {
@@ -189,6 +223,17 @@ pub struct Instance {
     /// Abort completed: at rest, queue discarded, nothing more runs until a new geometry.
     aborted: bool,
     fault: FaultCode,
+    /// Underrun stops so far (the epoch of the published stop point).
+    stops: u32,
+    /// Stopped after an underrun: where the machine stands, until a resumed motion starts.
+    held: Option<Held>,
+    /// A new geometry (the plan from `held`) has been taken: it runs after the resume command.
+    awaiting_resume: bool,
+    /// The resume command came: the next record must start at `held`, checked on its first
+    /// sample.
+    resuming: bool,
+    /// `resume` pin of the last period (rising-edge detection).
+    resume_pin: bool,
 }
 
 /// Default of the `ramp-time` pin (s).
@@ -371,8 +416,26 @@ impl Instance {
         if self.fault == FaultCode::None {
             self.accept_geometry(channel);
         }
+        let resume = self.pins.resume.get();
+        let resume_edge = resume && !self.resume_pin;
+        self.resume_pin = resume;
+        if self.awaiting_resume && self.pins.abort.get() {
+            // Abort while waiting to resume: the stopped motion is over; a new geometry starts
+            // a new motion from its first record.
+            self.awaiting_resume = false;
+            self.held = None;
+            self.aborted = true;
+            channel.stop.clear();
+        }
+        if self.awaiting_resume && resume_edge && self.fault == FaultCode::None && !channel.segments.is_empty() {
+            // Data and the command: run the plan from the stop point.
+            self.awaiting_resume = false;
+            self.resuming = true;
+            channel.stop.clear();
+        }
         let mut active = false;
-        if self.fault == FaultCode::None && self.pins.enable.get() && self.geometry.is_valid() {
+        if self.fault == FaultCode::None && self.pins.enable.get() && self.geometry.is_valid() && !self.awaiting_resume
+        {
             let dt = period_ns as f64 / 1e9;
             let abort = self.pins.abort.get();
             let target = if self.pins.hold.get() || abort || self.aborted {
@@ -388,6 +451,8 @@ impl Instance {
                 // Held (or aborted) at rest.
                 if abort && self.interp.record().is_some() {
                     self.aborted = true;
+                    self.held = None;
+                    channel.stop.clear();
                     discard(channel, self.geometry.generation);
                 }
             } else {
@@ -405,10 +470,13 @@ impl Instance {
         pins.done.set(self.interp.is_finished());
         pins.fault.set(self.fault != FaultCode::None);
         pins.fault_code.set(self.fault as u32);
-        pins.underrun.set(self.stopping);
+        pins.underrun
+            .set(self.stopping || self.awaiting_resume || self.resuming);
+        pins.resume_ready
+            .set(self.awaiting_resume && self.fault == FaultCode::None && !channel.segments.is_empty());
         pins.underruns.set(self.underruns);
         pins.records.set(self.records);
-        let buffered = if self.stopping {
+        let buffered = if self.stopping || self.awaiting_resume {
             0.0
         } else {
             (channel.planned_time() - self.taken_time).max(0.0) + self.interp.time_left_in_segment()
@@ -453,6 +521,15 @@ impl Instance {
         g.stop_accel = header.stop_accel;
         g.stop_jerk = header.stop_jerk;
         g.generation = generation;
+        // After an underrun stop (and before an abort) the new geometry carries the plan from the
+        // stop point: it waits for the resume command, and its first record must start there.
+        if self.held.is_some() && (self.stopped || self.awaiting_resume) && !self.aborted {
+            self.awaiting_resume = true;
+        } else {
+            self.held = None;
+            self.awaiting_resume = false;
+        }
+        self.resuming = false;
         // A new geometry starts a new motion.
         self.interp = Interpolator::new();
         self.next_seq = 0;
@@ -469,6 +546,7 @@ impl Instance {
         let step = {
             let ring = &channel.segments;
             let stopping = self.stopping;
+            let resume_from = if self.resuming { self.held } else { None };
             let next_seq = &mut self.next_seq;
             let records = &mut self.records;
             let taken_time = &mut self.taken_time;
@@ -480,6 +558,10 @@ impl Instance {
                 match ring.pop() {
                     Ok(Some(r)) if r.seq != *next_seq => {
                         pull = Pull::Fault(FaultCode::Sequence);
+                        None
+                    }
+                    Ok(Some(r)) if resume_from.is_some_and(|h| !starts_at(&r, &h)) => {
+                        pull = Pull::Fault(FaultCode::ResumePoint);
                         None
                     }
                     Ok(Some(r)) => match check_record(&r) {
@@ -513,6 +595,16 @@ impl Instance {
                 false
             }
             (Step::Sample(s), _) => {
+                if self.resuming {
+                    // The resumed motion's first sample: it must be where the machine stands.
+                    let here = self.held.map(|h| h.point);
+                    if here.is_none_or(|p| distance(&p, &self.point_of(&s)) > RESUME_TOLERANCE) {
+                        self.fault = FaultCode::ResumePoint;
+                        return false;
+                    }
+                    self.resuming = false;
+                    self.held = None;
+                }
                 self.output(&s);
                 true
             }
@@ -527,7 +619,10 @@ impl Instance {
                 };
                 self.underruns = self.underruns.wrapping_add(1);
                 if self.stopping {
-                    self.stopped = true;
+                    if !self.stopped {
+                        self.stopped = true;
+                        self.publish_stop(channel, last.seq);
+                    }
                     return false; // stopped: hold
                 }
                 self.stopping = true;
@@ -549,18 +644,57 @@ impl Instance {
         }
     }
 
+    /// The axis positions the module outputs for `s`.
+    fn point_of(&self, s: &Sample) -> [f64; 3] {
+        let [x, y, z, ..] = s.point;
+        [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }]
+    }
+
+    /// At rest after an underrun stop: remember where, and tell the planner.
+    fn publish_stop(&mut self, channel: &Channel, seq: u32) {
+        let c = *self.interp.cursor();
+        let [x, y, z, ..] = c.point;
+        let held = Held {
+            curve: self.interp.curve_index(),
+            u: c.u,
+            s: c.s,
+            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
+        };
+        self.held = Some(held);
+        self.stops = self.stops.wrapping_add(1).max(1);
+        channel.stop.publish(&StopPoint {
+            epoch: self.stops,
+            generation: self.geometry.generation,
+            seq,
+            curve: held.curve as u32,
+            u: held.u,
+            s: held.s,
+            point: held.point,
+        });
+    }
+
     fn output(&self, s: &Sample) {
         let pins = &self.pins;
-        let [x, y, z, ..] = s.point;
+        let [x, y, z] = self.point_of(s);
         pins.pos_cmd_x.set(x);
         pins.pos_cmd_y.set(y);
-        pins.pos_cmd_z.set(if self.geometry.tip >= 3 { z } else { 0.0 });
+        pins.pos_cmd_z.set(z);
         // The path speed: the planned feed times the hold time scale (exactly the plan's feed
         // when not scaled).
         pins.feed.set(s.feed * self.scale.value());
         pins.u.set(s.u);
         pins.curve.set(s.curve as u32);
     }
+}
+
+/// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
+fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
+    r.curve() == held.curve && r.u_start == held.u && r.s_start == held.s && r.feed_start == 0.0
+}
+
+fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    (dx * dx + dy * dy + dz * dz).sqrt()
 }
 
 /// Rounding slack for a start feed: the planner hands on a segment's computed end feed, which
@@ -621,6 +755,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
         Pin::create(addr_of_mut!((*p).enable), c"nurbs_interp.enable", i, id),
         Pin::create(addr_of_mut!((*p).hold), c"nurbs_interp.hold", i, id),
         Pin::create(addr_of_mut!((*p).abort), c"nurbs_interp.abort", i, id),
+        Pin::create(addr_of_mut!((*p).resume), c"nurbs_interp.resume", i, id),
         Pin::create(addr_of_mut!((*p).ramp_time), c"nurbs_interp.ramp-time", i, id),
         Pin::create(addr_of_mut!((*p).scale), c"nurbs_interp.scale", o, id),
         Pin::create(addr_of_mut!((*p).pos_cmd_x), c"nurbs_interp.pos-cmd-x", o, id),
@@ -638,6 +773,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
         Pin::create(addr_of_mut!((*p).records), c"nurbs_interp.records", o, id),
         Pin::create(addr_of_mut!((*p).seq), c"nurbs_interp.seq", o, id),
         Pin::create(addr_of_mut!((*p).buffered), c"nurbs_interp.buffered", o, id),
+        Pin::create(addr_of_mut!((*p).resume_ready), c"nurbs_interp.resume-ready", o, id),
     ];
     if let Some(&rc) = results.iter().find(|&&rc| rc < 0) {
         error(c"nurbs_interp: pin export failed");
@@ -675,6 +811,11 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).scale).write(TimeScale::run());
     addr_of_mut!((*inst).aborted).write(false);
     addr_of_mut!((*inst).fault).write(FaultCode::None);
+    addr_of_mut!((*inst).stops).write(0);
+    addr_of_mut!((*inst).held).write(None);
+    addr_of_mut!((*inst).awaiting_resume).write(false);
+    addr_of_mut!((*inst).resuming).write(false);
+    addr_of_mut!((*inst).resume_pin).write(false);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),

@@ -402,6 +402,147 @@ fn an_underrun_stops_along_the_path_without_a_jump() {
     unsafe { rtapi_app_exit() };
 }
 
+/// Underrun, resume: the module stops on the path, publishes where it stands; the plan of the
+/// rest of the path from there (at rest) is published; nothing moves until the resume command;
+/// then the motion continues to the end of the path. The whole sampled run (the stop's samples
+/// followed directly by the resumed ones, as a sampler records it) passes the finite-difference
+/// check, with no jump, and the update path allocates nothing.
+#[test]
+fn an_underrun_resumes_from_the_stop_point_on_command() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    for name in ["trident.json", "butterfly.json"] {
+        let job = job(name);
+        let (_planner, channel) = load();
+        let update = mock::funct("nurbs_interp.update").unwrap();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        geometry(&job).publish(channel).unwrap();
+        let end_feed = |i: usize| job.records[i - 1].profile().table().end().v;
+        let cut = (3..job.records.len() - 1)
+            .max_by(|&a, &b| end_feed(a).total_cmp(&end_feed(b)))
+            .unwrap();
+        fill(channel, &job.records[..cut], 0);
+        let mut samples: Vec<[f64; 5]> = Vec::new();
+        let mut allocated = 0;
+        let mut period = |samples: &mut Vec<[f64; 5]>| {
+            let before = allocations();
+            unsafe { mock::call(update, PERIOD_NS as _) };
+            allocated += allocations() - before;
+            if bit("nurbs_interp.active") {
+                samples.push([
+                    float("nurbs_interp.pos-cmd-x"),
+                    float("nurbs_interp.pos-cmd-y"),
+                    float("nurbs_interp.feed"),
+                    float("nurbs_interp.u"),
+                    u32_pin("nurbs_interp.curve") as f64,
+                ]);
+            }
+        };
+        let mut stop = None;
+        for _ in 0..job.samples.len() {
+            period(&mut samples);
+            stop = channel.stop.read();
+            if stop.is_some() {
+                break;
+            }
+        }
+        let stop = stop.expect("no stop point published");
+        let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+        assert_eq!([stop.point[0], stop.point[1]], held);
+        assert_eq!(stop.u, float("nurbs_interp.u"));
+        assert_eq!(stop.seq as usize, cut - 1);
+        assert!(bit("nurbs_interp.underrun") && !bit("nurbs_interp.fault"));
+        // A resume command without data does nothing.
+        mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+        let n_stopped = samples.len();
+        for _ in 0..100 {
+            period(&mut samples);
+        }
+        mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+        assert_eq!(samples.len(), n_stopped);
+        assert!(!bit("nurbs_interp.resume-ready"));
+        // The planner re-plans the rest from rest at the stop point and publishes it.
+        let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
+        assert_eq!((plan2.records[0].u_start, plan2.records[0].s_start), (stop.u, stop.s));
+        for _ in 0..10 {
+            period(&mut samples); // the module empties the ring of the stopped motion
+        }
+        assert!(channel.segments.is_empty());
+        crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
+            .unwrap()
+            .0
+            .publish(channel)
+            .unwrap();
+        let mut sent = fill(channel, &plan2.records, 0);
+        // Data but no command: the machine stays.
+        for _ in 0..400 {
+            period(&mut samples);
+        }
+        assert_eq!(samples.len(), n_stopped);
+        assert!(bit("nurbs_interp.resume-ready") && bit("nurbs_interp.underrun"));
+        assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], held);
+        assert!(channel.stop.read().is_some());
+        mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+        let periods = job.samples.len() + 20_000;
+        for _ in 0..periods {
+            sent = fill(channel, &plan2.records, sent);
+            period(&mut samples);
+            if bit("nurbs_interp.done") {
+                break;
+            }
+        }
+        mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+        assert_eq!(allocated, 0, "the update path allocated");
+        assert!(bit("nurbs_interp.done"), "{name}: did not resume to the end");
+        assert!(!bit("nurbs_interp.fault") && !bit("nurbs_interp.underrun"));
+        assert!(channel.stop.read().is_none());
+        // The resumed motion starts where the machine stood and ends at C(1) at rest.
+        assert_eq!([samples[n_stopped][0], samples[n_stopped][1]], held);
+        let end = job.samples.last().unwrap().point;
+        let last = samples.last().unwrap();
+        assert_eq!([last[0], last[1]], [end[0], end[1]], "{name}");
+        assert_eq!(last[2], 0.0);
+        let report =
+            nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&samples));
+        println!(
+            "{name}: {} samples to the stop, {} resumed; peaks {:?}",
+            n_stopped,
+            samples.len() - n_stopped,
+            report.peaks
+        );
+        assert!(report.violations.is_empty(), "{name}: {:?}", report.violations);
+        unsafe { rtapi_app_exit() };
+    }
+}
+
+/// After an underrun stop, a plan that does not start where the machine stands (here: the
+/// whole path again, from C(0)) is refused with a fault and the position is held.
+#[test]
+fn a_resume_from_elsewhere_is_refused() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let job = job("trident.json");
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records[..job.records.len() / 2], 0);
+    for _ in 0..job.samples.len() {
+        unsafe { mock::call(update, PERIOD_NS as _) };
+    }
+    assert!(channel.stop.read().is_some());
+    let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records, 0);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+    for _ in 0..100 {
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        assert!(!bit("nurbs_interp.active"));
+    }
+    assert!(bit("nurbs_interp.fault"));
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::ResumePoint as u32);
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], held);
+    unsafe { rtapi_app_exit() };
+}
+
 /// Runs a few periods and returns the fault code.
 fn fault_after(channel: &Channel, records: &[SegmentRecord]) -> u32 {
     let update = mock::funct("nurbs_interp.update").unwrap();
@@ -696,7 +837,7 @@ fn update_cost() {
     }
 }
 
-/// After a motion is over (finished, stopped on an underrun, aborted), the module empties the
+/// After a motion is over (finished, stopped on an underrun and aborted, aborted), the module empties the
 /// ring and a new geometry starts a new motion from its first record: the trident again, exactly.
 #[test]
 fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
@@ -729,6 +870,13 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
         end(channel, &job);
         periods(n + 12_000);
         assert!(!bit("nurbs_interp.active"), "{what}");
+        if what == "underrun" {
+            // An underrun stop waits for a plan from the stop point; abort ends that motion.
+            assert!(channel.stop.read().is_some());
+            mock::set_pin("nurbs_interp.abort", Value::Bit(true));
+            periods(9_000);
+            assert!(channel.stop.read().is_none(), "abort keeps the stop point");
+        }
         // Records of the old motion still coming are dropped, not run.
         fill(channel, &job.records[1..], 0);
         periods(10);
