@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 3
+#define CHANNEL_VERSION 4
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -47,11 +47,6 @@
  * re-published copy of the geometry that rounds differently.
  */
 #define RESUME_TOLERANCE 1e-9
-
-/**
- * Default of the `ramp-time` pin (s).
- */
-#define DEFAULT_RAMP_TIME 2.0
 
 /**
  * Number of phases of a jerk-limited S-curve (the length of the records' phase arrays;

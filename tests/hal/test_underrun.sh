@@ -32,7 +32,7 @@ echo "$verify"
 if grep "^VIOLATION" <<<"$verify"; then
     echo "the stop and resume violate the limits"; exit 1
 fi
-grep -q "the module stopped on an underrun at curve" "$work/halrun.log" || {
+grep -q "the module stopped (underrun) at curve" "$work/halrun.log" || {
     echo "the second nurbs-planner did not plan from the stop point"; exit 1; }
 grep -q "nurbs-planner: stopped by signal, exiting cleanly" "$work/halrun.log" || {
     echo "nurbs-planner did not exit cleanly on SIGTERM"; exit 1; }

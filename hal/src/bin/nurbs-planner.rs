@@ -19,10 +19,11 @@
 //! `.buffered` (float out, s: motion time queued in the ring).
 //! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send).
 //!
-//! Resume after an underrun: when the module has stopped on an underrun it publishes the stop
-//! point in the channel. A planner that starts then, or that is running when it happens, plans
-//! the rest of the path from rest at exactly that point and publishes it; the module runs it
-//! after a rising edge on `nurbs_interp.resume`. (To start a different job instead, abort
+//! Resume after a hold or an underrun: when the module has stopped on the path it publishes the
+//! stop point in the channel. A planner that starts then, or that is running when it happens,
+//! plans the rest of the path from rest at exactly that point and publishes it; the module runs
+//! it when `nurbs_interp.hold` is released (hold) or on a rising edge of `nurbs_interp.resume`
+//! (underrun). (To start a different job instead, abort
 //! first: `nurbs_interp.abort` clears the stop point.)
 
 use std::path::{Path, PathBuf};
@@ -214,8 +215,15 @@ fn start_motion<'a>(
         None => plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?,
         Some(p) => {
             eprintln!(
-                "nurbs-planner: the module stopped on an underrun at curve {} u = {} (after record {}): planning the rest from there",
-                p.curve, p.u, p.seq
+                "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
+                match p.cause {
+                    1 => "underrun",
+                    2 => "hold",
+                    _ => "?",
+                },
+                p.curve,
+                p.u,
+                p.seq
             );
             plan_geometry::plan_from_stop(toolpath, limits, p)?
         }
@@ -290,8 +298,8 @@ fn run(args: &Args) -> Result<(), String> {
         ready.set(true);
         comp.ready()?;
         while !stopped() {
-            // An underrun stop while we stream (we were too slow): re-plan from where the module
-            // stands; the module runs it after its resume command.
+            // A stop while we stream (hold, or an underrun: we were too slow): re-plan from where
+            // the module stands; the module runs it after the command.
             if let Some(p) = channel.stop.read() {
                 if from.is_none_or(|f| f.epoch != p.epoch) {
                     from = Some(p);
