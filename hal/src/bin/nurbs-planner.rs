@@ -254,6 +254,12 @@ fn start_motion<'a>(
         }
         std::thread::sleep(Duration::from_millis(5));
     }
+    if let Some(p) = from {
+        // An abort while we planned withdraws the stop point: then the plan is not wanted.
+        if channel.stop.read().is_none_or(|now| now.epoch != p.epoch) {
+            return Err("the stop point was withdrawn (abort) while planning from it".into());
+        }
+    }
     geometry.publish(channel)?;
     let mut ends = vec![0.0];
     let mut t = 0.0;
