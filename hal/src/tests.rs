@@ -855,6 +855,63 @@ fn hold_stops_on_the_path_and_resumes_within_the_limits() {
     }
 }
 
+/// The commands need data: a hold released before the plan from the stop point is queued
+/// keeps the machine at rest until it is, then the motion continues at once; a `resume` edge
+/// under hold is ignored.
+#[test]
+fn commands_wait_for_the_plan_from_the_stop_point() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let job = job("trident.json");
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    let periods = |k: usize| {
+        for _ in 0..k {
+            unsafe { mock::call(update, PERIOD_NS as _) };
+        }
+    };
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records, 0);
+    periods(job.samples.len() / 3);
+    mock::set_pin("nurbs_interp.hold", Value::Bit(true));
+    periods(3000);
+    let stop = channel.stop.read().expect("no stop point after the hold");
+    assert_eq!(stop.cause, crate::module::StopCause::Hold as u32);
+    assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.underrun"));
+    // Released without a plan from the stop point: nothing moves.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+    let here = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+    for _ in 0..500 {
+        periods(1);
+        assert!(!bit("nurbs_interp.active"));
+    }
+    let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
+    // Under hold again, the plan arrives; a resume edge does not start it.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(true));
+    crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
+        .unwrap()
+        .0
+        .publish(channel)
+        .unwrap();
+    let mut sent = fill(channel, &plan2.records, 0);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+    periods(100);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+    assert!(!bit("nurbs_interp.active") && bit("nurbs_interp.resume-ready"));
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], here);
+    // Released: the plan from the stop point runs to the end.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+    periods(1);
+    assert!(bit("nurbs_interp.active"));
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], here);
+    for _ in 0..job.samples.len() {
+        sent = fill(channel, &plan2.records, sent);
+        periods(1);
+    }
+    assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault") && !bit("nurbs_interp.held"));
+    unsafe { rtapi_app_exit() };
+}
+
 /// Abort: the module stops at the next segment boundary (the checked stop), then the motion is
 /// over and the queue is discarded; within the limits.
 #[test]
