@@ -848,9 +848,12 @@ fn hold_stops_on_the_path_and_resumes_within_the_limits() {
                 "{name}: hold at period {hold_at}: at rest after {to_rest:?} periods (None: in the last segment), end at {end}, worst ratio {ratio:.9}"
             );
         }
+        let durations: Vec<f64> = job.records.iter().map(|r| r.profile().total_time()).collect();
         println!(
-            "{name}: worst hold/resume ratio {worst:.9}, longest hold-to-rest {:.3} s",
-            latency as f64 * PERIOD
+            "{name}: worst hold/resume ratio {worst:.9}, longest hold-to-rest {:.3} s; segments: longest {:.3} s, last {:.3} s",
+            latency as f64 * PERIOD,
+            durations.iter().copied().fold(0.0, f64::max),
+            durations.last().unwrap()
         );
     }
 }
