@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 2
+#define CHANNEL_VERSION 4
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -42,9 +42,11 @@
 #define GEOMETRY_VALUES (1 << 16)
 
 /**
- * Default of the `ramp-time` pin (s).
+ * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
+ * Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
+ * re-published copy of the geometry that rounds differently.
  */
-#define DEFAULT_RAMP_TIME 2.0
+#define RESUME_TOLERANCE 1e-9
 
 /**
  * Number of phases of a jerk-limited S-curve (the length of the records' phase arrays;

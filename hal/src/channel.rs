@@ -31,7 +31,7 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 2;
+pub const CHANNEL_VERSION: u32 = 4;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
@@ -150,6 +150,8 @@ pub struct Channel {
     /// Total motion time (s, `f64` bits) of the records the planner has pushed so far; with the
     /// time the module has taken, this gives the buffered motion time.
     planned_time: AtomicU64,
+    /// Module → planner: where the module stands after a hold or underrun stop.
+    pub stop: StopStatus,
     /// Planner → module segment records.
     pub segments: SpscRing<SegmentRecord, SEGMENT_SLOTS>,
     /// Planner → module curve geometry.
@@ -177,6 +179,7 @@ impl Channel {
         channel.geometry_values.store(GEOMETRY_VALUES as u32, Ordering::Relaxed);
         channel.max_curves.store(MAX_CURVES as u32, Ordering::Relaxed);
         channel.planned_time.store(0, Ordering::Relaxed);
+        channel.stop.clear();
         channel.geometry.generation.store(0, Ordering::Relaxed);
         channel.magic.store(CHANNEL_MAGIC, Ordering::Release);
         channel
@@ -218,6 +221,84 @@ impl Channel {
 
     pub fn planned_time(&self) -> f64 {
         f64::from_bits(self.planned_time.load(Ordering::Acquire))
+    }
+}
+
+/// Where the module stopped (hold or underrun), at rest: the point a resumed plan must start
+/// from (element, parameter and arc length as the module's interpolator holds them, and the
+/// position it outputs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopPoint {
+    /// Counts the module's stops (from 1): a planner re-plans once per stop.
+    pub epoch: u32,
+    /// Why it stopped: 1 underrun (resumes on a `resume` edge), 2 hold (resumes on release).
+    pub cause: u32,
+    /// Geometry generation of the motion that stopped.
+    pub generation: u32,
+    /// Sequence number of the last planned record the module ran.
+    pub seq: u32,
+    pub curve: u32,
+    pub u: f64,
+    pub s: f64,
+    pub point: [f64; 3],
+}
+
+/// Module → planner status: the [`StopPoint`] of the last stop, while the module waits
+/// for a plan from there. Single writer (the module), seqlock-style: `epoch` is 0 while there is
+/// nothing to resume from (or while the module writes), and is stored last with release.
+#[repr(C)]
+pub struct StopStatus {
+    epoch: AtomicU32,
+    cause: AtomicU32,
+    generation: AtomicU32,
+    seq: AtomicU32,
+    curve: AtomicU32,
+    u: AtomicU64,
+    s: AtomicU64,
+    point: [AtomicU64; 3],
+}
+
+impl StopStatus {
+    /// Module side: publish where it stands (`p.epoch` must be non-zero).
+    pub fn publish(&self, p: &StopPoint) {
+        self.epoch.store(0, Ordering::Relaxed);
+        fence(Ordering::Release);
+        self.cause.store(p.cause, Ordering::Relaxed);
+        self.generation.store(p.generation, Ordering::Relaxed);
+        self.seq.store(p.seq, Ordering::Relaxed);
+        self.curve.store(p.curve, Ordering::Relaxed);
+        self.u.store(p.u.to_bits(), Ordering::Relaxed);
+        self.s.store(p.s.to_bits(), Ordering::Relaxed);
+        for (slot, v) in self.point.iter().zip(p.point) {
+            slot.store(v.to_bits(), Ordering::Relaxed);
+        }
+        self.epoch.store(p.epoch, Ordering::Release);
+    }
+
+    /// Module side: nothing to resume from (resumed, aborted, or a new motion).
+    pub fn clear(&self) {
+        self.epoch.store(0, Ordering::Release);
+    }
+
+    /// Planner side: the published stop point, if any (a consistent copy).
+    pub fn read(&self) -> Option<StopPoint> {
+        let epoch = self.epoch.load(Ordering::Acquire);
+        if epoch == 0 {
+            return None;
+        }
+        let f = |a: &AtomicU64| f64::from_bits(a.load(Ordering::Relaxed));
+        let p = StopPoint {
+            epoch,
+            cause: self.cause.load(Ordering::Relaxed),
+            generation: self.generation.load(Ordering::Relaxed),
+            seq: self.seq.load(Ordering::Relaxed),
+            curve: self.curve.load(Ordering::Relaxed),
+            u: f(&self.u),
+            s: f(&self.s),
+            point: [f(&self.point[0]), f(&self.point[1]), f(&self.point[2])],
+        };
+        fence(Ordering::Acquire);
+        (self.epoch.load(Ordering::Relaxed) == epoch).then_some(p)
     }
 }
 

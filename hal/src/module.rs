@@ -15,37 +15,54 @@
 //! | pin | type | dir | unit | meaning |
 //! | --- | --- | --- | --- | --- |
 //! | `nurbs_interp.enable` | bit | in | | run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine) |
-//! | `nurbs_interp.hold` | bit | in | | feed hold: ramp the plan's time scale to 0 (a jerk-limited stop on the path); false ramps back to 1 and the plan resumes where it stopped |
+//! | `nurbs_interp.hold` | bit | in | | feed hold: at the next segment boundary, the planner-checked stop to rest on the path; released, the plan from the stop point runs (see below) |
 //! | `nurbs_interp.abort` | bit | in | | stop as for hold, then discard the queue; the motion is over until a planner publishes a new geometry |
-//! | `nurbs_interp.ramp-time` | float | in | s | duration of the hold/resume ramp (default 2) |
-//! | `nurbs_interp.scale` | float | out | | current time scale (1: as planned, 0: held) |
+//! | `nurbs_interp.resume` | bit | in | | after an underrun stop: a rising edge starts the plan from the stop point once one is queued (`resume-ready`); an edge without it is ignored |
 //! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | mm | axis position commands (`-z` is 0 on a 2-D path) |
-//! | `nurbs_interp.feed` | float | out | mm/s | path feed at this sample (the plan's, times `scale`) |
+//! | `nurbs_interp.feed` | float | out | mm/s | path feed at this sample |
 //! | `nurbs_interp.u` | float | out | | curve parameter |
 //! | `nurbs_interp.curve` | u32 | out | | index of the path element (curve) |
 //! | `nurbs_interp.active` | bit | out | | a new sample was produced this period |
 //! | `nurbs_interp.done` | bit | out | | the last segment has been completed (at rest at its end) |
-//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record; latched, outputs hold |
+//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record, or a resumed plan that does not start where the machine stands; latched, outputs hold |
 //! | `nurbs_interp.fault-code` | u32 | out | | why ([`FaultCode`]) |
-//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stopped on the path; latched |
-//! | `nurbs_interp.underruns` | u32 | out | | periods that needed a record during motion and found none |
+//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stops or stopped on the path; set until the resumed motion starts (or an abort) |
+//! | `nurbs_interp.held` | bit | out | | at rest on the path after a stop (hold, underrun or abort), not moving |
+//! | `nurbs_interp.resume-ready` | bit | out | | stopped (hold or underrun) and a plan from the stop point is queued: releasing `hold` / a `resume` edge starts it |
+//! | `nurbs_interp.underruns` | u32 | out | | underrun stops so far |
 //! | `nurbs_interp.records` | u32 | out | | records taken so far |
 //! | `nurbs_interp.seq` | u32 | out | | sequence number of the last record taken |
 //! | `nurbs_interp.buffered` | float | out | s | motion time queued ahead of the current sample |
 //!
-//! Underrun: the records end at segment boundaries with zero tangential acceleration, so when
-//! the next record is missing the module appends a jerk-limited stop of its own (a three-phase
-//! S-curve from the feed at the segment end to rest, [`underrun_stop`]) and runs it through the
-//! same interpolator along the same curve: no jump, the feed ramps down to zero. Its
-//! deceleration and jerk come from the per-record stop table the planner published with the
-//! geometry: the planner ran this very stop from every boundary and chose limits under which it
-//! stays within the axis limits (`plan_geometry.rs`); the stop is compressed in time where it
-//! would otherwise pass a corner, critical point or the curve end faster than that point's
-//! feed cap. Afterwards the module holds that position; records arriving later are not run
-//! (they were planned from a feed the machine no longer has): resuming needs a new plan from the
-//! stop point (a new geometry publish resets the module).
+//! Every stop is the same planner-checked stop. The records end at segment boundaries with zero
+//! tangential acceleration; when the module must not (hold, abort) or cannot (underrun: the next
+//! record is missing) take the next record, it appends a jerk-limited stop of its own (a
+//! three-phase S-curve from the feed at the segment end to rest, [`underrun_stop`]) and runs it
+//! through the same interpolator along the same curve: no jump, the feed ramps down to zero.
+//! Its deceleration and jerk come from the per-record stop table the planner published with the
+//! geometry: the planner ran this very stop from every boundary, by finite differences on the
+//! setpoints the module will produce, and chose limits under which it stays within the axis
+//! limits (`plan_geometry.rs`); the stop is compressed in time where it would otherwise pass a
+//! corner, critical point or the curve end faster than that point's feed cap. So hold, abort
+//! and underrun stops are within the axis limits by the same check as the plan itself; the price
+//! is that a hold or abort takes effect at the next segment boundary (measured on the butterfly
+//! and the trident: at rest at most 0.30 s after the request), and a hold during the last
+//! segment lets the motion end at C(1). Afterwards the module holds that position; records
+//! arriving later are not run (they were planned from a feed the machine no longer has).
 //!
-//! Hold and abort scale the plan's time ([`TimeScale`]): the path stays the planned one.
+//! Resume (after a hold or an underrun): at rest, the module publishes where it stands in the
+//! channel ([`crate::channel::StopStatus`]: cause, element, parameter `u`, arc length `s`,
+//! position, the last record's sequence number). A planner (the running `nurbs-planner`, or one
+//! started afterwards) plans the rest of the path from rest at exactly that point
+//! (`PlanOptions::start`) and publishes it as a new geometry with its own records (sequence
+//! from 0) and stop table. The module takes it but does not move until the command: for a hold,
+//! `hold` false; for an underrun, a rising edge on `resume` (with records queued:
+//! `resume-ready`; `hold` must be false). Then it runs the new plan with a fresh interpolator,
+//! whose first setpoint is the stop point, at rest, as in the planner's own check. The first
+//! record must start at rest at exactly the held element, `u` and `s`, and its first sample must
+//! be the held position (within [`RESUME_TOLERANCE`]); otherwise nothing moves and the module
+//! faults ([`FaultCode::ResumePoint`]). `abort` while stopped ends the stopped motion (and
+//! withdraws the stop point): the next geometry is a new motion from its own first record.
 
 use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};
@@ -56,7 +73,9 @@ use nurbs_rtcore::CurveView;
 
 use nurbs_rtcore::scurve::SCurveTable;
 
-use crate::channel::{validate_geometry, Channel, CurveViews, GeometryHeader, ValidCurve, CHANNEL_KEY, MAX_CURVES};
+use crate::channel::{
+    validate_geometry, Channel, CurveViews, GeometryHeader, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
+};
 use crate::pins::Pin;
 use crate::record::{SegmentRecord, FLAG_LAST, PHASES};
 use crate::sys;
@@ -88,6 +107,9 @@ pub enum FaultCode {
     Sequence = 5,
     /// The interpolator refused a record (curve index without a curve).
     BadRecord = 6,
+    /// After a stop, the first record of the resumed motion does not start at rest
+    /// exactly where the machine stands (element, parameter, position): refused, position held.
+    ResumePoint = 7,
 }
 
 /// The component's pins, in HAL shared memory.
@@ -96,8 +118,7 @@ pub struct Pins {
     pub enable: Pin<bool>,
     pub hold: Pin<bool>,
     pub abort: Pin<bool>,
-    pub ramp_time: Pin<f64>,
-    pub scale: Pin<f64>,
+    pub resume: Pin<bool>,
     pub pos_cmd_x: Pin<f64>,
     pub pos_cmd_y: Pin<f64>,
     pub pos_cmd_z: Pin<f64>,
@@ -113,6 +134,8 @@ pub struct Pins {
     pub records: Pin<u32>,
     pub seq: Pin<u32>,
     pub buffered: Pin<f64>,
+    pub resume_ready: Pin<bool>,
+    pub held: Pin<bool>,
 }
 
 /// The accepted curve geometry: views into the channel's arena, validated once.
@@ -167,6 +190,20 @@ impl CurveSet for RtGeometry {
     }
 }
 
+/// Where the machine stands after a hold or underrun stop (what a resumed plan must start from).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Held {
+    pub curve: usize,
+    pub u: f64,
+    pub s: f64,
+    pub point: [f64; 3],
+}
+
+/// Largest distance (mm) between where the machine stands and a resumed motion's first sample.
+/// Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
+/// re-published copy of the geometry that rounds differently.
+pub const RESUME_TOLERANCE: f64 = 1e-9;
+
 /// Everything the update function touches: pins, the channel and plain-data state.
 #[repr(C)]
 pub struct Instance {
@@ -184,83 +221,35 @@ pub struct Instance {
     stopping: bool,
     /// ... and that stop is over: at rest.
     stopped: bool,
-    /// Time scale of the plan (1: as planned, 0: held) and its ramp.
-    scale: TimeScale,
+    /// Why the module stops or stopped (until the resumed motion starts).
+    cause: StopCause,
     /// Abort completed: at rest, queue discarded, nothing more runs until a new geometry.
     aborted: bool,
     fault: FaultCode,
+    /// Stops so far (the epoch of the published stop point).
+    stops: u32,
+    /// Stopped on the path: where the machine stands, until a resumed motion starts.
+    held: Option<Held>,
+    /// A new geometry (the plan from `held`) has been taken: it runs after the command.
+    awaiting_resume: bool,
+    /// The resume command came: the next record must start at `held`, checked on its first
+    /// sample.
+    resuming: bool,
+    /// `resume` pin of the last period (rising-edge detection).
+    resume_pin: bool,
 }
 
-/// Default of the `ramp-time` pin (s).
-pub const DEFAULT_RAMP_TIME: f64 = 2.0;
-
-/// Feed hold by time scaling: the plan runs at `r` times real time, `r` moving between 1 and 0
-/// along a quintic ramp (`10x^3 - 15x^4 + 6x^5`) over the ramp time, so the path is the planned
-/// one and the motion stays jerk-limited: velocity `v r`, acceleration `a r^2 + v r'`, jerk
-/// `j r^3 + 3 a r r' + v r''` with bounded `r'`, `r''` that are zero where a ramp starts and
-/// ends. A ramp always runs to its end before the next one starts (no kink in `r`). Not checked
-/// against the axis limits: where the plan itself runs at an axis jerk limit when the hold
-/// starts, the ramp's terms can add a little on top (see the hold test).
-///
-/// cbindgen:ignore
-#[derive(Clone, Copy, Debug)]
-pub struct TimeScale {
-    r: f64,
-    from: f64,
-    to: f64,
-    /// Ramp time elapsed and duration; `duration == 0`: no ramp running.
-    t: f64,
-    duration: f64,
-}
-
-impl TimeScale {
-    /// Running as planned (`r = 1`), no ramp.
-    pub const fn run() -> TimeScale {
-        TimeScale {
-            r: 1.0,
-            from: 1.0,
-            to: 1.0,
-            t: 0.0,
-            duration: 0.0,
-        }
-    }
-
-    pub fn value(&self) -> f64 {
-        self.r
-    }
-
-    /// Advance by `dt` towards `target` (0 or 1); returns the plan time that passes in this
-    /// period (exactly `dt` while running unscaled).
-    pub fn advance(&mut self, target: f64, ramp_time: f64, dt: f64) -> f64 {
-        let before = self.r;
-        if self.duration == 0.0 && self.r != target {
-            self.from = self.r;
-            self.to = target;
-            self.t = 0.0;
-            self.duration = if ramp_time.is_finite() && ramp_time > dt {
-                ramp_time
-            } else {
-                dt
-            };
-        }
-        if self.duration > 0.0 {
-            self.t += dt;
-            let x = (self.t / self.duration).min(1.0);
-            // Quintic smoothstep: r' and r'' are zero at both ends, so the scaled motion's
-            // acceleration and jerk do not jump when a ramp starts or ends.
-            let shape = x * x * x * (10.0 + x * (6.0 * x - 15.0));
-            self.r = self.from + (self.to - self.from) * shape;
-            if x >= 1.0 {
-                self.r = self.to;
-                self.duration = 0.0;
-            }
-        }
-        if before == 1.0 && self.r == 1.0 {
-            dt
-        } else {
-            0.5 * (before + self.r) * dt
-        }
-    }
+/// Why the module stops (or stopped) on the path.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopCause {
+    None = 0,
+    /// The next record was missing: resumes on a rising edge of `resume`.
+    Underrun = 1,
+    /// `hold`: resumes when `hold` is released.
+    Hold = 2,
+    /// `abort`: the motion is over once at rest.
+    Abort = 3,
 }
 
 /// What the record source saw while the interpolator pulled records.
@@ -371,44 +360,61 @@ impl Instance {
         if self.fault == FaultCode::None {
             self.accept_geometry(channel);
         }
-        let mut active = false;
-        if self.fault == FaultCode::None && self.pins.enable.get() && self.geometry.is_valid() {
-            let dt = period_ns as f64 / 1e9;
-            let abort = self.pins.abort.get();
-            let target = if self.pins.hold.get() || abort || self.aborted {
-                0.0
-            } else {
-                1.0
-            };
-            let before = self.scale.value();
-            let plan_dt = self.scale.advance(target, self.pins.ramp_time.get(), dt);
-            if self.aborted {
-                discard(channel, self.geometry.generation);
-            } else if before == 0.0 && self.scale.value() == 0.0 {
-                // Held (or aborted) at rest.
-                if abort && self.interp.record().is_some() {
-                    self.aborted = true;
-                    discard(channel, self.geometry.generation);
-                }
-            } else {
-                active = self.advance(channel, plan_dt);
-            }
+        let (hold, abort) = (self.pins.hold.get(), self.pins.abort.get());
+        let resume = self.pins.resume.get();
+        // Only an edge while a plan from the stop point is queued counts; one without data (or
+        // under hold) is dropped.
+        let resume_edge = resume && !self.resume_pin;
+        self.resume_pin = resume;
+        if (self.awaiting_resume || (self.stopped && !self.aborted)) && abort {
+            // Abort while stopped: the stopped motion is over; a new geometry starts a new
+            // motion from its first record.
+            self.end_motion(channel);
         }
-        if self.fault == FaultCode::None && (self.stopped || self.interp.is_finished()) {
+        let command = match self.cause {
+            StopCause::Hold => !hold,
+            _ => resume_edge,
+        };
+        if self.awaiting_resume && command && !hold && self.fault == FaultCode::None && !channel.segments.is_empty() {
+            // Data and the command: run the plan from the stop point.
+            self.awaiting_resume = false;
+            self.resuming = true;
+            self.cause = StopCause::None;
+            channel.stop.clear();
+        }
+        let mut active = false;
+        let started = self.interp.record().is_some();
+        if abort && !started && self.geometry.is_valid() && !self.aborted && self.fault == FaultCode::None {
+            self.end_motion(channel); // nothing moved yet: the queue is discarded at once
+        }
+        if self.fault == FaultCode::None
+            && self.pins.enable.get()
+            && self.geometry.is_valid()
+            && !self.awaiting_resume
+            && !self.aborted
+            && !self.stopped
+            && !((hold || abort) && !started)
+        {
+            let dt = period_ns as f64 / 1e9;
+            active = self.advance(channel, dt, hold, abort);
+        }
+        if self.fault == FaultCode::None && (self.stopped || self.aborted || self.interp.is_finished()) {
             // Over: what is still queued (or comes) belongs to a motion that will not run, and
             // an empty ring tells a new planner that it may publish.
             discard(channel, self.geometry.generation);
         }
         let pins = &self.pins;
-        pins.scale.set(self.scale.value());
         pins.active.set(active);
         pins.done.set(self.interp.is_finished());
         pins.fault.set(self.fault != FaultCode::None);
         pins.fault_code.set(self.fault as u32);
-        pins.underrun.set(self.stopping);
+        pins.underrun.set(self.cause == StopCause::Underrun);
+        pins.held.set(self.stopped || self.awaiting_resume);
         pins.underruns.set(self.underruns);
         pins.records.set(self.records);
-        let buffered = if self.stopping {
+        let ready = self.awaiting_resume && self.fault == FaultCode::None && !channel.segments.is_empty();
+        pins.resume_ready.set(ready);
+        let buffered = if self.cause != StopCause::None {
             0.0
         } else {
             (channel.planned_time() - self.taken_time).max(0.0) + self.interp.time_left_in_segment()
@@ -416,7 +422,7 @@ impl Instance {
         pins.buffered.set(buffered);
     }
 
-    /// A motion is loaded and may still move (not finished, aborted or stopped on underrun).
+    /// A motion is loaded and may still move (not finished, aborted or stopped).
     fn in_motion(&self) -> bool {
         self.interp.record().is_some() && !self.interp.is_finished() && !self.aborted && !self.stopped
     }
@@ -453,6 +459,16 @@ impl Instance {
         g.stop_accel = header.stop_accel;
         g.stop_jerk = header.stop_jerk;
         g.generation = generation;
+        // After a stop on the path (underrun or hold) the new geometry carries the plan from the
+        // stop point: it waits for the command, and its first record must start there.
+        if self.held.is_some() && (self.stopped || self.awaiting_resume) && !self.aborted {
+            self.awaiting_resume = true;
+        } else {
+            self.held = None;
+            self.awaiting_resume = false;
+            self.cause = StopCause::None;
+        }
+        self.resuming = false;
         // A new geometry starts a new motion.
         self.interp = Interpolator::new();
         self.next_seq = 0;
@@ -460,26 +476,40 @@ impl Instance {
         self.stopping = false;
         self.stopped = false;
         self.aborted = false;
-        self.scale = TimeScale::run();
     }
 
-    /// Advance the interpolator by one period; true if it produced a sample.
-    fn advance(&mut self, channel: &Channel, dt: f64) -> bool {
+    /// The stopped (or aborted) motion is over: nothing of it resumes.
+    fn end_motion(&mut self, channel: &Channel) {
+        self.aborted = true;
+        self.awaiting_resume = false;
+        self.held = None;
+        self.cause = StopCause::None;
+        channel.stop.clear();
+    }
+
+    /// Advance the interpolator by one period; true if it produced a sample. `hold`, `abort`:
+    /// no further record is taken; the module stops at the next segment boundary instead.
+    fn advance(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
         let mut pull = Pull::Fine;
         let step = {
             let ring = &channel.segments;
-            let stopping = self.stopping;
+            let no_more = self.stopping || hold || abort;
+            let resume_from = if self.resuming { self.held } else { None };
             let next_seq = &mut self.next_seq;
             let records = &mut self.records;
             let taken_time = &mut self.taken_time;
             let pins = &self.pins;
             let mut next = || -> Option<SegmentRecord> {
-                if stopping || pull != Pull::Fine {
+                if no_more || pull != Pull::Fine {
                     return None;
                 }
                 match ring.pop() {
                     Ok(Some(r)) if r.seq != *next_seq => {
                         pull = Pull::Fault(FaultCode::Sequence);
+                        None
+                    }
+                    Ok(Some(r)) if resume_from.is_some_and(|h| !starts_at(&r, &h)) => {
+                        pull = Pull::Fault(FaultCode::ResumePoint);
                         None
                     }
                     Ok(Some(r)) => match check_record(&r) {
@@ -513,6 +543,16 @@ impl Instance {
                 false
             }
             (Step::Sample(s), _) => {
+                if self.resuming {
+                    // The resumed motion's first sample: it must be where the machine stands.
+                    let here = self.held.map(|h| h.point);
+                    if here.is_none_or(|p| distance(&p, &self.point_of(&s)) > RESUME_TOLERANCE) {
+                        self.fault = FaultCode::ResumePoint;
+                        return false;
+                    }
+                    self.resuming = false;
+                    self.held = None;
+                }
                 self.output(&s);
                 true
             }
@@ -525,12 +565,25 @@ impl Instance {
                 let Some(last) = self.interp.record().copied() else {
                     return false; // not started yet: waiting for the first record
                 };
-                self.underruns = self.underruns.wrapping_add(1);
                 if self.stopping {
+                    // The stop is over: at rest.
                     self.stopped = true;
-                    return false; // stopped: hold
+                    if self.cause == StopCause::Abort {
+                        self.end_motion(channel);
+                    } else {
+                        self.publish_stop(channel, last.seq);
+                    }
+                    return false;
                 }
                 self.stopping = true;
+                self.cause = if abort {
+                    StopCause::Abort
+                } else if hold {
+                    StopCause::Hold
+                } else {
+                    self.underruns = self.underruns.wrapping_add(1);
+                    StopCause::Underrun
+                };
                 let curve = self.geometry.views.get(last.curve()).copied().flatten();
                 let (accel, jerk) = self.geometry.stop_limits(last.seq);
                 let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
@@ -549,18 +602,56 @@ impl Instance {
         }
     }
 
+    /// The axis positions the module outputs for `s`.
+    fn point_of(&self, s: &Sample) -> [f64; 3] {
+        let [x, y, z, ..] = s.point;
+        [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }]
+    }
+
+    /// At rest after a hold or underrun stop: remember where, and tell the planner.
+    fn publish_stop(&mut self, channel: &Channel, seq: u32) {
+        let c = *self.interp.cursor();
+        let [x, y, z, ..] = c.point;
+        let held = Held {
+            curve: self.interp.curve_index(),
+            u: c.u,
+            s: c.s,
+            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
+        };
+        self.held = Some(held);
+        self.stops = self.stops.wrapping_add(1).max(1);
+        channel.stop.publish(&StopPoint {
+            epoch: self.stops,
+            cause: self.cause as u32,
+            generation: self.geometry.generation,
+            seq,
+            curve: held.curve as u32,
+            u: held.u,
+            s: held.s,
+            point: held.point,
+        });
+    }
+
     fn output(&self, s: &Sample) {
         let pins = &self.pins;
-        let [x, y, z, ..] = s.point;
+        let [x, y, z] = self.point_of(s);
         pins.pos_cmd_x.set(x);
         pins.pos_cmd_y.set(y);
-        pins.pos_cmd_z.set(if self.geometry.tip >= 3 { z } else { 0.0 });
-        // The path speed: the planned feed times the hold time scale (exactly the plan's feed
-        // when not scaled).
-        pins.feed.set(s.feed * self.scale.value());
+        pins.pos_cmd_z.set(z);
+        pins.feed.set(s.feed);
         pins.u.set(s.u);
         pins.curve.set(s.curve as u32);
     }
+}
+
+/// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
+fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
+    r.curve() == held.curve && r.u_start == held.u && r.s_start == held.s && r.feed_start == 0.0
+}
+
+fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    (dx * dx + dy * dy + dz * dz).sqrt()
 }
 
 /// Rounding slack for a start feed: the planner hands on a segment's computed end feed, which
@@ -621,8 +712,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
         Pin::create(addr_of_mut!((*p).enable), c"nurbs_interp.enable", i, id),
         Pin::create(addr_of_mut!((*p).hold), c"nurbs_interp.hold", i, id),
         Pin::create(addr_of_mut!((*p).abort), c"nurbs_interp.abort", i, id),
-        Pin::create(addr_of_mut!((*p).ramp_time), c"nurbs_interp.ramp-time", i, id),
-        Pin::create(addr_of_mut!((*p).scale), c"nurbs_interp.scale", o, id),
+        Pin::create(addr_of_mut!((*p).resume), c"nurbs_interp.resume", i, id),
         Pin::create(addr_of_mut!((*p).pos_cmd_x), c"nurbs_interp.pos-cmd-x", o, id),
         Pin::create(addr_of_mut!((*p).pos_cmd_y), c"nurbs_interp.pos-cmd-y", o, id),
         Pin::create(addr_of_mut!((*p).pos_cmd_z), c"nurbs_interp.pos-cmd-z", o, id),
@@ -638,13 +728,13 @@ unsafe fn create(comp_id: c_int) -> c_int {
         Pin::create(addr_of_mut!((*p).records), c"nurbs_interp.records", o, id),
         Pin::create(addr_of_mut!((*p).seq), c"nurbs_interp.seq", o, id),
         Pin::create(addr_of_mut!((*p).buffered), c"nurbs_interp.buffered", o, id),
+        Pin::create(addr_of_mut!((*p).resume_ready), c"nurbs_interp.resume-ready", o, id),
+        Pin::create(addr_of_mut!((*p).held), c"nurbs_interp.held", o, id),
     ];
     if let Some(&rc) = results.iter().find(|&&rc| rc < 0) {
         error(c"nurbs_interp: pin export failed");
         return rc;
     }
-    (*p).ramp_time.set(DEFAULT_RAMP_TIME);
-    (*p).scale.set(1.0);
 
     let shmem_id = sys::rtapi_shmem_new(CHANNEL_KEY, comp_id, Channel::SIZE as _);
     if shmem_id < 0 {
@@ -672,9 +762,15 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).taken_time).write(0.0);
     addr_of_mut!((*inst).stopping).write(false);
     addr_of_mut!((*inst).stopped).write(false);
-    addr_of_mut!((*inst).scale).write(TimeScale::run());
+    addr_of_mut!((*inst).cause).write(StopCause::None);
+
     addr_of_mut!((*inst).aborted).write(false);
     addr_of_mut!((*inst).fault).write(FaultCode::None);
+    addr_of_mut!((*inst).stops).write(0);
+    addr_of_mut!((*inst).held).write(None);
+    addr_of_mut!((*inst).awaiting_resume).write(false);
+    addr_of_mut!((*inst).resuming).write(false);
+    addr_of_mut!((*inst).resume_pin).write(false);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),

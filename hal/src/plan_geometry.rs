@@ -8,12 +8,13 @@
 //! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
 //! check). That choice goes to the module as the per-record stop table.
 
-use nurbs_hal::channel::{validate_geometry, CurveViews, MAX_CURVES};
+use nurbs_hal::channel::{validate_geometry, CurveViews, StopPoint, MAX_CURVES};
 use nurbs_hal::module::underrun_stop;
 use nurbs_hal::user::GeometryBuilder;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
-use nurbs_motion::planner::{PathCurves, Plan, PlanOptions};
+use nurbs_motion::planner::erwinski::PlanStart;
+use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_rtcore::executor::{Interpolator, Step};
 
 /// Stop deceleration and jerk tried at each boundary, as fractions of the smallest axis
@@ -145,4 +146,18 @@ pub fn geometry(
     let table: Vec<(f64, f64)> = choices.iter().map(|c| (c.accel, c.jerk)).collect();
     g.set_stop_table(&table)?;
     Ok((g, choices))
+}
+
+/// The plan of the rest of the path from where the module stopped after an underrun (at rest,
+/// its first record starting at exactly the published element, parameter and arc length).
+pub fn plan_from_stop(toolpath: &Toolpath, limits: &Limits, stop: &StopPoint) -> Result<Plan, String> {
+    let options = PlanOptions {
+        start: Some(PlanStart {
+            curve: stop.curve as usize,
+            u: stop.u,
+            s: stop.s,
+        }),
+        ..PlanOptions::default()
+    };
+    plan(toolpath, limits, &options, &mut |_| {}).map_err(|e| format!("re-plan from the stop point: {e}"))
 }

@@ -164,6 +164,11 @@ fn module_creates_its_pins_and_function() {
         "records",
         "seq",
         "buffered",
+        "hold",
+        "abort",
+        "resume",
+        "resume-ready",
+        "held",
     ] {
         assert!(
             names.contains(&format!("nurbs_interp.{pin}")),
@@ -402,6 +407,147 @@ fn an_underrun_stops_along_the_path_without_a_jump() {
     unsafe { rtapi_app_exit() };
 }
 
+/// Underrun, resume: the module stops on the path, publishes where it stands; the plan of the
+/// rest of the path from there (at rest) is published; nothing moves until the resume command;
+/// then the motion continues to the end of the path. The whole sampled run (the stop's samples
+/// followed directly by the resumed ones, as a sampler records it) passes the finite-difference
+/// check, with no jump, and the update path allocates nothing.
+#[test]
+fn an_underrun_resumes_from_the_stop_point_on_command() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    for name in ["trident.json", "butterfly.json"] {
+        let job = job(name);
+        let (_planner, channel) = load();
+        let update = mock::funct("nurbs_interp.update").unwrap();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        geometry(&job).publish(channel).unwrap();
+        let end_feed = |i: usize| job.records[i - 1].profile().table().end().v;
+        let cut = (3..job.records.len() - 1)
+            .max_by(|&a, &b| end_feed(a).total_cmp(&end_feed(b)))
+            .unwrap();
+        fill(channel, &job.records[..cut], 0);
+        let mut samples: Vec<[f64; 5]> = Vec::new();
+        let mut allocated = 0;
+        let mut period = |samples: &mut Vec<[f64; 5]>| {
+            let before = allocations();
+            unsafe { mock::call(update, PERIOD_NS as _) };
+            allocated += allocations() - before;
+            if bit("nurbs_interp.active") {
+                samples.push([
+                    float("nurbs_interp.pos-cmd-x"),
+                    float("nurbs_interp.pos-cmd-y"),
+                    float("nurbs_interp.feed"),
+                    float("nurbs_interp.u"),
+                    u32_pin("nurbs_interp.curve") as f64,
+                ]);
+            }
+        };
+        let mut stop = None;
+        for _ in 0..job.samples.len() {
+            period(&mut samples);
+            stop = channel.stop.read();
+            if stop.is_some() {
+                break;
+            }
+        }
+        let stop = stop.expect("no stop point published");
+        let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+        assert_eq!([stop.point[0], stop.point[1]], held);
+        assert_eq!(stop.u, float("nurbs_interp.u"));
+        assert_eq!(stop.seq as usize, cut - 1);
+        assert!(bit("nurbs_interp.underrun") && !bit("nurbs_interp.fault"));
+        // A resume command without data does nothing.
+        mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+        let n_stopped = samples.len();
+        for _ in 0..100 {
+            period(&mut samples);
+        }
+        mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+        assert_eq!(samples.len(), n_stopped);
+        assert!(!bit("nurbs_interp.resume-ready"));
+        // The planner re-plans the rest from rest at the stop point and publishes it.
+        let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
+        assert_eq!((plan2.records[0].u_start, plan2.records[0].s_start), (stop.u, stop.s));
+        for _ in 0..10 {
+            period(&mut samples); // the module empties the ring of the stopped motion
+        }
+        assert!(channel.segments.is_empty());
+        crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
+            .unwrap()
+            .0
+            .publish(channel)
+            .unwrap();
+        let mut sent = fill(channel, &plan2.records, 0);
+        // Data but no command: the machine stays.
+        for _ in 0..400 {
+            period(&mut samples);
+        }
+        assert_eq!(samples.len(), n_stopped);
+        assert!(bit("nurbs_interp.resume-ready") && bit("nurbs_interp.underrun"));
+        assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], held);
+        assert!(channel.stop.read().is_some());
+        mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+        let periods = job.samples.len() + 20_000;
+        for _ in 0..periods {
+            sent = fill(channel, &plan2.records, sent);
+            period(&mut samples);
+            if bit("nurbs_interp.done") {
+                break;
+            }
+        }
+        mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+        assert_eq!(allocated, 0, "the update path allocated");
+        assert!(bit("nurbs_interp.done"), "{name}: did not resume to the end");
+        assert!(!bit("nurbs_interp.fault") && !bit("nurbs_interp.underrun"));
+        assert!(channel.stop.read().is_none());
+        // The resumed motion starts where the machine stood and ends at C(1) at rest.
+        assert_eq!([samples[n_stopped][0], samples[n_stopped][1]], held);
+        let end = job.samples.last().unwrap().point;
+        let last = samples.last().unwrap();
+        assert_eq!([last[0], last[1]], [end[0], end[1]], "{name}");
+        assert_eq!(last[2], 0.0);
+        let report =
+            nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&samples));
+        println!(
+            "{name}: {} samples to the stop, {} resumed; peaks {:?}",
+            n_stopped,
+            samples.len() - n_stopped,
+            report.peaks
+        );
+        assert!(report.violations.is_empty(), "{name}: {:?}", report.violations);
+        unsafe { rtapi_app_exit() };
+    }
+}
+
+/// After an underrun stop, a plan that does not start where the machine stands (here: the
+/// whole path again, from C(0)) is refused with a fault and the position is held.
+#[test]
+fn a_resume_from_elsewhere_is_refused() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let job = job("trident.json");
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records[..job.records.len() / 2], 0);
+    for _ in 0..job.samples.len() {
+        unsafe { mock::call(update, PERIOD_NS as _) };
+    }
+    assert!(channel.stop.read().is_some());
+    let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records, 0);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+    for _ in 0..100 {
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        assert!(!bit("nurbs_interp.active"));
+    }
+    assert!(bit("nurbs_interp.fault"));
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::ResumePoint as u32);
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], held);
+    unsafe { rtapi_app_exit() };
+}
+
 /// Runs a few periods and returns the fault code.
 fn fault_after(channel: &Channel, records: &[SegmentRecord]) -> u32 {
     let update = mock::funct("nurbs_interp.update").unwrap();
@@ -560,35 +706,134 @@ fn run_with(channel: &Channel, job: &Job, periods: usize, control: &mut dyn FnMu
     out
 }
 
+/// Periods of `job`'s offline samples where an axis' finite-difference jerk and acceleration
+/// peak (the hardest moments to start a hold at).
+fn peak_periods(job: &Job) -> Vec<usize> {
+    let p: Vec<[f64; 2]> = job.samples.iter().map(|s| [s.point[0], s.point[1]]).collect();
+    let mut best = [(0.0f64, 0usize); 2];
+    for (k, w) in p.windows(4).enumerate().map(|(k, w)| (k + 3, w)) {
+        for (i, (jerk_limit, acc_limit)) in job.limits.jerk.iter().zip(&job.limits.acceleration).enumerate() {
+            let acc = (w[3][i] - 2.0 * w[2][i] + w[1][i]).abs();
+            let jerk = (w[3][i] - 3.0 * w[2][i] + 3.0 * w[1][i] - w[0][i]).abs();
+            let jerk_ratio = jerk / (jerk_limit * PERIOD.powi(3));
+            let acc_ratio = acc / (acc_limit * PERIOD.powi(2));
+            if jerk_ratio > best[0].0 {
+                best[0] = (jerk_ratio, k);
+            }
+            if acc_ratio > best[1].0 {
+                best[1] = (acc_ratio, k);
+            }
+        }
+    }
+    println!(
+        "peak jerk {:?}, peak acceleration {:?} (ratio, sample)",
+        best[0], best[1]
+    );
+    // The sample k is produced by period k - 1 (the first period produces sample 0).
+    best.iter().map(|b| b.1.saturating_sub(1)).collect()
+}
+
+/// Runs `job` with `hold` set before period `hold_at`, playing the planner: it streams the plan
+/// until the module publishes its stop point, then the plan from there; `hold` is released
+/// `held_for` periods after that plan is queued. Returns every period's setpoint from the first
+/// sample on (x, y, feed, u, curve), the period the module came to rest (None: the hold came
+/// during the last segment, which has no boundary to stop at: the motion ends at C(1)), and the
+/// period the motion ended.
+fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Option<usize>, usize) {
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(job).publish(channel).unwrap();
+    let mut records = job.records.clone();
+    let (mut sent, mut out, mut allocated) = (0, Vec::new(), 0);
+    let (mut rest_at, mut release_at, mut end, mut last_running) = (None, None, 0, false);
+    for p in 0..job.samples.len() + 50_000 {
+        if p == hold_at {
+            mock::set_pin("nurbs_interp.hold", Value::Bit(true));
+            last_running = u32_pin("nurbs_interp.records") as usize == job.records.len();
+        }
+        if rest_at.is_none() {
+            if let Some(stop) = channel.stop.read() {
+                // The planner sees the stop point once the module has emptied the ring.
+                assert!(channel.segments.is_empty());
+                assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.underrun"));
+                let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
+                crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
+                    .unwrap()
+                    .0
+                    .publish(channel)
+                    .unwrap();
+                records = plan2.records;
+                sent = 0;
+                rest_at = Some(p);
+                release_at = Some(p + held_for);
+            }
+        }
+        if Some(p) == release_at {
+            assert!(bit("nurbs_interp.resume-ready") && !bit("nurbs_interp.active"));
+            mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+        }
+        sent = fill(channel, &records, sent);
+        let before = allocations();
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        allocated += allocations() - before;
+        if bit("nurbs_interp.active") || !out.is_empty() {
+            out.push([
+                float("nurbs_interp.pos-cmd-x"),
+                float("nurbs_interp.pos-cmd-y"),
+                float("nurbs_interp.feed"),
+                float("nurbs_interp.u"),
+                u32_pin("nurbs_interp.curve") as f64,
+            ]);
+        }
+        if bit("nurbs_interp.done") {
+            end = p;
+            break;
+        }
+    }
+    assert_eq!(allocated, 0, "the update path allocated");
+    assert!(!bit("nurbs_interp.fault") && !bit("nurbs_interp.held"));
+    assert!(
+        rest_at.is_some() || last_running,
+        "hold at {hold_at} never came to rest"
+    );
+    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+    unsafe { rtapi_app_exit() };
+    (out, rest_at, end)
+}
+
+/// Feed hold: the module stops at the next segment boundary with the stop the planner checked
+/// from that boundary, publishes its stop point, the planner re-plans the rest from there and
+/// releasing `hold` runs it to the end. Holds requested anywhere, including where the plan runs
+/// at its peak axial jerk and acceleration: every period's setpoint (held ones included) passes
+/// the exact finite-difference check (`verify`, relative slack 1e-6), no jump, ends at C(1).
 #[test]
 fn hold_stops_on_the_path_and_resumes_within_the_limits() {
     let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
     for name in ["trident.json", "butterfly.json"] {
         let job = job(name);
         let n = job.samples.len();
+        let mut at = vec![1, n / 7, n / 3, n / 2, 2 * n / 3, 6 * n / 7];
+        at.extend(peak_periods(&job));
         let mut worst = 0.0f64;
-        for hold_at in [n / 7, n / 3, n / 2, 2 * n / 3, 6 * n / 7] {
-            let (_planner, channel) = load();
-            mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-            geometry(&job).publish(channel).unwrap();
-            let ramp = crate::module::DEFAULT_RAMP_TIME;
-            assert_eq!(float("nurbs_interp.ramp-time"), ramp);
-            let release = hold_at + (ramp / PERIOD) as usize + 1000;
-            let mut scale_at_release = 1.0;
-            let samples = run_with(channel, &job, n + 10_000 + 2 * (ramp / PERIOD) as usize, &mut |p| {
-                if p == hold_at {
-                    mock::set_pin("nurbs_interp.hold", Value::Bit(true));
-                }
-                if p == release {
-                    scale_at_release = float("nurbs_interp.scale");
-                    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
-                }
-            });
-            assert_eq!(scale_at_release, 0.0, "{name}: not held after the ramp");
-            assert!(bit("nurbs_interp.done"), "{name}: did not resume to the end");
-            assert!(!bit("nurbs_interp.fault"));
+        let mut latency = 0usize;
+        for hold_at in at {
+            let (samples, rest_at, end) = hold_run(&job, hold_at, 2000);
+            let last = samples.last().unwrap();
+            let goal = job.samples.last().unwrap().point;
+            assert_eq!([last[0], last[1]], [goal[0], goal[1]], "{name}: hold at {hold_at}");
+            if rest_at.is_some() {
+                assert!(samples.len() > n + 2000, "{name}: hold at {hold_at}: no hold");
+                let still = samples.windows(2).filter(|w| w[0][..2] == w[1][..2]).count();
+                assert!(still >= 2000, "{name}: hold at {hold_at}: held {still} periods");
+            }
             let report =
                 nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&samples));
+            assert!(
+                report.violations.is_empty(),
+                "{name}: hold at {hold_at}: {:?}",
+                report.violations
+            );
             let ratio = (0..2)
                 .map(|i| {
                     (report.peaks.vel[i] / job.limits.velocity[i])
@@ -597,22 +842,81 @@ fn hold_stops_on_the_path_and_resumes_within_the_limits() {
                 })
                 .fold(0.0, f64::max);
             worst = worst.max(ratio);
+            let to_rest = rest_at.map(|r| r - hold_at);
+            latency = latency.max(to_rest.unwrap_or(0));
             println!(
-                "{name}: hold at period {hold_at}: worst ratio {ratio:.6}, {:?}",
-                report.violations
+                "{name}: hold at period {hold_at}: at rest after {to_rest:?} periods (None: in the last segment), end at {end}, worst ratio {ratio:.9}"
             );
-            // The ramp is not checked against the limits: where the plan runs at a jerk limit as
-            // the hold starts, its terms add a little (measured with the default 2 s ramp:
-            // at most 0.0007 %; 0.6 % with a 1 s ramp, 2.8 % with 0.5 s). Allow 0.01 %.
-            assert!(ratio <= 1.0001, "{name}: hold at {hold_at}: ratio {ratio}");
-            let others: Vec<_> = report.violations.iter().filter(|v| !v.contains(": jerk ")).collect();
-            assert!(others.is_empty(), "{name}: hold at {hold_at}: {others:?}");
-            unsafe { rtapi_app_exit() };
         }
-        println!("{name}: worst hold/resume ratio {worst:.4}");
+        let durations: Vec<f64> = job.records.iter().map(|r| r.profile().total_time()).collect();
+        println!(
+            "{name}: worst hold/resume ratio {worst:.9}, longest hold-to-rest {:.3} s; segments: longest {:.3} s, last {:.3} s",
+            latency as f64 * PERIOD,
+            durations.iter().copied().fold(0.0, f64::max),
+            durations.last().unwrap()
+        );
     }
 }
 
+/// The commands need data: a hold released before the plan from the stop point is queued
+/// keeps the machine at rest until it is, then the motion continues at once; a `resume` edge
+/// under hold is ignored.
+#[test]
+fn commands_wait_for_the_plan_from_the_stop_point() {
+    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let job = job("trident.json");
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    let periods = |k: usize| {
+        for _ in 0..k {
+            unsafe { mock::call(update, PERIOD_NS as _) };
+        }
+    };
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(&job).publish(channel).unwrap();
+    fill(channel, &job.records, 0);
+    periods(job.samples.len() / 3);
+    mock::set_pin("nurbs_interp.hold", Value::Bit(true));
+    periods(3000);
+    let stop = channel.stop.read().expect("no stop point after the hold");
+    assert_eq!(stop.cause, crate::module::StopCause::Hold as u32);
+    assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.underrun"));
+    // Released without a plan from the stop point: nothing moves.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+    let here = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+    for _ in 0..500 {
+        periods(1);
+        assert!(!bit("nurbs_interp.active"));
+    }
+    let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
+    // Under hold again, the plan arrives; a resume edge does not start it.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(true));
+    crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
+        .unwrap()
+        .0
+        .publish(channel)
+        .unwrap();
+    let mut sent = fill(channel, &plan2.records, 0);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+    periods(100);
+    mock::set_pin("nurbs_interp.resume", Value::Bit(false));
+    assert!(!bit("nurbs_interp.active") && bit("nurbs_interp.resume-ready"));
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], here);
+    // Released: the plan from the stop point runs to the end.
+    mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+    periods(1);
+    assert!(bit("nurbs_interp.active"));
+    assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], here);
+    for _ in 0..job.samples.len() {
+        sent = fill(channel, &plan2.records, sent);
+        periods(1);
+    }
+    assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault") && !bit("nurbs_interp.held"));
+    unsafe { rtapi_app_exit() };
+}
+
+/// Abort: the module stops at the next segment boundary (the checked stop), then the motion is
+/// over and the queue is discarded; within the limits.
 #[test]
 fn abort_stops_then_discards_the_queue() {
     let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
@@ -630,10 +934,10 @@ fn abort_stops_then_discards_the_queue() {
             mock::set_pin("nurbs_interp.abort", Value::Bit(false));
         }
     });
-    assert_eq!(float("nurbs_interp.scale"), 0.0);
     assert!(!bit("nurbs_interp.done"));
     assert!(!bit("nurbs_interp.fault"));
     assert!(!bit("nurbs_interp.active"));
+    assert!(channel.stop.read().is_none(), "an aborted motion offers no stop point");
     let rest = samples.last().unwrap();
     assert!(samples[samples.len() - 1500..].iter().all(|s| s[..2] == rest[..2]));
     let records = u32_pin("nurbs_interp.records") as usize;
@@ -642,20 +946,12 @@ fn abort_stops_then_discards_the_queue() {
     assert!(channel.segments.is_empty());
     let report =
         nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&samples));
-    // As for hold: the ramp may add a little to a jerk the plan runs at its limit (<= 0.01 %).
     let others: Vec<_> = report
         .violations
         .iter()
-        .filter(|v| !v.contains("not the end of the path") && !v.contains(": jerk "))
+        .filter(|v| !v.contains("not the end of the path"))
         .collect();
     assert!(others.is_empty(), "{others:?}");
-    for i in 0..2 {
-        assert!(
-            report.peaks.jerk[i] <= job.limits.jerk[i] * 1.0001,
-            "{:?}",
-            report.peaks
-        );
-    }
     unsafe { rtapi_app_exit() };
 }
 
@@ -696,7 +992,7 @@ fn update_cost() {
     }
 }
 
-/// After a motion is over (finished, stopped on an underrun, aborted), the module empties the
+/// After a motion is over (finished, stopped on an underrun and aborted, aborted), the module empties the
 /// ring and a new geometry starts a new motion from its first record: the trident again, exactly.
 #[test]
 fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
@@ -729,6 +1025,13 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
         end(channel, &job);
         periods(n + 12_000);
         assert!(!bit("nurbs_interp.active"), "{what}");
+        if what == "underrun" {
+            // An underrun stop waits for a plan from the stop point; abort ends that motion.
+            assert!(channel.stop.read().is_some());
+            mock::set_pin("nurbs_interp.abort", Value::Bit(true));
+            periods(9_000);
+            assert!(channel.stop.read().is_none(), "abort keeps the stop point");
+        }
         // Records of the old motion still coming are dropped, not run.
         fill(channel, &job.records[1..], 0);
         periods(10);

@@ -27,6 +27,9 @@ pub struct PlanOptions {
     /// Fraction of the FLF acceleration and jerk caps used as segment end feeds, leaving room
     /// for the tangential acceleration terms.
     pub flf_margin: f64,
+    /// Plan the rest of the path from rest at this point instead of the whole path (resuming
+    /// after a stop); `None`: from the start of the first element.
+    pub start: Option<PlanStart>,
 }
 
 impl Default for PlanOptions {
@@ -34,8 +37,19 @@ impl Default for PlanOptions {
         PlanOptions {
             samples_per_control_point: 500,
             flf_margin: 0.95,
+            start: None,
         }
     }
+}
+
+/// A point on the path to plan from, at rest: element `curve`, parameter `u`, taken to be at
+/// arc length `s` from the element's start (the first record gets exactly these `u_start`,
+/// `s_start`, so an interpolator standing there continues without a jump).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlanStart {
+    pub curve: usize,
+    pub u: f64,
+    pub s: f64,
 }
 
 /// A finished plan.
@@ -141,6 +155,22 @@ pub fn plan(
     let mut scans = Vec::new();
     let mut criticals = Vec::new();
     let mut nodes: Vec<Node> = Vec::new();
+    let start = options.start.unwrap_or(PlanStart {
+        curve: 0,
+        u: curves.view(0).u_min(),
+        s: 0.0,
+    });
+    let start_ok = start.curve < toolpath.elements.len() && {
+        let view = curves.view(start.curve);
+        start.u >= view.u_min() && start.u < view.u_max() && start.s.is_finite() && start.s >= 0.0
+    };
+    if !start_ok {
+        return Err(PlanError::Infeasible {
+            curve: start.curve,
+            u: start.u,
+            reason: "the start point is not on the path (or at its end)".into(),
+        });
+    }
     for (c, element) in toolpath.elements.iter().enumerate() {
         let mut lim = planning.clone();
         if let Some(f) = element.feed {
@@ -148,6 +178,11 @@ pub fn plan(
         }
         let view = curves.view(c);
         let scan = FlfScan::new(view, tip, &lim, options.samples_per_control_point);
+        if c < start.curve {
+            // Before the start point: only the scan is kept (indexed by curve).
+            scans.push(scan);
+            continue;
+        }
         let points = critical_points(view, tip, &lim, &scan);
         let cap_of = |p: &CriticalPoint| {
             let v = flf(view, tip, &lim, p.u);
@@ -164,12 +199,12 @@ pub fn plan(
                 last.hard = true;
             }
             None => nodes.push(Node {
-                end_curve: 0,
-                end_u: u0,
-                end_s: 0.0,
-                start_curve: 0,
-                start_u: u0,
-                start_s: 0.0,
+                end_curve: c,
+                end_u: start.u,
+                end_s: start.s,
+                start_curve: c,
+                start_u: start.u,
+                start_s: start.s,
                 cap: 0.0,
                 hard: true,
             }),
@@ -184,6 +219,10 @@ pub fn plan(
         all.retain(|(p, _)| stops.iter().all(|b| (b.u - p.u).abs() > 1e-9 * (u1 - u0)));
         all.extend(stops.drain(..).map(|b| (b, Some(b.flf))));
         all.sort_by(|a, b| a.0.u.total_cmp(&b.0.u));
+        if c == start.curve {
+            // Only what lies ahead of the start point (which is a stop itself).
+            all.retain(|(p, _)| p.u > start.u + 1e-9 * (u1 - u0));
+        }
         for (p, fixed_cap) in &all {
             let p = &p;
             let s = tables[c].length_to(&element.curve, p.u);

@@ -3,8 +3,13 @@
 
 - the samples start as the offline plan, equal to --tol mm, up to a segment boundary;
 - then the module's own stop: the feed never rises and ends at rest (below J dt^2 / 2);
-- underrun set, no fault, not done; the recorded setpoints go to a CSV for `nurbs-plan verify`
-  (which must find no violation but the missing end of the path).
+- underrun set, no fault, not done;
+- with --resumed (the samples after a planner re-planned from the stop point and the module got
+  its resume command): the first resumed sample is where the stop ended (no jump), the motion ends
+  at C(1) (the offline plan's last point, to --tol mm) at rest, done, no fault, underrun cleared.
+The recorded setpoints (stop and resumed samples back to back, as the sampler saw them) go to a
+CSV for `nurbs-plan verify`, which must find no violation (but the missing end of the path when
+there is no resume).
 """
 import argparse
 import sys
@@ -20,6 +25,7 @@ def main():
     ap.add_argument("--jerk", type=float, required=True)
     ap.add_argument("--tol", type=float, default=1e-9)
     ap.add_argument("--recorded-csv", required=True)
+    ap.add_argument("--resumed")
     a = ap.parse_args()
 
     rows, axes = read_plan(a.expected)
@@ -47,12 +53,34 @@ def main():
     if any(s["fault"] for s in samples):
         errors.append("fault during the run")
 
-    write_recorded_csv(a.recorded_csv, samples, axes, a.period)
+    resumed = read_samples(a.resumed) if a.resumed else []
+    if a.resumed:
+        if not resumed:
+            errors.append("no samples after the resume command")
+        else:
+            gap = sample_gap(samples + resumed)
+            if gap:
+                errors.append("stop -> resumed: " + gap)
+            first, end = resumed[0], resumed[-1]
+            jump = max(abs(first[c] - last[c]) for c in axes) if last else float("inf")
+            if jump > a.tol:
+                errors.append(f"position jump at the resume: {jump} mm")
+            if first["feed"] != 0.0:
+                errors.append(f"the resumed motion does not start at rest: feed {first['feed']}")
+            goal = max(abs(end[c] - float(rows[-1][c])) for c in axes)
+            if goal > a.tol or end["feed"] != 0.0:
+                errors.append(f"the resumed motion ends {goal} mm from C(1), feed {end['feed']}")
+            if not end["done"] or end["fault"] or end["underrun"]:
+                errors.append(f"end state after the resume: {end}")
+            if any(s["fault"] for s in resumed):
+                errors.append("fault after the resume")
+    write_recorded_csv(a.recorded_csv, samples + resumed, axes, a.period)
     if errors:
         print("FAIL:\n  " + "\n  ".join(errors))
         sys.exit(1)
     print(f"ok: {planned} planned samples, then a {len(stop)}-sample stop from "
-          f"{stop[0]['feed']:.3f} mm/s to {last['feed']:.2e} mm/s; underruns={last['underruns']}")
+          f"{stop[0]['feed']:.3f} mm/s to {last['feed']:.2e} mm/s; underruns={last['underruns']}"
+          + (f"; resumed: {len(resumed)} samples to C(1)" if resumed else ""))
 
 
 if __name__ == "__main__":

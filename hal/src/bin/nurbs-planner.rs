@@ -18,18 +18,26 @@
 //! (bit out: records remain to be sent), `.error` (bit out), `.records-sent` (u32 out),
 //! `.buffered` (float out, s: motion time queued in the ring).
 //! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send).
+//!
+//! Resume after a hold or an underrun: when the module has stopped on the path it publishes the
+//! stop point in the channel. A planner that starts then, or that is running when it happens,
+//! plans the rest of the path from rest at exactly that point and publishes it; the module runs
+//! it when `nurbs_interp.hold` is released (hold) or on a rising edge of `nurbs_interp.resume`
+//! (underrun). (To start a different job instead, abort
+//! first: `nurbs_interp.abort` clears the stop point.)
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
-use nurbs_hal::channel::{Channel, ChannelError, SegmentRecord};
+use nurbs_hal::channel::{Channel, ChannelError, SegmentRecord, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
 use nurbs_hal::user::{install_signal_handlers, stopped, Component};
 
 #[path = "../plan_geometry.rs"]
 mod plan_geometry;
+use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{plan, Limits, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 
@@ -194,6 +202,84 @@ impl Streamer<'_> {
     }
 }
 
+/// Plans the whole path, or the rest of it from the module's underrun stop point `from`,
+/// publishes the geometry once the module has emptied the ring, and queues the first records.
+fn start_motion<'a>(
+    args: &Args,
+    toolpath: &Toolpath,
+    limits: &Limits,
+    channel: &'a Channel,
+    from: Option<&StopPoint>,
+) -> Result<Streamer<'a>, String> {
+    let plan = match from {
+        None => plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?,
+        Some(p) => {
+            eprintln!(
+                "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
+                match p.cause {
+                    1 => "underrun",
+                    2 => "hold",
+                    _ => "?",
+                },
+                p.curve,
+                p.u,
+                p.seq
+            );
+            plan_geometry::plan_from_stop(toolpath, limits, p)?
+        }
+    };
+    eprintln!(
+        "nurbs-planner: {} segments, motion {:.6} s, planned in {:.3} s",
+        plan.records.len(),
+        plan.motion_time,
+        plan.plan_time
+    );
+    let (geometry, stops) = plan_geometry::geometry(toolpath, &plan, args.stop_fraction)?;
+    let worst = stops.iter().map(|c| c.ratio).fold(0.0, f64::max);
+    eprintln!(
+        "nurbs-planner: underrun stops checked after every segment: worst {:.4} x an axis limit{}",
+        worst,
+        if worst <= 1.0 {
+            ""
+        } else {
+            " (EXCEEDS the limits at some boundary)"
+        }
+    );
+    // A motion of an earlier planner may still be queued: the module empties the ring once
+    // that motion is over (finished, aborted or stopped), and refuses a new geometry before.
+    let waited = std::time::Instant::now();
+    while !channel.segments.is_empty() {
+        if stopped() || waited.elapsed() > Duration::from_secs(10) {
+            return Err("the channel still holds records of a running motion".into());
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if let Some(p) = from {
+        // An abort while we planned withdraws the stop point: then the plan is not wanted.
+        if channel.stop.read().is_none_or(|now| now.epoch != p.epoch) {
+            return Err("the stop point was withdrawn (abort) while planning from it".into());
+        }
+    }
+    geometry.publish(channel)?;
+    let mut ends = vec![0.0];
+    let mut t = 0.0;
+    for r in &plan.records {
+        t += r.profile().total_time();
+        ends.push(t);
+    }
+    let mut streamer = Streamer {
+        channel,
+        records: plan.records,
+        ends,
+        sent: 0,
+        margin: args.margin,
+    };
+    // Queue what the margin allows before hal_ready, so `loadusr -W` returns with data in
+    // place and the servo thread can start at once.
+    streamer.fill()?;
+    Ok(streamer)
+}
+
 fn run(args: &Args) -> Result<(), String> {
     let toolpath = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
     let limits = limits(args, toolpath.tip_dim())?;
@@ -206,50 +292,9 @@ fn run(args: &Args) -> Result<(), String> {
     let buffered_pin = comp.pin::<f64>("buffered", HAL_OUT)?;
     let result = (|| {
         let channel = comp.attach_channel(Duration::from_secs(5))?;
-        let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?;
-        eprintln!(
-            "nurbs-planner: {} segments, motion {:.6} s, planned in {:.3} s",
-            plan.records.len(),
-            plan.motion_time,
-            plan.plan_time
-        );
-        let (geometry, stops) = plan_geometry::geometry(&toolpath, &plan, args.stop_fraction)?;
-        let worst = stops.iter().map(|c| c.ratio).fold(0.0, f64::max);
-        eprintln!(
-            "nurbs-planner: underrun stops checked after every segment: worst {:.4} x an axis limit{}",
-            worst,
-            if worst <= 1.0 {
-                ""
-            } else {
-                " (EXCEEDS the limits at some boundary)"
-            }
-        );
-        // A motion of an earlier planner may still be queued: the module empties the ring once
-        // that motion is over (finished, aborted or stopped), and refuses a new geometry before.
-        let waited = std::time::Instant::now();
-        while !channel.segments.is_empty() {
-            if stopped() || waited.elapsed() > Duration::from_secs(10) {
-                return Err("the channel still holds records of a running motion".into());
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        geometry.publish(channel)?;
-        let mut ends = vec![0.0];
-        let mut t = 0.0;
-        for r in &plan.records {
-            t += r.profile().total_time();
-            ends.push(t);
-        }
-        let mut streamer = Streamer {
-            channel,
-            records: plan.records,
-            ends,
-            sent: 0,
-            margin: args.margin,
-        };
-        // Queue what the margin allows before hal_ready, so `loadusr -W` returns with data in
-        // place and the servo thread can start at once.
-        streamer.fill()?;
+        // The module may be standing where an underrun stopped it: then plan from there.
+        let mut from = channel.stop.read();
+        let mut streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
         let show = |s: &Streamer| {
             sent_pin.set(s.sent as u32);
             running.set(!s.done());
@@ -259,6 +304,14 @@ fn run(args: &Args) -> Result<(), String> {
         ready.set(true);
         comp.ready()?;
         while !stopped() {
+            // A stop while we stream (hold, or an underrun: we were too slow): re-plan from where
+            // the module stands; the module runs it after the command.
+            if let Some(p) = channel.stop.read() {
+                if from.is_none_or(|f| f.epoch != p.epoch) {
+                    from = Some(p);
+                    streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
+                }
+            }
             streamer.fill()?;
             show(&streamer);
             std::thread::sleep(Duration::from_millis(1));
