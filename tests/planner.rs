@@ -104,6 +104,12 @@ fn random_curves_never_violate() {
             skipped += 1;
             continue;
         }
+        if case > 0 && case % 1000 == 0 {
+            eprintln!(
+                "random curves, seed {seed}: {case} cases, {planned} planned and verified, {} refused",
+                refused.len()
+            );
+        }
         match try_plan_and_verify(&tp, &limits) {
             Ok(_) => planned += 1,
             Err(Failure::Refused(e)) => refused.push(format!("case {case}: {e}")),

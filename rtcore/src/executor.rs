@@ -59,6 +59,9 @@ pub struct Interpolator {
     finished: bool,
 }
 
+/// A record ending at or below this feed (mm/s) ends at rest.
+const REST_FEED: f64 = 1e-9;
+
 impl Interpolator {
     /// An interpolator that has not started (the first record positions it).
     pub fn new() -> Self {
@@ -87,9 +90,28 @@ impl Interpolator {
         }
     }
 
+    /// The loaded record is not the last and ends at rest: the path has an interior stop there
+    /// (a corner), and the next record's first sample lands exactly on it (see [`Self::step`]).
+    pub fn ends_at_rest(&self) -> bool {
+        self.loaded && !self.record.is_last() && self.table.end().v <= REST_FEED
+    }
+
+    /// Local time of the loaded record at which the next record's first sample falls, minus
+    /// one period (the offset the next record is loaded with).
+    fn next_offset(&self, dt: f64) -> f64 {
+        if self.ends_at_rest() {
+            -dt
+        } else {
+            self.t_local - self.table.total_time()
+        }
+    }
+
     fn load<C: CurveSet + ?Sized>(&mut self, curves: &C, record: SegmentRecord, t_local: f64) -> bool {
         let index = record.curve();
-        if !self.loaded || index != self.curve {
+        // At a stop the machine is at rest exactly at the record's start: place the cursor there
+        // (as on a change of curve) rather than carry the interpolated one.
+        let at_rest = self.ends_at_rest();
+        if !self.loaded || index != self.curve || at_rest {
             let Some(view) = curves.curve(index) else { return false };
             self.cursor = PathCursor::at(&view, curves.tip_axes(), record.u_start, record.s_start);
             self.curve = index;
@@ -129,8 +151,11 @@ impl Interpolator {
             }
             match next() {
                 // The last sample lies before the new segment's start: negative local time.
+                // After a stop at rest the motion waits there for the rest of the period, so
+                // that a sample lands exactly on the stop point (a corner): no pair of samples
+                // straddles it, and the chord between them cannot cut the corner.
                 Some(r) => {
-                    if !self.load(curves, r, self.t_local - total) {
+                    if !self.load(curves, r, self.next_offset(dt)) {
                         return Step::BadRecord;
                     }
                 }

@@ -411,7 +411,9 @@ pub fn plan(
     for r in &records {
         on_record(r);
     }
-    let motion_time = records.iter().map(|r| r.profile().total_time()).sum();
+    // From the first setpoint to the last: the profiles plus the part-period waits at stops.
+    let samples = states.last().map_or(0, |s| s.samples);
+    let motion_time = samples.saturating_sub(1) as f64 * limits.period;
     Ok(Plan {
         records,
         critical_points: criticals,
@@ -704,9 +706,10 @@ const HOPELESS_ESTIMATE: f64 = 1.05;
 
 fn quick(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down: Ramp) -> Option<Quick> {
     let profile = fit_ramps(v0, v1, ctx.length, ctx.peak_cap, up, down).ok()?;
+    // Local time of the segment's first sample (0 from rest at a stop, see the executor).
     let t_first = match from.interp.record() {
-        Some(_) => ctx.limits.period - from.interp.time_left_in_segment(),
-        None => 0.0,
+        Some(_) if !from.interp.ends_at_rest() => ctx.limits.period - from.interp.time_left_in_segment(),
+        _ => 0.0,
     };
     let table = profile.table();
     let estimate = estimate(

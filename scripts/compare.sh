@@ -1,0 +1,40 @@
+#!/bin/bash
+# Side by side in one run: every bundled curve with both lab sets of paper 000 (and the trident
+# with the VPOp limits), planned by `--planner erwinski` and `--planner vpop`, each output checked
+# by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run).
+# Usage: scripts/compare.sh  (after `cargo build --release --bin nurbs-plan`)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=target/release/nurbs-plan
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
+vpop="--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006"
+cases=("trident|VPOp limits|$vpop")
+for curve in trident butterfly fan open_pocket fan_5axis; do
+  cases+=("$curve|lab set 1|$lab1" "$curve|lab set 2|$lab2")
+done
+run() { # planner curve limits -> "time|plan ms|verify"
+  local planner=$1 curve=$2 lim=$3
+  # shellcheck disable=SC2086
+  if ! $bin plan examples/$curve.json --planner "$planner" $lim --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
+    echo "refused|-|-"
+    return
+  fi
+  # shellcheck disable=SC2086
+  if $bin verify "$dir/o.csv" examples/$curve.json $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
+  python3 - "$dir/s.json" "$ok" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+print(f"{s['motion_time_s']:.4f}|{s['plan_time_s'] * 1e3:.1f}|{sys.argv[2]}")
+PY
+}
+echo "| curve | limits | Erwinski motion (s) | plan (ms) | verify | VPOp motion (s) | plan (ms) | verify |"
+echo "|---|---|---|---|---|---|---|---|"
+for c in "${cases[@]}"; do
+  IFS='|' read -r curve name lim <<<"$c"
+  IFS='|' read -r et ep ev <<<"$(run erwinski "$curve" "$lim")"
+  IFS='|' read -r vt vp vv <<<"$(run vpop "$curve" "$lim")"
+  echo "| $curve | $name | $et | $ep | $ev | $vt | $vp | $vv |"
+done
