@@ -3,15 +3,9 @@
 # with the VPOp limits), planned by `--planner erwinski` and `--planner vpop`, each output checked
 # by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run).
 # Usage: scripts/compare.sh  (after `cargo build --release --bin nurbs-plan`)
-set -euo pipefail
-cd "$(dirname "$0")/.."
-bin=target/release/nurbs-plan
-dir=$(mktemp -d)
-trap 'rm -rf "$dir"' EXIT
-lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
-lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
-vpop="--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006"
-cases=("trident|VPOp limits|$vpop")
+# shellcheck source=scripts/common.sh
+source "$(dirname "$0")/common.sh"
+cases=("trident|VPOp limits|$vpop_limits")
 for curve in trident butterfly fan open_pocket fan_5axis; do
   cases+=("$curve|lab set 1|$lab1" "$curve|lab set 2|$lab2")
 done

@@ -2,13 +2,8 @@
 # Plans every benchmark case with the release build, verifies each output with
 # `nurbs-plan verify`, and prints the README's table of motion and planning times.
 # Usage: scripts/figures.sh  (after `cargo build --release --bin nurbs-plan`)
-set -euo pipefail
-cd "$(dirname "$0")/.."
-bin=target/release/nurbs-plan
-dir=$(mktemp -d)
-trap 'rm -rf "$dir"' EXIT
-lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
-lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
+# shellcheck source=scripts/common.sh
+source "$(dirname "$0")/common.sh"
 cases=(
   "butterfly|lab set 1|$lab1|2.404|3.163"
   "butterfly|lab set 2|$lab2|1.609|"
@@ -23,7 +18,7 @@ cases=(
   "butterfly|F40 A500 J2e4|--feed 40 --accel 500 --jerk 2e4 --chord-tol 0.001 --period 0.00025||"
   "butterfly|F250 A2000 J2e4|--feed 250 --accel 2000 --jerk 2e4 --chord-tol 0.001 --period 0.00025|3.512|4.562"
   "butterfly|F300 A2500 J5e4|--feed 300 --accel 2500 --jerk 5e4 --chord-tol 0.001 --period 0.00025||"
-  "trident|VPOp limits|--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006|1.650|1.668"
+  "trident|VPOp limits|$vpop_limits|1.650|1.668"
 )
 echo "| curve | limits | motion time (s) | / lower bound | / best known | plan time (ms) | plan / motion | max jerk / limit | verify |"
 echo "|---|---|---|---|---|---|---|---|---|"

@@ -122,6 +122,22 @@ struct Node {
     hard: bool,
 }
 
+impl Node {
+    /// A hard node inside curve `c` at parameter `u`, arc length `s`, with feed cap `cap`.
+    fn within(c: usize, u: f64, s: f64, cap: f64) -> Node {
+        Node {
+            end_curve: c,
+            end_u: u,
+            end_s: s,
+            start_curve: c,
+            start_u: u,
+            start_s: s,
+            cap,
+            hard: true,
+        }
+    }
+}
+
 /// Plans `toolpath` under `limits`; every record is passed to `on_record` as soon as it is final.
 pub fn plan(
     toolpath: &Toolpath,
@@ -266,24 +282,12 @@ pub fn plan(
         let scan = &scans[a.start_curve];
         let dip = scan.min_speed_cap_between(a.start_u, b.end_u);
         match dip {
-            // A dip below both end caps gets a node; any other dip only lowers the segment's
-            // peak (below), and the exact check of the segment lowers it further if needed.
+            // A dip below both end caps gets a node; any other dip is left to the exact check
+            // of the segment, which splits it there if the profile passes it too fast.
             Some((m, u)) if m < a.cap.min(b.cap) && u > a.start_u && u < b.end_u => {
                 let c = a.start_curve;
                 let s = tables[c].length_to(&toolpath.elements[c].curve, u);
-                nodes.insert(
-                    k + 1,
-                    Node {
-                        end_curve: c,
-                        end_u: u,
-                        end_s: s,
-                        start_curve: c,
-                        start_u: u,
-                        start_s: s,
-                        cap: m,
-                        hard: true,
-                    },
-                );
+                nodes.insert(k + 1, Node::within(c, u, s, m));
             }
             _ => k += 1,
         }
@@ -364,19 +368,7 @@ pub fn plan(
                 let c = nodes[k].start_curve;
                 let s = tables[c].length_to(&toolpath.elements[c].curve, u);
                 let end_s = nodes[k + 1].end_s;
-                nodes.insert(
-                    k + 1,
-                    Node {
-                        end_curve: c,
-                        end_u: u,
-                        end_s: s,
-                        start_curve: c,
-                        start_u: u,
-                        start_s: s,
-                        cap,
-                        hard: true,
-                    },
-                );
+                nodes.insert(k + 1, Node::within(c, u, s, cap));
                 lengths[k] = s - nodes[k].start_s;
                 lengths.insert(k + 1, end_s - s);
                 feeds.insert(k + 1, cap);

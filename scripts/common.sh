@@ -1,0 +1,10 @@
+# Sourced by the figure scripts: the release binary, a scratch directory removed on exit, and
+# the limit sets of the papers (mm, s).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bin=target/release/nurbs-plan
+dir=$(mktemp -d)
+trap 'rm -rf "$dir"' EXIT
+lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
+vpop_limits="--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006"
