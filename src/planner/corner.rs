@@ -66,24 +66,46 @@ fn corner_deviation(curve: &Nurbs, p: &[f64], u1: &[f64], u2: &[f64], d: f64) ->
         .fold(0.0, f64::max)
 }
 
-fn line(a: &[f64], b: &[f64]) -> PathElement {
+fn line(a: &[f64], b: &[f64], feed: Option<f64>) -> PathElement {
     PathElement {
         kind: ElementKind::Polyline,
         curve: Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[a.to_vec(), b.to_vec()], None).expect("line is valid"),
-        feed: None,
+        feed,
         source_line: None,
+    }
+}
+
+/// The lower of two programmed feeds (`None`: no programmed feed).
+fn min_feed(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    match (a, b) {
+        (Some(x), Some(y)) => Some(x.min(y)),
+        (x, None) => x,
+        (None, y) => y,
     }
 }
 
 /// Rounds the corners of a polyline given by its vertices (2-D or 3-D) within `tolerance`.
 pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, String> {
+    let feeds = vec![None; vertices.len().saturating_sub(1)];
+    round_with_feeds(vertices, &feeds, tolerance)
+}
+
+/// [`round_polyline`] with a programmed feed per segment (`feeds[i]` for `vertices[i]` to
+/// `vertices[i + 1]`): a straight piece keeps its segment's feed, a corner spline takes the
+/// lower feed of its two segments.
+fn round_with_feeds(vertices: &[Vec<f64>], feeds: &[Option<f64>], tolerance: f64) -> Result<Rounded, String> {
     let mut v: Vec<Vec<f64>> = Vec::new();
-    for p in vertices {
+    // seg_feed[i]: feed of the kept segment v[i] to v[i + 1].
+    let mut seg_feed: Vec<Option<f64>> = Vec::new();
+    for (k, p) in vertices.iter().enumerate() {
         let distinct = match v.last() {
             Some(q) => norm(&sub(p, q)) > 1e-12,
             None => true,
         };
         if distinct {
+            if k > 0 && !v.is_empty() {
+                seg_feed.push(feeds.get(k - 1).copied().flatten());
+            }
             v.push(p.clone());
         }
     }
@@ -99,6 +121,9 @@ pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, 
     let mut start = v[0].clone();
     let mut max_dev: f64 = 0.0;
     let mut corners = 0;
+    // A straight piece runs from segment `start_seg` through collinear vertices: lowest feed.
+    let mut start_seg = 0;
+    let run_feed = |from: usize, to: usize| seg_feed[from..=to].iter().fold(None, |a, b| min_feed(a, *b));
     for i in 1..n - 1 {
         let u1: Vec<f64> = sub(&v[i], &v[i - 1]).iter().map(|x| x / lens[i - 1]).collect();
         let u2: Vec<f64> = sub(&v[i + 1], &v[i]).iter().map(|x| x / lens[i]).collect();
@@ -114,19 +139,20 @@ pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, 
         max_dev = max_dev.max(corner_deviation(&curve, &v[i], &u1, &u2, d));
         let entry = axpy(&v[i], -d, &u1);
         if norm(&sub(&entry, &start)) > 1e-12 {
-            elements.push(line(&start, &entry));
+            elements.push(line(&start, &entry, run_feed(start_seg, i - 1)));
         }
         elements.push(PathElement {
             kind: ElementKind::Nurbs,
             curve,
-            feed: None,
+            feed: min_feed(seg_feed[i - 1], seg_feed[i]),
             source_line: None,
         });
         start = axpy(&v[i], d, &u2);
+        start_seg = i;
         corners += 1;
     }
     if norm(&sub(&v[n - 1], &start)) > 1e-12 {
-        elements.push(line(&start, &v[n - 1]));
+        elements.push(line(&start, &v[n - 1], run_feed(start_seg, n - 2)));
     }
     Ok(Rounded {
         toolpath: Toolpath { elements },
@@ -135,10 +161,14 @@ pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, 
     })
 }
 
-/// Rounds a toolpath made of degree-1 elements (G1 blocks, polylines, degree-1 splines) as one
-/// polyline through their control points (tool tip only).
-pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, String> {
+type Vertices = Vec<Vec<f64>>;
+
+/// The programmed polyline of a toolpath made of degree-1 elements: its vertices (tool tip,
+/// padded to the toolpath's tip dimension) and the programmed feed of each segment (the
+/// element's; the zero-length joins between elements get the later element's).
+fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), String> {
     let mut vertices: Vec<Vec<f64>> = Vec::new();
+    let mut feeds = Vec::new();
     let tip = toolpath.tip_dim();
     for e in &toolpath.elements {
         if e.curve.degree() != 1 {
@@ -148,8 +178,78 @@ pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, St
             let mut p = vec![0.0; tip];
             let c = e.curve.control_point(k);
             p[..e.curve.tip_dim()].copy_from_slice(&c[..e.curve.tip_dim()]);
+            if !vertices.is_empty() {
+                feeds.push(e.feed);
+            }
             vertices.push(p);
         }
     }
-    round_polyline(&vertices, tolerance)
+    Ok((vertices, feeds))
+}
+
+/// Rounds a toolpath made of degree-1 elements (G1 blocks, polylines, degree-1 splines) as one
+/// polyline through their control points (tool tip only). Programmed feeds carry over: a
+/// straight piece keeps its element's feed, a corner spline the lower of its two segments'.
+pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, String> {
+    let (vertices, feeds) = polyline_of(toolpath)?;
+    round_with_feeds(&vertices, &feeds, tolerance)
+}
+
+/// True when every element is a straight-line polyline of the tool tip alone (degree 1, no top
+/// curve): G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON curves.
+pub fn is_tip_polyline(toolpath: &Toolpath) -> bool {
+    !toolpath.elements.is_empty()
+        && toolpath
+            .elements
+            .iter()
+            .all(|e| e.curve.degree() == 1 && e.curve.dim() == e.curve.tip_dim())
+}
+
+/// The programmed polyline of a toolpath made of degree-1 elements, for measuring how far
+/// setpoints stray from it.
+#[derive(Clone, Debug)]
+pub struct ProgramPolyline {
+    vertices: Vec<Vec<f64>>,
+}
+
+impl ProgramPolyline {
+    pub fn new(toolpath: &Toolpath) -> Result<Self, String> {
+        let (vertices, _) = polyline_of(toolpath)?;
+        if vertices.is_empty() {
+            return Err("empty polyline".into());
+        }
+        Ok(ProgramPolyline { vertices })
+    }
+
+    fn segment(&self, i: usize, x: &[f64]) -> f64 {
+        let n = self.vertices[i].len().min(x.len());
+        if self.vertices.len() == 1 {
+            return norm(&sub(&x[..n], &self.vertices[0][..n]));
+        }
+        segment_distance(&x[..n], &self.vertices[i][..n], &self.vertices[i + 1][..n])
+    }
+
+    /// Largest distance of `points` (tool-tip coordinates) to the polyline: exact (the
+    /// distance of each point to the nearest segment of the whole polyline). A point is first
+    /// checked against the segments next to the previous point's nearest one and only scanned
+    /// against all segments when that cannot rule it out.
+    pub fn max_distance<'a>(&self, points: impl IntoIterator<Item = &'a [f64]>) -> f64 {
+        let segs = self.vertices.len().saturating_sub(1).max(1);
+        let mut worst: f64 = 0.0;
+        let mut hint = 0usize;
+        for x in points {
+            let near = (hint.saturating_sub(1)..(hint + 3).min(segs))
+                .map(|i| self.segment(i, x))
+                .fold(f64::INFINITY, f64::min);
+            if near <= worst {
+                continue;
+            }
+            let (best, d) = (0..segs)
+                .map(|i| (i, self.segment(i, x)))
+                .fold((hint, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            hint = best;
+            worst = worst.max(d);
+        }
+        worst
+    }
 }
