@@ -253,3 +253,76 @@ impl ProgramPolyline {
         worst
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn g1(points: &[[f64; 2]], feed: f64) -> PathElement {
+        let cps: Vec<Vec<f64>> = points.iter().map(|p| p.to_vec()).collect();
+        let mut knots = vec![0.0];
+        let mut s = 0.0;
+        knots.push(0.0);
+        for w in cps.windows(2) {
+            s += norm(&sub(&w[1], &w[0]));
+            knots.push(s);
+        }
+        knots.push(s);
+        PathElement {
+            kind: ElementKind::Polyline,
+            curve: Nurbs::new(1, knots, &cps, None).unwrap(),
+            feed: Some(feed),
+            source_line: None,
+        }
+    }
+
+    /// Two G1 runs at different feeds: straight pieces keep their run's feed, the corner at the
+    /// feed change takes the lower one, and collinear vertices are not corners.
+    #[test]
+    fn programmed_feeds_carry_over() {
+        let tp = Toolpath {
+            elements: vec![
+                g1(&[[0.0, 0.0], [10.0, 0.0], [20.0, 0.0], [20.0, 10.0]], 50.0),
+                g1(&[[20.0, 10.0], [30.0, 10.0]], 20.0),
+            ],
+        };
+        let r = round_toolpath(&tp, 0.01).unwrap();
+        assert_eq!(r.corners, 2);
+        let feeds: Vec<Option<f64>> = r.toolpath.elements.iter().map(|e| e.feed).collect();
+        assert_eq!(feeds, vec![Some(50.0), Some(50.0), Some(50.0), Some(20.0), Some(20.0)]);
+        assert!(r.max_deviation <= 0.01 && r.max_deviation > 0.009);
+    }
+
+    /// The hinted search gives the exact largest distance (same as checking every segment).
+    #[test]
+    fn max_distance_is_exact() {
+        let pts: Vec<[f64; 2]> = (0..200)
+            .map(|k| {
+                let t = k as f64 * 0.05;
+                [t.cos() * (5.0 + t), t.sin() * (5.0 + t)]
+            })
+            .collect();
+        let tp = Toolpath {
+            elements: vec![g1(&pts, 10.0)],
+        };
+        let poly = ProgramPolyline::new(&tp).unwrap();
+        let probes: Vec<Vec<f64>> = (0..5000)
+            .map(|k| {
+                let t = k as f64 * 0.002;
+                let r = 5.0 + t + 0.3 * (37.0 * t).sin();
+                vec![t.cos() * r, t.sin() * r]
+            })
+            .collect();
+        let brute = probes
+            .iter()
+            .map(|x| {
+                (0..pts.len() - 1)
+                    .map(|i| segment_distance(x, &pts[i], &pts[i + 1]))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max);
+        let got = poly.max_distance(probes.iter().map(|x| x.as_slice()));
+        assert!(brute > 0.1);
+        assert_eq!(got, brute);
+    }
+}
