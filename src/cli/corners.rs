@@ -10,7 +10,7 @@ use std::path::Path;
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum RoundCorners {
     /// Round when every element is a straight line of the tool tip (G1, DXF LINE / LWPOLYLINE
-    /// without bulges, degree-1 JSON); plan other paths as programmed.
+    /// without bulges, degree-1 JSON) and the elements join; plan other paths as programmed.
     #[default]
     Auto,
     /// Round, and fail if the path is not a tool-tip polyline.
@@ -80,7 +80,7 @@ pub fn prepare(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<Prepar
         RoundCorners::On if polyline => true,
         RoundCorners::On => {
             return Err(format!(
-                "{}: --round-corners on needs a tool-tip polyline (only straight G1 / LINE / degree-1 elements, no top curve)",
+                "{}: --round-corners on needs a tool-tip polyline (one continuous run of straight G1 / LINE / degree-1 elements, no top curve)",
                 file.display()
             )
             .into())

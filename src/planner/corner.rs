@@ -131,6 +131,16 @@ fn round_with_feeds(vertices: &[Vec<f64>], feeds: &[Option<f64>], tolerance: f64
         if cos > 1.0 - 1e-12 {
             continue; // straight through
         }
+        if cos < -1.0 + 1e-9 {
+            // A reversal has no rounding inside the tolerance (the spline would stop and turn
+            // back on itself): keep the programmed vertex, where the motion stops.
+            if norm(&sub(&v[i], &start)) > 1e-12 {
+                elements.push(line(&start, &v[i], run_feed(start_seg, i - 1)));
+            }
+            start = v[i].clone();
+            start_seg = i;
+            continue;
+        }
         // Deviation is proportional to d: measure it at d = 1 and scale to the tolerance.
         let unit = corner_deviation(&corner_curve(&v[i], &u1, &u2, 1.0), &v[i], &u1, &u2, 1.0);
         let room = 0.5 * lens[i - 1].min(lens[i]);
@@ -163,6 +173,9 @@ fn round_with_feeds(vertices: &[Vec<f64>], feeds: &[Option<f64>], tolerance: f64
 
 type Vertices = Vec<Vec<f64>>;
 
+/// Largest gap between consecutive elements of one continuous polyline (mm).
+const JOIN_GAP: f64 = 1e-9;
+
 /// The programmed polyline of a toolpath made of degree-1 elements: its vertices (tool tip,
 /// padded to the toolpath's tip dimension) and the programmed feed of each segment (the
 /// element's; the zero-length joins between elements get the later element's).
@@ -170,7 +183,7 @@ fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), Stri
     let mut vertices: Vec<Vec<f64>> = Vec::new();
     let mut feeds = Vec::new();
     let tip = toolpath.tip_dim();
-    for e in &toolpath.elements {
+    for (i, e) in toolpath.elements.iter().enumerate() {
         if e.curve.degree() != 1 {
             return Err("corner rounding needs a polyline (degree-1 elements)".into());
         }
@@ -178,6 +191,17 @@ fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), Stri
             let mut p = vec![0.0; tip];
             let c = e.curve.control_point(k);
             p[..e.curve.tip_dim()].copy_from_slice(&c[..e.curve.tip_dim()]);
+            if k == 0 {
+                if let Some(q) = vertices.last() {
+                    let gap = norm(&sub(&p, q));
+                    if gap > JOIN_GAP {
+                        return Err(format!(
+                            "element {} starts {gap:.3e} mm away from the end of element {i}: not one continuous polyline",
+                            i + 1
+                        ));
+                    }
+                }
+            }
             if !vertices.is_empty() {
                 feeds.push(e.feed);
             }
@@ -196,13 +220,15 @@ pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, St
 }
 
 /// True when every element is a straight-line polyline of the tool tip alone (degree 1, no top
-/// curve): G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON curves.
+/// curve) and each element starts where the previous one ends: G1 moves, DXF LINE / LWPOLYLINE
+/// without bulges, degree-1 JSON curves.
 pub fn is_tip_polyline(toolpath: &Toolpath) -> bool {
     !toolpath.elements.is_empty()
         && toolpath
             .elements
             .iter()
             .all(|e| e.curve.degree() == 1 && e.curve.dim() == e.curve.tip_dim())
+        && polyline_of(toolpath).is_ok()
 }
 
 /// The programmed polyline of a toolpath made of degree-1 elements, for measuring how far
@@ -291,6 +317,35 @@ mod tests {
         let feeds: Vec<Option<f64>> = r.toolpath.elements.iter().map(|e| e.feed).collect();
         assert_eq!(feeds, vec![Some(50.0), Some(50.0), Some(50.0), Some(20.0), Some(20.0)]);
         assert!(r.max_deviation <= 0.01 && r.max_deviation > 0.009);
+    }
+
+    /// A reversal keeps its vertex (exact stop); the other corners are rounded.
+    #[test]
+    fn a_reversal_is_not_rounded() {
+        let tp = Toolpath {
+            elements: vec![g1(&[[0.0, 0.0], [10.0, 0.0], [5.0, 0.0], [5.0, 5.0]], 50.0)],
+        };
+        let r = round_toolpath(&tp, 0.01).unwrap();
+        assert_eq!(r.corners, 1);
+        let kinds: Vec<ElementKind> = r.toolpath.elements.iter().map(|e| e.kind).collect();
+        use ElementKind::{Nurbs as N, Polyline as L};
+        assert_eq!(kinds, vec![L, L, N, L]);
+        let end = r.toolpath.elements[0].curve.point(1.0);
+        assert!((end[0] - 10.0).abs() < 1e-12 && end[1].abs() < 1e-12);
+    }
+
+    /// Elements that do not join are not one polyline: no rounding across the gap.
+    #[test]
+    fn a_gap_is_not_bridged() {
+        let tp = Toolpath {
+            elements: vec![
+                g1(&[[0.0, 0.0], [10.0, 0.0]], 50.0),
+                g1(&[[10.0, 1.0], [20.0, 1.0]], 50.0),
+            ],
+        };
+        assert!(!is_tip_polyline(&tp));
+        let err = round_toolpath(&tp, 0.01).unwrap_err();
+        assert!(err.contains("not one continuous polyline"), "{err}");
     }
 
     /// The hinted search gives the exact largest distance (same as checking every segment).
