@@ -235,7 +235,6 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
         let summary = with_rounding(summary, prepared.summary_fields(deviation));
-        let summary = with_rounding(summary, prepared.summary_fields(deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
