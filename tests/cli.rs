@@ -275,3 +275,208 @@ fn an_unwritable_plot_fails_after_the_csv_is_written() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+const LAB1: [&str; 10] = [
+    "--feed",
+    "2500",
+    "--accel",
+    "1e4",
+    "--jerk",
+    "6e4",
+    "--chord-tol",
+    "0.001",
+    "--period",
+    "0.00025",
+];
+
+/// A G1 program through `points` (2-D or 3-D) at F 150000 mm/min (2500 mm/s).
+fn g1_program(points: &[Vec<f64>]) -> String {
+    let word = |p: &[f64]| {
+        ["X", "Y", "Z"]
+            .iter()
+            .zip(p)
+            .map(|(a, v)| format!("{a}{v:.6}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let mut s = String::from("G21 G90 G17 G94 G64\n");
+    s += &format!("G0 {}\nF150000\n", word(&points[0]));
+    for p in &points[1..] {
+        s += &format!("G1 {}\n", word(p));
+    }
+    s + "M2\n"
+}
+
+/// The dense G1 polyline of the butterfly (points 0.5 mm apart along the curve) and the
+/// fan_5axis tool tip path (25 points), written as G-code where the binary can read them
+/// (`CARGO_TARGET_TMPDIR`, kept for re-running the commands by hand).
+fn g1_examples() -> Vec<(&'static str, PathBuf)> {
+    use nurbs_motion::readers::read_toolpath;
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"));
+    let butterfly = read_toolpath(&example("butterfly.json")).unwrap();
+    let curve = &butterfly.elements[0].curve;
+    let (u0, u1) = (curve.u_min(), curve.u_max());
+    let n = 400_000;
+    let at = |k: usize| curve.point(u0 + (u1 - u0) * k as f64 / n as f64)[..2].to_vec();
+    let mut pts = vec![at(0)];
+    for k in 1..n {
+        let p = at(k);
+        let last = pts.last().unwrap();
+        if (p[0] - last[0]).hypot(p[1] - last[1]) >= 0.5 {
+            pts.push(p);
+        }
+    }
+    pts.push(at(n));
+    assert!(pts.len() > 700, "{} butterfly points", pts.len());
+    let b = dir.join("butterfly_g1.ngc");
+    std::fs::write(&b, g1_program(&pts)).unwrap();
+    let fan = read_toolpath(&example("fan_5axis.json")).unwrap();
+    let c = &fan.elements[0].curve;
+    let tip: Vec<Vec<f64>> = (0..c.control_point_count())
+        .map(|k| c.control_point(k)[..3].to_vec())
+        .collect();
+    let f = dir.join("fan_5axis_tip_g1.ngc");
+    std::fs::write(&f, g1_program(&tip)).unwrap();
+    vec![("butterfly", b), ("fan_5axis tip", f)]
+}
+
+fn plan_summary(program: &Path, planner: &str, corners: &str, csv: &Path, limits: &[&str]) -> serde_json::Value {
+    let summary = csv.with_extension("json");
+    let out = bin()
+        .arg("plan")
+        .arg(program)
+        .args(limits)
+        .args(["--planner", planner, "--round-corners", corners])
+        .arg("--out")
+        .arg(csv)
+        .arg("--summary")
+        .arg(&summary)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}",
+        program.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap()
+}
+
+/// G1 polylines are rounded by default within --chord-tol, planned as one motion by both
+/// planners, and verified against the same rounded path; the setpoints stay within the
+/// tolerance of the programmed polyline, and the motion is much shorter than stopping at
+/// every corner (`--round-corners off`).
+#[test]
+fn g1_polylines_are_rounded_planned_and_verified() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("g1-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let tol = 0.001;
+    for (name, program) in g1_examples() {
+        for planner in ["erwinski", "vpop"] {
+            let csv = dir.join(format!("{}-{planner}.csv", name.replace(' ', "_")));
+            let s = plan_summary(&program, planner, "auto", &csv, &LAB1);
+            let corners = s["rounding_corners"].as_u64().unwrap();
+            let rounding = s["rounding_max_deviation_mm"].as_f64().unwrap();
+            let dev = s["max_deviation_from_program_mm"].as_f64().unwrap();
+            let time = s["motion_time_s"].as_f64().unwrap();
+            eprintln!(
+                "{name} {planner}: {corners} corners, rounding {rounding:.6} mm, setpoints {dev:.6} mm, motion {time:.4} s, plan {:.1} ms",
+                s["plan_time_s"].as_f64().unwrap() * 1e3
+            );
+            assert!(corners >= 20, "{name} {planner}: {corners} corners");
+            assert!(rounding <= tol && rounding > 0.0, "{name}: rounding {rounding}");
+            assert!(dev <= tol * (1.0 + 1e-6), "{name} {planner}: {dev} mm");
+            let verify = |corners: &str| {
+                bin()
+                    .arg("verify")
+                    .arg(&csv)
+                    .arg(&program)
+                    .args(LAB1)
+                    .args(["--round-corners", corners])
+                    .output()
+                    .unwrap()
+            };
+            let ok = verify("auto");
+            let text = String::from_utf8_lossy(&ok.stdout);
+            assert!(ok.status.success(), "{name} {planner}: {text}");
+            assert!(text.contains("of the programmed polyline"), "{text}");
+            // Against the unrounded polyline the setpoints are off the path.
+            let bad = verify("off");
+            assert!(
+                !bad.status.success(),
+                "{name} {planner}: verify --round-corners off passed"
+            );
+            if planner == "erwinski" && name == "butterfly" {
+                // Exact stop at every corner of the dense polyline takes far longer.
+                let stop = plan_summary(&program, planner, "off", &dir.join("stop.csv"), &LAB1);
+                let stop_time = stop["motion_time_s"].as_f64().unwrap();
+                eprintln!("{name} {planner} without rounding: motion {stop_time:.4} s");
+                assert_eq!(stop["rounding_corners"].as_u64(), Some(0));
+                assert!(time < 0.6 * stop_time, "{name}: {time} s vs {stop_time} s");
+            }
+        }
+        if name == "fan_5axis tip" {
+            // The paper's limits (seed 003, tolerance 0.02 mm): VPOp flows through the rounded
+            // corners faster than it stops at the programmed ones.
+            let lim = [
+                "--feed",
+                "166.667",
+                "--vel",
+                "500",
+                "--accel",
+                "2500,3000,2100",
+                "--jerk",
+                "5000,5000,50000",
+                "--chord-tol",
+                "0.02",
+                "--period",
+                "0.006",
+            ];
+            let csv = dir.join("fan-paper.csv");
+            let round = plan_summary(&program, "vpop", "auto", &csv, &lim);
+            let stop = plan_summary(&program, "vpop", "off", &dir.join("fan-stop.csv"), &lim);
+            let (t1, t0) = (
+                round["motion_time_s"].as_f64().unwrap(),
+                stop["motion_time_s"].as_f64().unwrap(),
+            );
+            let dev = round["max_deviation_from_program_mm"].as_f64().unwrap();
+            eprintln!("fan_5axis tip, paper limits, vpop: {t1:.3} s rounded, {t0:.3} s stopping; {dev:.5} mm");
+            assert!(dev <= 0.02 * (1.0 + 1e-6), "{dev}");
+            assert!(t1 < 0.95 * t0, "{t1} s vs {t0} s");
+            let ok = bin().arg("verify").arg(&csv).arg(&program).args(lim).output().unwrap();
+            assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stdout));
+        }
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--round-corners on` refuses a path that is not a tool-tip polyline; `auto` leaves a NURBS
+/// path as programmed.
+#[test]
+fn round_corners_on_needs_a_polyline() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-corners-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |corners: &str| {
+        bin()
+            .arg("plan")
+            .arg(example("trident.json"))
+            .args(["--feed", "2500", "--accel", "1e4", "--jerk", "6e4"])
+            .args(["--chord-tol", "0.001", "--period", "0.001"])
+            .args(["--round-corners", corners])
+            .arg("--out")
+            .arg(dir.join("t.csv"))
+            .arg("--summary")
+            .arg(dir.join("t.json"))
+            .output()
+            .unwrap()
+    };
+    let out = run("on");
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("needs a tool-tip polyline"));
+    let out = run("auto");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
+    assert_eq!(s["rounding_corners"].as_u64(), Some(0));
+    assert!(s["max_deviation_from_program_mm"].is_null());
+    std::fs::remove_dir_all(&dir).ok();
+}

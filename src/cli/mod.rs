@@ -1,5 +1,6 @@
 //! The `nurbs-plan` command line: `inspect` (geometry report), `plan` and `verify`.
 
+mod corners;
 mod inspect;
 mod plan;
 mod plot;
@@ -8,6 +9,7 @@ mod verify;
 pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};
+use corners::RoundCorners;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -52,6 +54,16 @@ enum Command {
         /// (the finite differences `verify` checks) with their limits, over the curve parameter.
         #[arg(long, value_name = "PNG")]
         plot: Option<PathBuf>,
+        /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
+        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
+        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
+        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
+        /// allow), and is planned as one motion without stopping at the corners; other paths
+        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// `off`: follow the programmed polyline exactly (exact stop at every corner).
+        /// `verify` must be given the same mode to check against the same path.
+        #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
+        round_corners: RoundCorners,
     },
     /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
     Verify {
@@ -59,6 +71,17 @@ enum Command {
         toolpath: PathBuf,
         #[command(flatten)]
         limits: LimitArgs,
+        /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
+        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
+        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
+        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
+        /// allow), and is planned as one motion without stopping at the corners; other paths
+        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// `off`: follow the programmed polyline exactly (exact stop at every corner).
+        /// The same mode as `plan` (default `auto`): the setpoints are checked against the same
+        /// rounded path, and their distance to the programmed polyline against --chord-tol.
+        #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
+        round_corners: RoundCorners,
     },
 }
 
@@ -119,6 +142,7 @@ pub fn run() -> ExitCode {
             summary,
             planner,
             plot,
+            round_corners,
         } => plan::run(plan::PlanArgs {
             toolpath: &toolpath,
             limits: &limits,
@@ -126,12 +150,14 @@ pub fn run() -> ExitCode {
             summary: summary.as_deref(),
             planner,
             plot: plot.as_deref(),
+            round_corners,
         }),
         Command::Verify {
             setpoints,
             toolpath,
             limits,
-        } => match verify::run(&setpoints, &toolpath, &limits) {
+            round_corners,
+        } => match verify::run(&setpoints, &toolpath, &limits, round_corners) {
             Ok(true) => Ok(()),
             Ok(false) => return ExitCode::from(1),
             Err(e) => Err(e),

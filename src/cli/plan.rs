@@ -1,9 +1,9 @@
+use super::corners::{prepare, RoundCorners};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
 use crate::planner::axial::{FiniteDifferences, MAX_AXES};
 use crate::planner::simulate::setpoints;
 use crate::planner::{plan, PathCurves, PlanOptions};
-use crate::readers::read_toolpath;
 use std::io::Write;
 use std::path::Path;
 
@@ -14,6 +14,15 @@ pub struct PlanArgs<'a> {
     pub summary: Option<&'a Path>,
     pub planner: PlannerKind,
     pub plot: Option<&'a Path>,
+    pub round_corners: RoundCorners,
+}
+
+/// Adds the corner-rounding fields to a summary object.
+fn with_rounding(mut summary: serde_json::Value, extra: serde_json::Value) -> serde_json::Value {
+    if let (Some(s), serde_json::Value::Object(e)) = (summary.as_object_mut(), extra) {
+        s.extend(e);
+    }
+    summary
 }
 
 /// Figure title: file, planner, limits and motion time.
@@ -44,10 +53,11 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.planner == PlannerKind::Vpop {
         return run_vpop(args);
     }
-    let toolpath = read_toolpath(args.toolpath)?;
+    let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
+    let toolpath = &prepared.toolpath;
     let limits = args.limits.limits(toolpath.tip_dim())?;
-    let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {})?;
-    let curves = PathCurves::new(&toolpath);
+    let plan = plan(toolpath, &limits, &PlanOptions::default(), &mut |_| {})?;
+    let curves = PathCurves::new(toolpath);
     let samples = setpoints(&curves, &plan.limits, &plan.records);
     let tip = toolpath.tip_dim();
     let names = ["x", "y", "z"];
@@ -74,10 +84,15 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         samples.len(),
         plan.plan_time * 1e3
     );
+    let deviation = prepared.deviation_from_program(samples.iter().map(|s| &s.point[..tip]));
+    if let Some(line) = prepared.describe(deviation, plan.limits.chord_tolerance) {
+        eprintln!("{line}");
+    }
     if let Some(path) = args.summary {
         let pk = &check.peaks;
         let summary = serde_json::json!({
             "toolpath": args.toolpath.display().to_string(),
+            "planner": "erwinski",
             "motion_time_s": motion_time,
             "profile_time_s": plan.motion_time,
             "plan_time_s": plan.plan_time,
@@ -94,6 +109,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "max_axial_jerk": &pk.jerk[..tip],
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
+        let summary = with_rounding(summary, prepared.summary_fields(deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
@@ -111,7 +127,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             })
             .collect();
         let profile = Profile {
-            toolpath: &toolpath,
+            toolpath,
             limits: &plan.limits,
             axes: &names[..tip],
             rotary_from: tip,
@@ -130,20 +146,21 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// (same CSV columns and summary keys as the default planner).
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     use crate::planner::vpop::{plan_five_axis, plan_tip, SearchOptions};
-    let toolpath = read_toolpath(args.toolpath)?;
+    let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
+    let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
     // A top curve on every element: 5-axis on the XYZAC machine, limits in joint order.
     let five = toolpath.elements.iter().all(|e| e.curve.dim() == 6);
     let plan = if five {
         let limits = args.limits.limits(5)?;
         plan_five_axis(
-            &toolpath,
+            toolpath,
             crate::kinematics::Xyzac::default(),
             &limits,
             SearchOptions::default(),
         )?
     } else {
-        plan_tip(&toolpath, &args.limits.limits(tip)?, SearchOptions::default())?
+        plan_tip(toolpath, &args.limits.limits(tip)?, SearchOptions::default())?
     };
     let axes = plan.axes;
     let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
@@ -193,6 +210,10 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         plan.stats.dead_ends,
         plan.stats.brakes
     );
+    let deviation = prepared.deviation_from_program(plan.points.iter().map(|p| &p.tip[..tip]));
+    if let Some(line) = prepared.describe(deviation, plan.limits.chord_tolerance) {
+        eprintln!("{line}");
+    }
     if let Some(path) = args.summary {
         let pk = &check.peaks;
         let summary = serde_json::json!({
@@ -213,6 +234,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "max_axial_jerk": &pk.jerk[..axes],
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
+        let summary = with_rounding(summary, prepared.summary_fields(deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
@@ -222,7 +244,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             &["x", "y", "z"][..tip]
         };
         let profile = Profile {
-            toolpath: &toolpath,
+            toolpath,
             limits: &plan.limits,
             axes: names,
             rotary_from: if five { 3 } else { axes },

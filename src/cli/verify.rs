@@ -1,7 +1,7 @@
+use super::corners::{prepare, RoundCorners};
 use super::LimitArgs;
 use crate::planner::verify::{verify, Row};
 use crate::planner::PathCurves;
-use crate::readers::read_toolpath;
 use std::path::Path;
 
 /// Reads a setpoint CSV written by `plan` (columns t,u,x,y[,z] then optional extras; an
@@ -162,16 +162,31 @@ fn run_five_axis(
     Ok(violations.is_empty())
 }
 
-pub fn run(setpoints: &Path, toolpath: &Path, limits: &LimitArgs) -> Result<bool, Box<dyn std::error::Error>> {
-    let toolpath = read_toolpath(toolpath)?;
+pub fn run(
+    setpoints: &Path,
+    toolpath: &Path,
+    limits: &LimitArgs,
+    round_corners: RoundCorners,
+) -> Result<bool, Box<dyn std::error::Error>> {
+    let prepared = prepare(toolpath, round_corners, limits.chord_tol)?;
+    let toolpath = &prepared.toolpath;
     if read_columns(setpoints, &["a", "c", "tip_x"]).is_ok() {
-        return run_five_axis(setpoints, &toolpath, limits);
+        return run_five_axis(setpoints, toolpath, limits);
     }
     let limits = limits.limits(toolpath.tip_dim())?;
     let rows = read_rows(setpoints, toolpath.tip_dim())?;
-    let curves = PathCurves::new(&toolpath);
-    let report = verify(&curves, &limits, &rows);
+    let curves = PathCurves::new(toolpath);
+    let mut report = verify(&curves, &limits, &rows);
     let tip = toolpath.tip_dim();
+    let deviation = prepared.deviation_from_program(rows.iter().map(|r| &r.q[..tip]));
+    if let Some(dev) = deviation {
+        if dev > limits.chord_tolerance * (1.0 + crate::planner::verify::SLACK) {
+            report.violations.push(format!(
+                "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {}",
+                limits.chord_tolerance
+            ));
+        }
+    }
     println!(
         "{} setpoints ({:.6} s): max |v| {:?}, |a| {:?}, |jerk| {:?}; max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
@@ -183,6 +198,9 @@ pub fn run(setpoints: &Path, toolpath: &Path, limits: &LimitArgs) -> Result<bool
         report.max_chord_error,
         report.max_distance_to_curve,
     );
+    if let Some(line) = prepared.describe(deviation, limits.chord_tolerance) {
+        println!("{line}");
+    }
     for v in &report.violations {
         println!("VIOLATION: {v}");
     }
