@@ -649,7 +649,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
             ratio = ratio.max(step2.sqrt() / period / feed);
             if p.curve == s.curve && s.u > p.u {
                 if let Some(view) = ctx.curves.curve(s.curve) {
-                    let r = sagitta(&view, tip, &p, s) / eps;
+                    let r = sagitta(&view, tip, &p, s, eps) / eps;
                     chord_ratio = chord_ratio.max(r);
                     ratio = ratio.max(r.sqrt());
                 }
@@ -718,15 +718,29 @@ fn quick(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     })
 }
 
-/// Distance from the curve point at the middle parameter to the chord between two samples.
+/// Largest distance from the curve between two samples to the chord between them.
+///
+/// Three probes (quarter, middle, three quarters of the parameter step) find the sagitta where
+/// the parametrisation is uneven across the step (near-repeated control points); where they
+/// come near the tolerance `eps`, the step is measured as `verify` measures it.
 fn sagitta(
     view: &nurbs_rtcore::CurveView,
     tip: usize,
     a: &nurbs_rtcore::executor::Sample,
     b: &nurbs_rtcore::executor::Sample,
+    eps: f64,
 ) -> f64 {
-    super::verify::distance_to_chord(&view.point(0.5 * (a.u + b.u)), &a.point, &b.point, tip)
+    let probe = |f: f64| super::verify::distance_to_chord(&view.point(a.u + f * (b.u - a.u)), &a.point, &b.point, tip);
+    let probed = probe(0.5).max(probe(0.25)).max(probe(0.75));
+    if probed > EXACT_CHORD_ABOVE * eps {
+        super::verify::chord_error(view, tip, a.u, b.u, &a.point, &b.point)
+    } else {
+        probed
+    }
 }
+
+/// Fraction of the planning tolerance above which a step's chord error is measured exactly.
+const EXACT_CHORD_ABOVE: f64 = 0.3;
 
 /// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the
 /// paper's rules: violating vs violating, the smaller violation; both fine, the shorter; else
