@@ -145,14 +145,11 @@ fn png_pixels(path: &Path) -> Vec<[u8; 3]> {
         .collect()
 }
 
-fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
-    let mut cmd = bin();
-    cmd.arg("plan")
-        .arg(example("trident.json"))
-        .args(["--planner", planner]);
+/// Limits of the plot tests: seed 003's for VPOp (coarse period, per-axis accelerations, a fast
+/// run), lab set 1 at a 1 ms period for the Erwinski planner.
+fn plot_limits(planner: &str) -> &'static [&'static str] {
     if planner == "vpop" {
-        // Seed 003's limits (coarse period, per-axis accelerations): a fast VPOp run.
-        cmd.args([
+        &[
             "--feed",
             "166.667",
             "--vel",
@@ -161,10 +158,13 @@ fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
             "2500,3000",
             "--jerk",
             "5000",
-        ]);
-        cmd.args(["--chord-tol", "0.02", "--period", "0.006"]);
+            "--chord-tol",
+            "0.02",
+            "--period",
+            "0.006",
+        ]
     } else {
-        cmd.args([
+        &[
             "--feed",
             "2500",
             "--accel",
@@ -173,11 +173,38 @@ fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
             "6e4",
             "--chord-tol",
             "0.001",
-        ]);
-        cmd.args(["--period", "0.001"]);
+            "--period",
+            "0.001",
+        ]
     }
+}
+
+fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
+    let mut cmd = bin();
+    cmd.arg("plan")
+        .arg(example("trident.json"))
+        .args(["--planner", planner]);
+    cmd.args(plot_limits(planner));
     cmd.arg("--out").arg(csv).arg("--plot").arg(png);
     cmd
+}
+
+/// `nurbs-plan verify` passes on `csv` planned from `toolpath` under `limits`.
+fn assert_verifies(csv: &Path, toolpath: &Path, limits: &[&str]) {
+    let out = bin()
+        .arg("verify")
+        .arg(csv)
+        .arg(toolpath)
+        .args(limits)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}: {}{}",
+        csv.display(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
@@ -196,6 +223,7 @@ fn plan_draws_the_profile_as_a_png() {
             String::from_utf8_lossy(&out.stderr)
         );
         assert!(std::fs::metadata(&csv).unwrap().len() > 1000);
+        assert_verifies(&csv, &example("trident.json"), plot_limits(planner));
         let bytes = std::fs::read(&png).unwrap();
         assert_eq!(png_header(&bytes), (1600, 1800, 2), "{planner}: 1600x1800 RGB");
         // Three panels of curves, grids and text compress to far more than a blank image.
@@ -226,17 +254,8 @@ fn plan_draws_the_profile_as_a_png() {
     let out = bin()
         .arg("plan")
         .arg(&ngc)
-        .args([
-            "--feed",
-            "2500",
-            "--accel",
-            "1e4",
-            "--jerk",
-            "6e4",
-            "--chord-tol",
-            "0.001",
-        ])
-        .args(["--period", "0.001", "--out"])
+        .args(plot_limits("erwinski"))
+        .arg("--out")
         .arg(dir.join("multi.csv"))
         .arg("--plot")
         .arg(&png)
@@ -247,6 +266,7 @@ fn plan_draws_the_profile_as_a_png() {
         "multi.ngc: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    assert_verifies(&dir.join("multi.csv"), &ngc, plot_limits("erwinski"));
     assert_eq!(png_header(&std::fs::read(&png).unwrap()), (1600, 1800, 2));
     let pixels = png_pixels(&png);
     assert!(
