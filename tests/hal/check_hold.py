@@ -7,29 +7,15 @@
 - the motion ends at C(1) with `done` on the last sample; no fault, no underrun;
 - writes the recorded setpoints as a CSV for `nurbs-plan verify`.
 """
-import argparse
 import json
 import sys
 
-from samples import planned_prefix, read_plan, read_samples, sample_gap, write_recorded_csv
+from samples import load_run, parse_args, planned_prefix, write_recorded_csv
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--expected", required=True)
-    ap.add_argument("--samples", required=True)
-    ap.add_argument("--toolpath", required=True)
-    ap.add_argument("--period", type=float, required=True)
-    ap.add_argument("--tol", type=float, default=1e-9)
-    ap.add_argument("--recorded-csv", required=True)
-    a = ap.parse_args()
-
-    rows, axes = read_plan(a.expected)
-    samples = read_samples(a.samples)
-    errors = []
-    gap = sample_gap(samples)
-    if gap:
-        errors.append(gap)
+    a = parse_args(("--toolpath", dict(required=True, help="JSON toolpath (for C(1))")))
+    rows, axes, samples, errors = load_run(a)
     planned = planned_prefix(samples, rows, axes, a.tol)
     if not 1000 <= planned < len(rows) - 1:
         errors.append(f"{planned} samples follow the plan (of {len(rows)}): the hold did not start mid-path")

@@ -8,32 +8,17 @@
 - the motion ends at the end of the last curve, C(1), to --tol mm;
 - writes the recorded setpoints as a CSV in the offline format for `nurbs-plan verify`.
 """
-import argparse
 import json
 import sys
 
-from samples import read_plan, read_samples, sample_gap, write_recorded_csv
+from samples import load_run, parse_args, write_recorded_csv
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--expected", required=True, help="nurbs-plan plan --out CSV")
-    ap.add_argument("--samples", required=True, help="nurbs-hal-record output")
-    ap.add_argument("--toolpath", required=True, help="JSON toolpath (for C(1))")
-    ap.add_argument("--period", type=float, required=True)
-    ap.add_argument("--tol", type=float, default=1e-9)
-    ap.add_argument("--recorded-csv", required=True)
-    a = ap.parse_args()
-
-    rows, axes = read_plan(a.expected)
-    samples = read_samples(a.samples)
-
-    errors = []
+    a = parse_args(("--toolpath", dict(required=True, help="JSON toolpath (for C(1))")))
+    rows, axes, samples, errors = load_run(a)
     if len(samples) != len(rows):
         errors.append(f"{len(samples)} samples, offline plan has {len(rows)}")
-    gap = sample_gap(samples)
-    if gap:
-        errors.append(gap)
     worst = {k: 0.0 for k in axes + ["u", "feed"]}
     for k, (s, r) in enumerate(zip(samples, rows)):
         if s["fault"] or s["underrun"] or s["underruns"]:

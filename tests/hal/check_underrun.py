@@ -11,29 +11,14 @@ The recorded setpoints (stop and resumed samples back to back, as the sampler sa
 CSV for `nurbs-plan verify`, which must find no violation (but the missing end of the path when
 there is no resume).
 """
-import argparse
 import sys
 
-from samples import planned_prefix, read_plan, read_samples, sample_gap, write_recorded_csv
+from samples import load_run, parse_args, planned_prefix, read_samples, sample_gap, write_recorded_csv
 
 
 def main():
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--expected", required=True)
-    ap.add_argument("--samples", required=True)
-    ap.add_argument("--period", type=float, required=True)
-    ap.add_argument("--jerk", type=float, required=True)
-    ap.add_argument("--tol", type=float, default=1e-9)
-    ap.add_argument("--recorded-csv", required=True)
-    ap.add_argument("--resumed")
-    a = ap.parse_args()
-
-    rows, axes = read_plan(a.expected)
-    samples = read_samples(a.samples)
-    errors = []
-    gap = sample_gap(samples)
-    if gap:
-        errors.append(gap)
+    a = parse_args(("--jerk", dict(type=float, required=True)), ("--resumed", {}))
+    rows, axes, samples, errors = load_run(a)
     planned = planned_prefix(samples, rows, axes, a.tol)
     if not 1000 <= planned < len(rows) - 1:
         errors.append(f"{planned} samples follow the plan (of {len(rows)}): not a mid-path cut")

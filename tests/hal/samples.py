@@ -1,7 +1,32 @@
 """What the check_*.py scripts share: reading the offline plan and the recorder's samples,
 the consecutive-sample check, the length of the stretch that follows the plan, and writing the
-recorded setpoints as a CSV for `nurbs-plan verify`."""
+recorded setpoints as a CSV for `nurbs-plan verify`; the options and loading every check starts
+with."""
+import argparse
 import csv
+
+
+def parse_args(*extra):
+    """The options of every check (--expected, --samples, --period, --tol, --recorded-csv) plus
+    `extra` as (flag, keyword arguments) pairs."""
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--expected", required=True, help="nurbs-plan plan --out CSV")
+    ap.add_argument("--samples", required=True, help="nurbs-hal-record output")
+    ap.add_argument("--period", type=float, required=True)
+    ap.add_argument("--tol", type=float, default=1e-9)
+    ap.add_argument("--recorded-csv", required=True, help="where to write the samples as a CSV")
+    for flag, kwargs in extra:
+        ap.add_argument(flag, **kwargs)
+    return ap.parse_args()
+
+
+def load_run(a):
+    """The offline plan's rows and axes, the samples, and the errors found so far (a skipped
+    period)."""
+    rows, axes = read_plan(a.expected)
+    samples = read_samples(a.samples)
+    gap = sample_gap(samples)
+    return rows, axes, samples, [gap] if gap else []
 
 
 def read_plan(path):

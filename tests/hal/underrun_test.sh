@@ -1,0 +1,69 @@
+#!/bin/bash
+# underrun_test.sh unload|freeze: a planner that falls behind, in real LinuxCNC. nurbs-planner
+# streams the butterfly with a 0.1 s margin (limits and period from halfiles/sim.ini, the same as
+# $LIMITS below); after 1 s it is either unloaded (SIGTERM; a second nurbs-planner is started
+# later) or frozen (SIGSTOP, by its pid; later continued with SIGCONT and it must notice the
+# published stop point by itself). nurbs_interp runs out of records mid-path and stops on the path
+# with the stop the planner checked from that segment boundary (plan_geometry.rs). The planner
+# then plans the rest of the path from rest at the stop point and queues it; `setp
+# nurbs_interp.resume 1` runs it. Checks (check_underrun.py, nurbs-plan verify): the samples are
+# the offline plan up to the cut, then a stop with a never-rising feed that ends at rest, no
+# position jump, underrun set and no fault; the resumed motion ends at C(1) at rest; the whole
+# sampled run (to the stop, then resumed) has no axial violation.
+here=$(cd "$(dirname "$0")" && pwd)
+source "$here/lib.sh"
+
+mode=$1
+case $mode in
+    unload)
+        cut="unloadusr nurbs-planner"
+        replan="loadusr -W nurbs-planner @TOOLPATH@ --ini @INI@ --margin 2" ;;
+    freeze)
+        cut="loadusr -w @WORK@/signal.sh STOP"
+        replan="loadusr -w @WORK@/signal.sh CONT\nloadusr -w @WORK@/wait-ready.sh" ;;
+    *) echo "usage: underrun_test.sh unload|freeze"; exit 2 ;;
+esac
+
+toolpath=$(realpath "$here/../../examples/butterfly.json")
+PERIOD=0.00025
+JERK=6e4
+LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
+
+work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
+chmod 755 "$work"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
+sed -e "s|@CUT@|$cut|" -e "s|@REPLAN@|$replan|" -e "s|@TOOLPATH@|$toolpath|g" \
+    -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
+    -e "s|@MARGIN@|0.1|g" -e "s|@KILL_AFTER@|1|g" -e "s|@WORK@|$work|g" \
+    "$here/underrun.hal.in" >"$work/underrun.hal"
+
+cat >"$work/signal.sh" <<'SH'
+#!/bin/sh
+# signal.sh STOP|CONT: freeze or continue the nurbs-planner of this session (by its pid).
+pid=$(pidof nurbs-planner) || { echo "no nurbs-planner running"; exit 1; }
+kill -"$1" $pid
+SH
+cat >"$work/wait-ready.sh" <<'SH'
+#!/bin/sh
+# Wait (at most 20 s) until nurbs_interp has a plan from the stop point queued.
+for i in $(seq 200); do
+    [ "$(halcmd getp nurbs_interp.resume-ready)" = TRUE ] && exit 0
+    sleep 0.1
+done
+echo "no plan from the stop point after 20 s"; exit 1
+SH
+chmod 755 "$work/signal.sh" "$work/wait-ready.sh"
+hal_session "$work/underrun.hal" "$work/halrun.log"
+cat "$work/halrun.log"
+python3 "$here/check_underrun.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
+    --period $PERIOD --jerk $JERK --recorded-csv "$work/recorded.csv" --resumed "$work/resumed.txt"
+verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
+echo "$verify"
+if grep "^VIOLATION" <<<"$verify"; then
+    echo "the stop and resume violate the limits"; exit 1
+fi
+grep -q "the module stopped (underrun) at curve" "$work/halrun.log" || {
+    echo "the planner did not plan from the stop point"; exit 1; }
+grep -q "nurbs-planner: stopped by signal, exiting cleanly" "$work/halrun.log" || {
+    echo "nurbs-planner did not exit cleanly on SIGTERM"; exit 1; }
+rm -rf "$work"
