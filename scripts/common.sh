@@ -8,3 +8,5 @@ trap 'rm -rf "$dir"' EXIT
 lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
 lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
 vpop_limits="--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006"
+# Paper 003, Table 1: joint limits of the XYZAC machine (x,y,z in mm, a,c in degrees).
+table1="--feed 83.333 --vel 500,500,500,90,120 --accel 2500,3000,2100,298.8,298.8 --jerk 5000,5000,50000,1800,36000 --chord-tol 0.02 --period 0.006"

@@ -1,7 +1,9 @@
 #!/bin/bash
 # Side by side in one run: every bundled curve with both lab sets of paper 000 (and the trident
 # with the VPOp limits), planned by `--planner erwinski` and `--planner vpop`, each output checked
-# by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run).
+# by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run),
+# then the open pocket on the 5-axis machine with paper 003's Table 1 joint limits (VPOp only: the
+# Erwinski planner has no joint kinematics).
 # Usage: scripts/compare.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
@@ -32,3 +34,6 @@ for c in "${cases[@]}"; do
   IFS='|' read -r vt vp vv <<<"$(run vpop "$curve" "$lim")"
   echo "| $curve | $name | $et | $ep | $ev | $vt | $vp | $vv |"
 done
+IFS='|' read -r vt vp vv <<<"$(run vpop open_pocket "$table1")"
+echo
+echo "open_pocket, XYZAC joints, Table 1 limits, VPOp: motion $vt s, plan $vp ms, verify $vv"
