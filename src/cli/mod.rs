@@ -2,6 +2,7 @@
 
 mod corners;
 mod inspect;
+mod machine;
 mod plan;
 mod plot;
 mod verify;
@@ -10,6 +11,7 @@ pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};
 use corners::RoundCorners;
+use machine::MachineArgs;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -64,6 +66,8 @@ enum Command {
         /// `verify` must be given the same mode to check against the same path.
         #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
         round_corners: RoundCorners,
+        #[command(flatten)]
+        machine: MachineArgs,
     },
     /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
     Verify {
@@ -82,6 +86,8 @@ enum Command {
         /// rounded path, and their distance to the programmed polyline against --chord-tol.
         #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
         round_corners: RoundCorners,
+        #[command(flatten)]
+        machine: MachineArgs,
     },
 }
 
@@ -143,6 +149,7 @@ pub fn run() -> ExitCode {
             planner,
             plot,
             round_corners,
+            machine,
         } => plan::run(plan::PlanArgs {
             toolpath: &toolpath,
             limits: &limits,
@@ -151,13 +158,15 @@ pub fn run() -> ExitCode {
             planner,
             plot: plot.as_deref(),
             round_corners,
+            machine: &machine,
         }),
         Command::Verify {
             setpoints,
             toolpath,
             limits,
             round_corners,
-        } => match verify::run(&setpoints, &toolpath, &limits, round_corners) {
+            machine,
+        } => match verify::run(&setpoints, &toolpath, &limits, round_corners, &machine) {
             Ok(true) => Ok(()),
             Ok(false) => return ExitCode::from(1),
             Err(e) => Err(e),
