@@ -492,7 +492,7 @@ fn round_corners_on_needs_a_polyline() {
     };
     let out = run("on");
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("needs a tool-tip polyline"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("needs a polyline"));
     let out = run("auto");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
@@ -787,5 +787,83 @@ fn programmed_gcode_feeds_cap_each_element() {
         assert!(!bad.status.success(), "{planner}: {text}");
         assert!(text.contains("exceeds the programmed feed 20"), "{planner}: {text}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Slow spots of a setpoint CSV: stretches where the feed column dips below `below` mm/s
+/// (away from the start and the end).
+fn slow_spots(csv: &Path, below: f64) -> usize {
+    let feed: Vec<f64> = csv_columns(csv, &["feed"]).iter().map(|r| r[0]).collect();
+    let inner = &feed[5..feed.len() - 5];
+    inner.windows(2).filter(|w| w[0] >= below && w[1] < below).count()
+}
+
+/// fan_5axis is a 5-axis G1 path (tool tip and tool axis, 25 points): `--round-corners auto`
+/// rounds tip and top curve on one parameter within --chord-tol, so the rotary joints turn
+/// through the corners instead of stopping at every one. Both planners' plans verify against
+/// the rounded path (and fail against the programmed one), VPOp's within the tolerance of the
+/// programmed polyline and faster than with exact stops.
+#[test]
+fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-fan5-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let program = example("fan_5axis.json");
+    let tol = 0.02;
+    let verify = |csv: &Path, limits: &[&str], corners: &str| {
+        bin()
+            .arg("verify")
+            .arg(csv)
+            .arg(&program)
+            .args(limits)
+            .args(["--round-corners", corners])
+            .output()
+            .unwrap()
+    };
+    let (round_csv, stop_csv) = (dir.join("vpop-auto.csv"), dir.join("vpop-off.csv"));
+    let round = plan_summary(&program, "vpop", "auto", &round_csv, &TABLE1);
+    let stop = plan_summary(&program, "vpop", "off", &stop_csv, &TABLE1);
+    let corners = round["rounding_corners"].as_u64().unwrap();
+    let tip_dev = round["rounding_max_deviation_mm"].as_f64().unwrap();
+    let top_dev = round["rounding_max_top_deviation_mm"].as_f64().unwrap();
+    let dev = round["max_deviation_from_program_mm"].as_f64().unwrap();
+    let (t1, t0) = (
+        round["motion_time_s"].as_f64().unwrap(),
+        stop["motion_time_s"].as_f64().unwrap(),
+    );
+    let (slow1, slow0) = (slow_spots(&round_csv, 5.0), slow_spots(&stop_csv, 5.0));
+    eprintln!(
+        "fan_5axis, Table 1, vpop: {corners} corners (tip {tip_dev:.5} mm, top {top_dev:.5} mm), setpoints {dev:.5} mm; \
+         {t1:.3} s rounded ({slow1} slow spots) vs {t0:.3} s stopping ({slow0})"
+    );
+    assert!(corners >= 20, "{corners}");
+    assert!(tip_dev <= tol && top_dev <= tol && dev <= tol * (1.0 + 1e-6));
+    assert!(tip_dev.max(top_dev) > 0.9 * tol);
+    assert!(t1 < 0.95 * t0, "{t1} s vs {t0} s");
+    assert!(slow0 >= 20 && slow1 * 3 < slow0, "{slow1} vs {slow0}");
+    let ok = verify(&round_csv, &TABLE1, "auto");
+    let text = String::from_utf8_lossy(&ok.stdout);
+    assert!(ok.status.success() && text.contains("top curve"), "{text}");
+    assert!(!verify(&round_csv, &TABLE1, "off").status.success());
+    assert!(verify(&stop_csv, &TABLE1, "off").status.success());
+    // The Erwinski planner plans the tool tip of the same rounded path.
+    let tip_limits = [
+        "--feed",
+        "83.333",
+        "--vel",
+        "500",
+        "--accel",
+        "2500,3000,2100",
+        "--jerk",
+        "5000,5000,50000",
+        "--chord-tol",
+        "0.02",
+        "--period",
+        "0.006",
+    ];
+    let csv = dir.join("erwinski-auto.csv");
+    let s = plan_summary(&program, "erwinski", "auto", &csv, &tip_limits);
+    assert_eq!(s["rounding_corners"].as_u64(), Some(corners));
+    assert!(verify(&csv, &tip_limits, "auto").status.success());
+    assert!(!verify(&csv, &tip_limits, "off").status.success());
     std::fs::remove_dir_all(&dir).ok();
 }

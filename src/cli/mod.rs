@@ -57,10 +57,12 @@ enum Command {
         #[arg(long, value_name = "PNG")]
         plot: Option<PathBuf>,
         /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
-        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
-        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
-        /// allow), and is planned as one motion without stopping at the corners; other paths
+        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
+        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
+        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
+        /// control points that stays within --chord-tol of the programmed polyline (as much of it
+        /// as the segment lengths allow), and is planned as one motion without stopping at the
+        /// corners; other paths
         /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// `verify` must be given the same mode to check against the same path.
@@ -76,10 +78,12 @@ enum Command {
         #[command(flatten)]
         limits: LimitArgs,
         /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
-        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
-        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
-        /// allow), and is planned as one motion without stopping at the corners; other paths
+        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
+        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
+        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
+        /// control points that stays within --chord-tol of the programmed polyline (as much of it
+        /// as the segment lengths allow), and is planned as one motion without stopping at the
+        /// corners; other paths
         /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// The same mode as `plan` (default `auto`): the setpoints are checked against the same

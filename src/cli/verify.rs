@@ -1,4 +1,4 @@
-use super::corners::{prepare, RoundCorners};
+use super::corners::{prepare, Prepared, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::LimitArgs;
 use crate::planner::verify::{verify, Row};
@@ -89,10 +89,11 @@ fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, String> {
 /// tool axis).
 fn run_five_axis(
     setpoints: &Path,
-    toolpath: &crate::geometry::Toolpath,
+    prepared: &Prepared,
     limits: &LimitArgs,
     machine: crate::kinematics::Xyzac,
 ) -> Result<bool, Box<dyn std::error::Error>> {
+    let toolpath = &prepared.toolpath;
     use crate::planner::axial::FiniteDifferences;
     use crate::planner::verify::SLACK;
     use nurbs_rtcore::executor::CurveSet;
@@ -160,6 +161,12 @@ fn run_five_axis(
         .collect();
     let report = verify(&curves, &tip_limits, &rows);
     violations.extend(report.violations);
+    let deviation = check_program_deviation(
+        prepared,
+        tips.iter().map(Vec::as_slice),
+        joint_limits.chord_tolerance,
+        &mut violations,
+    );
     println!(
         "{} setpoints ({:.6} s), joints x y z a c: max |v| {:?}, |a| {:?}, |jerk| {:?}; tool tip: max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
@@ -171,6 +178,9 @@ fn run_five_axis(
         report.max_chord_error,
         report.max_distance_to_curve,
     );
+    if let Some(line) = prepared.describe(deviation, joint_limits.chord_tolerance) {
+        println!("{line}");
+    }
     print_programmed_feed(report.max_programmed_feed_ratio);
     for v in &violations {
         println!("VIOLATION: {v}");
@@ -179,6 +189,23 @@ fn run_five_axis(
         println!("OK: no violation");
     }
     Ok(violations.is_empty())
+}
+
+/// Largest distance of the tool tips to the programmed polyline (`None` when the program is
+/// not one); a violation when it exceeds --chord-tol.
+fn check_program_deviation<'a>(
+    prepared: &Prepared,
+    tips: impl IntoIterator<Item = &'a [f64]>,
+    tolerance: f64,
+    violations: &mut Vec<String>,
+) -> Option<f64> {
+    let deviation = prepared.deviation_from_program(tips);
+    if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + crate::planner::verify::SLACK)) {
+        violations.push(format!(
+            "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}"
+        ));
+    }
+    deviation
 }
 
 /// One line on the programmed feeds, when the toolpath has them.
@@ -208,7 +235,7 @@ pub fn run(
             )
             .into());
         }
-        return run_five_axis(setpoints, toolpath, limits, machine.kinematics());
+        return run_five_axis(setpoints, &prepared, limits, machine.kinematics());
     }
     machine.refuse(&format!(
         "{} holds tool-tip setpoints (no a, c columns): no machine kinematics to check",
@@ -219,15 +246,12 @@ pub fn run(
     let curves = PathCurves::new(toolpath);
     let mut report = verify(&curves, &limits, &rows);
     let tip = toolpath.tip_dim();
-    let deviation = prepared.deviation_from_program(rows.iter().map(|r| &r.q[..tip]));
-    if let Some(dev) = deviation {
-        if dev > limits.chord_tolerance * (1.0 + crate::planner::verify::SLACK) {
-            report.violations.push(format!(
-                "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {}",
-                limits.chord_tolerance
-            ));
-        }
-    }
+    let deviation = check_program_deviation(
+        &prepared,
+        rows.iter().map(|r| &r.q[..tip]),
+        limits.chord_tolerance,
+        &mut report.violations,
+    );
     println!(
         "{} setpoints ({:.6} s): max |v| {:?}, |a| {:?}, |jerk| {:?}; max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
