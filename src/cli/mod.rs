@@ -62,8 +62,8 @@ enum Command {
         /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
         /// control points that stays within --chord-tol of the programmed polyline (as much of it
         /// as the segment lengths allow), and is planned as one motion without stopping at the
-        /// corners; other paths
-        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
+        /// not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// `verify` must be given the same mode to check against the same path.
         #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
@@ -83,8 +83,8 @@ enum Command {
         /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
         /// control points that stays within --chord-tol of the programmed polyline (as much of it
         /// as the segment lengths allow), and is planned as one motion without stopping at the
-        /// corners; other paths
-        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
+        /// not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// The same mode as `plan` (default `auto`): the setpoints are checked against the same
         /// rounded path, and their distance to the programmed polyline against --chord-tol.

@@ -93,10 +93,10 @@ fn run_five_axis(
     limits: &LimitArgs,
     machine: crate::kinematics::Xyzac,
 ) -> Result<bool, Box<dyn std::error::Error>> {
-    let toolpath = &prepared.toolpath;
     use crate::planner::axial::FiniteDifferences;
     use crate::planner::verify::SLACK;
     use nurbs_rtcore::executor::CurveSet;
+    let toolpath = &prepared.toolpath;
     let joint_limits = limits.limits(5)?;
     let joints = read_columns(setpoints, &["x", "y", "z", "a", "c"])?;
     let tips = read_columns(setpoints, &["tip_x", "tip_y", "tip_z"])?;

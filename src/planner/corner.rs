@@ -155,29 +155,28 @@ fn round_with_feeds(vertices: &[Vertex], tip: usize, feeds: &[Option<f64>], tole
     let mut start_seg = 0;
     let run_feed = |from: usize, to: usize| seg_feed[from..=to].iter().fold(None, |a, b| min_feed(a, *b));
     for i in 1..n - 1 {
-        // A turn of the tool axis in place (5-axis) has no tip length to round along.
-        let in_place = lens[i - 1] <= 1e-12 || lens[i] <= 1e-12;
         // Per mm of tip travel on either side: the tip's unit direction, and the top's rate.
         let rate = |k: usize| -> Vec<f64> { sub(&v[k + 1], &v[k]).iter().map(|x| x / lens[k]).collect() };
-        let (r1, r2) = if in_place {
-            (v[i].clone(), v[i].clone())
-        } else {
-            (rate(i - 1), rate(i))
-        };
-        let cos = r1[..tip].iter().zip(&r2[..tip]).map(|(a, b)| a * b).sum::<f64>();
-        let axis_kink = five && norm(&sub(&r1[tip..], &r2[tip..])) > 1e-12;
-        if !in_place && cos > 1.0 - 1e-12 && !axis_kink {
-            continue; // straight through
-        }
-        if in_place || cos < -1.0 + 1e-9 {
-            // A reversal has no rounding inside the tolerance (the spline would stop and turn
-            // back on itself): keep the programmed vertex, where the motion stops.
-            if norm(&sub(&v[i], &start)) > 1e-12 {
-                elements.push(line(&start, &v[i], run_feed(start_seg, i - 1), tip));
+        // A turn of the tool axis with the tip standing still (5-axis) has no tip length to
+        // round along: `None`, the vertex is kept like a reversal.
+        let turn = (lens[i - 1] > 1e-12 && lens[i] > 1e-12).then(|| {
+            let (r1, r2) = (rate(i - 1), rate(i));
+            let cos = r1[..tip].iter().zip(&r2[..tip]).map(|(a, b)| a * b).sum::<f64>();
+            (cos, five && norm(&sub(&r1[tip..], &r2[tip..])) > 1e-12)
+        });
+        match turn {
+            Some((cos, axis_kink)) if cos > 1.0 - 1e-12 && !axis_kink => continue, // straight through
+            Some((cos, _)) if cos >= -1.0 + 1e-9 => {}                             // a corner
+            _ => {
+                // A reversal has no rounding inside the tolerance (the spline would stop and
+                // turn back on itself): keep the programmed vertex, where the motion stops.
+                if norm(&sub(&v[i], &start)) > 1e-12 {
+                    elements.push(line(&start, &v[i], run_feed(start_seg, i - 1), tip));
+                }
+                start = v[i].clone();
+                start_seg = i;
+                continue;
             }
-            start = v[i].clone();
-            start_seg = i;
-            continue;
         }
         // Deviation is proportional to d (the tip distance of the first control point from the
         // vertex), for the tip and the top alike: measure it at d = 1 and scale to the tolerance.
@@ -486,6 +485,31 @@ mod tests {
         // End points kept.
         let last = els.last().unwrap();
         assert!(norm(&sub(&last.curve.point(last.curve.u_max())[..6], &cps[4])) < 1e-12);
+    }
+
+    /// A turn of the tool axis with the tip standing still is kept as programmed (no tip length
+    /// to round along), not an error.
+    #[test]
+    fn an_axis_turn_in_place_is_kept() {
+        let tips = [[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 10.0, 0.0]];
+        let tops = [[0.0, 0.0, 10.0], [10.0, 0.0, 10.0], [13.0, 0.0, 9.5], [13.0, 10.0, 9.5]];
+        let knots = vec![0.0, 0.0, 1.0, 2.0, 3.0, 3.0];
+        let rows = |p: &[[f64; 3]]| -> Vec<Vec<f64>> { p.iter().map(|x| x.to_vec()).collect() };
+        let curve = Nurbs::new(1, knots.clone(), &rows(&tips), None)
+            .unwrap()
+            .with_top_curve(&Nurbs::new(1, knots, &rows(&tops), None).unwrap())
+            .unwrap();
+        let tp = Toolpath {
+            elements: vec![PathElement {
+                kind: ElementKind::Polyline,
+                curve,
+                feed: None,
+                source_line: None,
+            }],
+        };
+        let r = round_toolpath(&tp, 0.01).unwrap();
+        assert_eq!(r.corners, 0);
+        assert_eq!(r.toolpath.elements.len(), 3);
     }
 
     /// The hinted search gives the exact largest distance (same as checking every segment).

@@ -7,10 +7,11 @@
 //! jerk `|q - 3q_j + 3q_{j-1} - q_{j-2}| <= J dt^3` (eq. 14). The intersection of the slabs is
 //! a box; the feasible next positions are where the path crosses the box, inside the feed ball
 //! `|tip(s) - tip_j| <= F dt` and the chord-error cap. F is the feed limit, lowered on every
-//! element to its programmed feed (G-code `F`); a step across elements takes the lowest. The crossing is located with the
-//! geometric derivative at the unknown point (eq. 13), re-linearised Newton-style at each
-//! estimate, and every returned point is checked with exactly the arithmetic of
-//! [`crate::planner::axial`], so no overrun can pass (the paper allowed 120 % jerk).
+//! element to its programmed feed (G-code `F`); a step across elements takes the lowest. The
+//! crossing is located with the geometric derivative at the unknown point (eq. 13),
+//! re-linearised Newton-style at each estimate, and every returned point is checked with
+//! exactly the arithmetic of [`crate::planner::axial`], so no overrun can pass (the paper
+//! allowed 120 % jerk).
 
 use super::path::{JointPath, PathPoint};
 use crate::planner::axial::MAX_AXES;
