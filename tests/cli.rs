@@ -492,11 +492,378 @@ fn round_corners_on_needs_a_polyline() {
     };
     let out = run("on");
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("needs a tool-tip polyline"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("needs a polyline"));
     let out = run("auto");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("t.json")).unwrap()).unwrap();
     assert_eq!(s["rounding_corners"].as_u64(), Some(0));
     assert!(s["max_deviation_from_program_mm"].is_null());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Columns `names` of a setpoint CSV, row by row.
+fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let cols: Vec<usize> = names
+        .iter()
+        .map(|n| {
+            header
+                .iter()
+                .position(|h| h == n)
+                .unwrap_or_else(|| panic!("no column {n}"))
+        })
+        .collect();
+    lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            cols.iter().map(|&c| f[c].parse().unwrap()).collect()
+        })
+        .collect()
+}
+
+/// The paper's Table 1 limits of the XYZAC machine (joint order x, y, z, a, c; degrees).
+const TABLE1: [&str; 12] = [
+    "--feed",
+    "83.333",
+    "--vel",
+    "500,500,500,90,120",
+    "--accel",
+    "2500,3000,2100,298.8,298.8",
+    "--jerk",
+    "5000,5000,50000,1800,36000",
+    "--chord-tol",
+    "0.02",
+    "--period",
+    "0.006",
+];
+
+/// `--pivot` moves the point where the A and C axes meet: the joints planned with it put the
+/// tool tip and the tool axis, by forward kinematics with that pivot, on the programmed curves;
+/// `verify` passes with the same pivot and fails with another one (or none).
+#[test]
+fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
+    use nurbs_motion::kinematics::Xyzac;
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-pivot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let program = example("open_pocket.json");
+    let pivot = [-15.0, 40.0, -60.0];
+    let csv = dir.join("pivot.csv");
+    let summary = dir.join("pivot.json");
+    let out = bin()
+        .arg("plan")
+        .arg(&program)
+        .args(TABLE1)
+        .args(["--planner", "vpop", "--machine", "xyzac", "--pivot", "-15,40,-60"])
+        .arg("--out")
+        .arg(&csv)
+        .arg("--summary")
+        .arg(&summary)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(s["machine"], "xyzac");
+    assert_eq!(s["pivot_mm"], serde_json::json!(pivot));
+    // Every row: the joints' tool tip and tool axis on the programmed tip and top curves.
+    let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
+    let machine = Xyzac {
+        pivot,
+        ..Xyzac::default()
+    };
+    let rows = csv_columns(&csv, &["x", "y", "z", "a", "c", "element", "u"]);
+    assert!(rows.len() > 100);
+    let (mut tip_error, mut axis_error, mut unpivoted): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for r in &rows {
+        let p = toolpath.elements[r[5] as usize].curve.point(r[6]);
+        let d = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let (tip, axis) = machine.forward(&r[..5]);
+        let (tip0, _) = Xyzac::default().forward(&r[..5]);
+        for i in 0..3 {
+            tip_error = tip_error.max((tip[i] - p[i]).abs());
+            axis_error = axis_error.max((axis[i] - d[i] / n).abs());
+            unpivoted = unpivoted.max((tip0[i] - p[i]).abs());
+        }
+    }
+    eprintln!(
+        "pivot {pivot:?}: tip {tip_error:.2e} mm, axis {axis_error:.2e}; without the pivot {unpivoted:.3} mm off"
+    );
+    assert!(tip_error < 1e-6, "{tip_error}");
+    assert!(axis_error < 1e-9, "{axis_error}");
+    assert!(unpivoted > 1.0, "the pivot changed nothing: {unpivoted}");
+    let verify = |pivot: Option<&str>| {
+        let mut cmd = bin();
+        cmd.arg("verify").arg(&csv).arg(&program).args(TABLE1);
+        if let Some(p) = pivot {
+            cmd.arg(format!("--pivot={p}"));
+        }
+        cmd.output().unwrap()
+    };
+    let ok = verify(Some("-15,40,-60"));
+    assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stdout));
+    for other in [None, Some("-15,40,-59"), Some("0,0,0")] {
+        let bad = verify(other);
+        let text = String::from_utf8_lossy(&bad.stdout);
+        assert!(!bad.status.success(), "{other:?}: {text}");
+        assert!(text.contains("off the joints' tool tip"), "{other:?}: {text}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Bad `--machine` / `--pivot` values, and the flags where no kinematics is used, fail with a
+/// message naming the flag.
+#[test]
+fn machine_options_refuse_bad_values_and_tool_tip_paths() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-machine-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let plan = |program: &str, planner: &str, extra: &[&str]| {
+        bin()
+            .arg("plan")
+            .arg(example(program))
+            .args(TABLE1)
+            .args(["--planner", planner])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.join("m.csv"))
+            .output()
+            .unwrap()
+    };
+    for (program, planner, extra, expected) in [
+        ("open_pocket.json", "vpop", &["--pivot", "1,2"][..], "three numbers"),
+        ("open_pocket.json", "vpop", &["--pivot", "1,2,3,4"], "three numbers"),
+        (
+            "open_pocket.json",
+            "vpop",
+            &["--pivot", "1,y,3"],
+            "three finite numbers",
+        ),
+        (
+            "open_pocket.json",
+            "vpop",
+            &["--pivot", "nan,0,0"],
+            "three finite numbers",
+        ),
+        (
+            "open_pocket.json",
+            "vpop",
+            &["--machine", "xyzbc"],
+            "possible values: xyzac",
+        ),
+        ("trident.json", "vpop", &["--pivot", "1,2,3"], "2-axis tool-tip path"),
+        (
+            "trident.json",
+            "erwinski",
+            &["--machine", "xyzac"],
+            "2-axis tool-tip path",
+        ),
+        ("open_pocket.json", "erwinski", &["--pivot", "1,2,3"], "--planner vpop"),
+    ] {
+        let out = plan(program, planner, extra);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{program} {planner} {extra:?} passed");
+        assert!(err.contains(expected), "{program} {planner} {extra:?}: {err}");
+        assert!(err.contains("--pivot") || err.contains("--machine"), "{err}");
+    }
+    // verify: tool-tip setpoints (the Erwinski planner on the same path) have no kinematics
+    // to check.
+    let tip_limits = [
+        "--feed",
+        "83.333",
+        "--vel",
+        "500",
+        "--accel",
+        "2500,3000,2100",
+        "--jerk",
+        "5000,5000,50000",
+        "--chord-tol",
+        "0.02",
+        "--period",
+        "0.006",
+    ];
+    let csv = dir.join("tip.csv");
+    let out = bin()
+        .arg("plan")
+        .arg(example("open_pocket.json"))
+        .args(tip_limits)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_verifies(&csv, &example("open_pocket.json"), &tip_limits);
+    let out = bin()
+        .arg("verify")
+        .arg(&csv)
+        .arg(example("open_pocket.json"))
+        .args(tip_limits)
+        .args(["--pivot", "1,2,3"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("--pivot") && err.contains("tool-tip setpoints"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A line and an arc at F1200 (20 mm/s), then a line at F3000 (50 mm/s): the same geometry in
+/// both programs, `one_feed` programs F3000 throughout.
+fn two_feed_program(one_feed: bool) -> String {
+    let slow = if one_feed { "F3000" } else { "F1200" };
+    format!("G21 G90 G17 G94 G64\nG0 X0 Y0\n{slow}\nG1 X30 Y0\nG3 X40 Y10 R10\nF3000\nG1 X40 Y60\nM2\n")
+}
+
+/// Both planners keep every element at or below its programmed G-code feed (never above
+/// --feed), and reach it; `verify` checks the programmed feed per element, so a plan of the
+/// same geometry at a single feed fails against the two-feed program.
+#[test]
+fn programmed_gcode_feeds_cap_each_element() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-feeds-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (two, one) = (dir.join("two_feeds.ngc"), dir.join("one_feed.ngc"));
+    std::fs::write(&two, two_feed_program(false)).unwrap();
+    std::fs::write(&one, two_feed_program(true)).unwrap();
+    let limits = [
+        "--feed",
+        "100",
+        "--accel",
+        "1000",
+        "--jerk",
+        "1e4",
+        "--chord-tol",
+        "0.001",
+        "--period",
+        "0.001",
+    ];
+    let plan = |program: &Path, planner: &str, csv: &Path| {
+        let out = bin()
+            .arg("plan")
+            .arg(program)
+            .args(limits)
+            .args(["--planner", planner])
+            .arg("--out")
+            .arg(csv)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{} {planner}: {}",
+            program.display(),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    for planner in ["erwinski", "vpop"] {
+        let csv = dir.join(format!("{planner}-two.csv"));
+        plan(&two, planner, &csv);
+        assert_verifies(&csv, &two, &limits);
+        // Feed of every step from the positions: within the slow elements (line, arc) at most
+        // 20 mm/s, at most 50 mm/s anywhere, and both feeds reached.
+        let rows = csv_columns(&csv, &["x", "y", "element"]);
+        let (mut slow, mut fast): (f64, f64) = (0.0, 0.0);
+        for w in rows.windows(2) {
+            let feed = (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]) / 0.001;
+            if w[1][2] <= 1.0 {
+                slow = slow.max(feed);
+            } else {
+                fast = fast.max(feed);
+            }
+        }
+        eprintln!("{planner}: max feed {slow:.4} mm/s at F1200, {fast:.4} mm/s at F3000");
+        assert!(slow <= 20.0 * (1.0 + 1e-6) && slow > 19.0, "{planner}: {slow}");
+        assert!(fast <= 50.0 * (1.0 + 1e-6) && fast > 45.0, "{planner}: {fast}");
+        // The single-feed plan is fine for its own program, not for the two-feed one.
+        let csv_one = dir.join(format!("{planner}-one.csv"));
+        plan(&one, planner, &csv_one);
+        assert_verifies(&csv_one, &one, &limits);
+        let bad = bin()
+            .arg("verify")
+            .arg(&csv_one)
+            .arg(&two)
+            .args(limits)
+            .output()
+            .unwrap();
+        let text = String::from_utf8_lossy(&bad.stdout);
+        assert!(!bad.status.success(), "{planner}: {text}");
+        assert!(text.contains("exceeds the programmed feed 20"), "{planner}: {text}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Slow spots of a setpoint CSV: stretches where the feed column dips below `below` mm/s
+/// (away from the start and the end).
+fn slow_spots(csv: &Path, below: f64) -> usize {
+    let feed: Vec<f64> = csv_columns(csv, &["feed"]).iter().map(|r| r[0]).collect();
+    let inner = &feed[5..feed.len() - 5];
+    inner.windows(2).filter(|w| w[0] >= below && w[1] < below).count()
+}
+
+/// fan_5axis is a 5-axis G1 path (tool tip and tool axis, 25 points): `--round-corners auto`
+/// rounds tip and top curve on one parameter within --chord-tol, so the rotary joints turn
+/// through the corners instead of stopping at every one. Both planners' plans verify against
+/// the rounded path (and fail against the programmed one), VPOp's within the tolerance of the
+/// programmed polyline and faster than with exact stops.
+#[test]
+fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
+    let dir = std::env::temp_dir().join(format!("nurbs-cli-fan5-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let program = example("fan_5axis.json");
+    let tol = 0.02;
+    let verify = |csv: &Path, limits: &[&str], corners: &str| {
+        bin()
+            .arg("verify")
+            .arg(csv)
+            .arg(&program)
+            .args(limits)
+            .args(["--round-corners", corners])
+            .output()
+            .unwrap()
+    };
+    let (round_csv, stop_csv) = (dir.join("vpop-auto.csv"), dir.join("vpop-off.csv"));
+    let round = plan_summary(&program, "vpop", "auto", &round_csv, &TABLE1);
+    let stop = plan_summary(&program, "vpop", "off", &stop_csv, &TABLE1);
+    let corners = round["rounding_corners"].as_u64().unwrap();
+    let tip_dev = round["rounding_max_deviation_mm"].as_f64().unwrap();
+    let top_dev = round["rounding_max_top_deviation_mm"].as_f64().unwrap();
+    let dev = round["max_deviation_from_program_mm"].as_f64().unwrap();
+    let (t1, t0) = (
+        round["motion_time_s"].as_f64().unwrap(),
+        stop["motion_time_s"].as_f64().unwrap(),
+    );
+    let (slow1, slow0) = (slow_spots(&round_csv, 5.0), slow_spots(&stop_csv, 5.0));
+    eprintln!(
+        "fan_5axis, Table 1, vpop: {corners} corners (tip {tip_dev:.5} mm, top {top_dev:.5} mm), setpoints {dev:.5} mm; \
+         {t1:.3} s rounded ({slow1} slow spots) vs {t0:.3} s stopping ({slow0})"
+    );
+    assert!(corners >= 20, "{corners}");
+    assert!(tip_dev <= tol && top_dev <= tol && dev <= tol * (1.0 + 1e-6));
+    assert!(tip_dev.max(top_dev) > 0.9 * tol);
+    assert!(t1 < 0.95 * t0, "{t1} s vs {t0} s");
+    assert!(slow0 >= 20 && slow1 * 3 < slow0, "{slow1} vs {slow0}");
+    let ok = verify(&round_csv, &TABLE1, "auto");
+    let text = String::from_utf8_lossy(&ok.stdout);
+    assert!(ok.status.success() && text.contains("top curve"), "{text}");
+    assert!(!verify(&round_csv, &TABLE1, "off").status.success());
+    assert!(verify(&stop_csv, &TABLE1, "off").status.success());
+    // The Erwinski planner plans the tool tip of the same rounded path.
+    let tip_limits = [
+        "--feed",
+        "83.333",
+        "--vel",
+        "500",
+        "--accel",
+        "2500,3000,2100",
+        "--jerk",
+        "5000,5000,50000",
+        "--chord-tol",
+        "0.02",
+        "--period",
+        "0.006",
+    ];
+    let csv = dir.join("erwinski-auto.csv");
+    let s = plan_summary(&program, "erwinski", "auto", &csv, &tip_limits);
+    assert_eq!(s["rounding_corners"].as_u64(), Some(corners));
+    assert!(verify(&csv, &tip_limits, "auto").status.success());
+    assert!(!verify(&csv, &tip_limits, "off").status.success());
     std::fs::remove_dir_all(&dir).ok();
 }

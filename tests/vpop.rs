@@ -181,8 +181,9 @@ fn open_pocket_five_axis_table_1() {
     assert!(plan.motion_time >= 98.168 / 83.333);
 }
 
-/// G1 path (fan_5axis tool tip, 25 points): corners rounded with five-point cubic B-splines
-/// inside the contour tolerance, planned as one motion with the VPOp limits (3 axes).
+/// G1 path (fan_5axis, 25 points): corners rounded with five-point cubic B-splines inside the
+/// contour tolerance (tip and top curve together), the tool tip planned as one motion with the
+/// VPOp limits (3 axes).
 #[test]
 fn fan_5axis_tip_polyline_rounded() {
     use nurbs_motion::planner::corner::round_toolpath;

@@ -2,6 +2,7 @@
 
 mod corners;
 mod inspect;
+mod machine;
 mod plan;
 mod plot;
 mod verify;
@@ -10,6 +11,7 @@ pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};
 use corners::RoundCorners;
+use machine::MachineArgs;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -55,15 +57,19 @@ enum Command {
         #[arg(long, value_name = "PNG")]
         plot: Option<PathBuf>,
         /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
-        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
-        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
-        /// allow), and is planned as one motion without stopping at the corners; other paths
-        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
+        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
+        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
+        /// control points that stays within --chord-tol of the programmed polyline (as much of it
+        /// as the segment lengths allow), and is planned as one motion without stopping at the
+        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
+        /// not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// `verify` must be given the same mode to check against the same path.
         #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
         round_corners: RoundCorners,
+        #[command(flatten)]
+        machine: MachineArgs,
     },
     /// Check a setpoint CSV against the limits and the curve; non-zero exit on any violation.
     Verify {
@@ -72,16 +78,20 @@ enum Command {
         #[command(flatten)]
         limits: LimitArgs,
         /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines of the tool tip (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON),
-        /// one continuous run, has each corner replaced by a C2 cubic B-spline of five control points that stays
-        /// within --chord-tol of the programmed polyline (as much of it as the segment lengths
-        /// allow), and is planned as one motion without stopping at the corners; other paths
-        /// are planned as programmed. `on`: round, or fail if the path is not such a polyline.
+        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
+        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
+        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
+        /// control points that stays within --chord-tol of the programmed polyline (as much of it
+        /// as the segment lengths allow), and is planned as one motion without stopping at the
+        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
+        /// not such a polyline.
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// The same mode as `plan` (default `auto`): the setpoints are checked against the same
         /// rounded path, and their distance to the programmed polyline against --chord-tol.
         #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
         round_corners: RoundCorners,
+        #[command(flatten)]
+        machine: MachineArgs,
     },
 }
 
@@ -143,6 +153,7 @@ pub fn run() -> ExitCode {
             planner,
             plot,
             round_corners,
+            machine,
         } => plan::run(plan::PlanArgs {
             toolpath: &toolpath,
             limits: &limits,
@@ -151,13 +162,15 @@ pub fn run() -> ExitCode {
             planner,
             plot: plot.as_deref(),
             round_corners,
+            machine: &machine,
         }),
         Command::Verify {
             setpoints,
             toolpath,
             limits,
             round_corners,
-        } => match verify::run(&setpoints, &toolpath, &limits, round_corners) {
+            machine,
+        } => match verify::run(&setpoints, &toolpath, &limits, round_corners, &machine) {
             Ok(true) => Ok(()),
             Ok(false) => return ExitCode::from(1),
             Err(e) => Err(e),

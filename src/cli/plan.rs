@@ -1,4 +1,5 @@
 use super::corners::{prepare, RoundCorners};
+use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
 use crate::planner::axial::{FiniteDifferences, MAX_AXES};
@@ -15,10 +16,11 @@ pub struct PlanArgs<'a> {
     pub planner: PlannerKind,
     pub plot: Option<&'a Path>,
     pub round_corners: RoundCorners,
+    pub machine: &'a MachineArgs,
 }
 
-/// Adds the corner-rounding fields to a summary object.
-fn with_rounding(mut summary: serde_json::Value, extra: serde_json::Value) -> serde_json::Value {
+/// Adds the fields of `extra` (corner rounding, machine) to a summary object.
+fn with_fields(mut summary: serde_json::Value, extra: serde_json::Value) -> serde_json::Value {
     if let (Some(s), serde_json::Value::Object(e)) = (summary.as_object_mut(), extra) {
         s.extend(e);
     }
@@ -55,6 +57,10 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
     let toolpath = &prepared.toolpath;
+    args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
+    args.machine.refuse(
+        "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
+    )?;
     let limits = args.limits.limits(toolpath.tip_dim())?;
     let plan = plan(toolpath, &limits, &PlanOptions::default(), &mut |_| {})?;
     let curves = PathCurves::new(toolpath);
@@ -109,7 +115,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "max_axial_jerk": &pk.jerk[..tip],
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
-        let summary = with_rounding(summary, prepared.summary_fields(deviation));
+        let summary = with_fields(summary, prepared.summary_fields(deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
@@ -149,16 +155,12 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
     let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
-    // A top curve on every element: 5-axis on the XYZAC machine, limits in joint order.
-    let five = toolpath.elements.iter().all(|e| e.curve.dim() == 6);
+    args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
+    // A top curve on every element: 5-axis on the machine (XYZAC by default), limits in joint order.
+    let five = is_five_axis(toolpath);
     let plan = if five {
         let limits = args.limits.limits(5)?;
-        plan_five_axis(
-            toolpath,
-            crate::kinematics::Xyzac::default(),
-            &limits,
-            SearchOptions::default(),
-        )?
+        plan_five_axis(toolpath, args.machine.kinematics(), &limits, SearchOptions::default())?
     } else {
         plan_tip(toolpath, &args.limits.limits(tip)?, SearchOptions::default())?
     };
@@ -234,7 +236,10 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "max_axial_jerk": &pk.jerk[..axes],
             "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
         });
-        let summary = with_rounding(summary, prepared.summary_fields(deviation));
+        let mut summary = with_fields(summary, prepared.summary_fields(deviation));
+        if five {
+            summary = with_fields(summary, args.machine.summary_fields());
+        }
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {

@@ -1,4 +1,5 @@
-use super::corners::{prepare, RoundCorners};
+use super::corners::{prepare, Prepared, RoundCorners};
+use super::machine::{is_five_axis, MachineArgs};
 use super::LimitArgs;
 use crate::planner::verify::{verify, Row};
 use crate::planner::PathCurves;
@@ -84,26 +85,40 @@ fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, String> {
 
 /// 5-axis setpoints (`--planner vpop` on a two-curve toolpath): joint limits in order x y z a c
 /// by finite differences; the tool tip columns against the curve (distance, chord error, feed,
-/// end points) and against the forward kinematics of the joints.
+/// end points) and against the forward kinematics of the joints on `machine` (tool tip and
+/// tool axis).
 fn run_five_axis(
     setpoints: &Path,
-    toolpath: &crate::geometry::Toolpath,
+    prepared: &Prepared,
     limits: &LimitArgs,
+    machine: crate::kinematics::Xyzac,
 ) -> Result<bool, Box<dyn std::error::Error>> {
     use crate::planner::axial::FiniteDifferences;
     use crate::planner::verify::SLACK;
+    use nurbs_rtcore::executor::CurveSet;
+    let toolpath = &prepared.toolpath;
     let joint_limits = limits.limits(5)?;
     let joints = read_columns(setpoints, &["x", "y", "z", "a", "c"])?;
     let tips = read_columns(setpoints, &["tip_x", "tip_y", "tip_z"])?;
     let base = read_rows(setpoints, 0)?;
+    let curves = PathCurves::new(toolpath);
     let mut fd = FiniteDifferences::new(5, joint_limits.period);
-    let machine = crate::kinematics::Xyzac::default();
-    let mut fk_error: f64 = 0.0;
-    for (q, t) in joints.iter().zip(&tips) {
+    let (mut fk_error, mut axis_error): (f64, f64) = (0.0, 0.0);
+    for ((q, t), row) in joints.iter().zip(&tips).zip(&base) {
         fd.push(q, &joint_limits);
-        let (tip, _) = machine.forward(q);
+        let (tip, axis) = machine.forward(q);
         for i in 0..3 {
             fk_error = fk_error.max((tip[i] - t[i]).abs());
+        }
+        // The orientation too: the tool axis of the joints against the programmed one (top
+        // minus tip curve); a missing element is reported by the tip check below.
+        if let Some(curve) = curves.curve(row.curve) {
+            let p = curve.point(row.u);
+            let d = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            for i in 0..3 {
+                axis_error = axis_error.max((axis[i] - d[i] / n).abs());
+            }
         }
     }
     fd.finish(&joint_limits);
@@ -122,7 +137,12 @@ fn run_five_axis(
     }
     if fk_error > 1e-6 {
         violations.push(format!(
-            "tool tip columns are {fk_error:.3e} mm off the joints' tool tip"
+            "tool tip columns are {fk_error:.3e} mm off the joints' tool tip (same --machine and --pivot as plan?)"
+        ));
+    }
+    if axis_error > 1e-6 {
+        violations.push(format!(
+            "the joints' tool axis is {axis_error:.3e} off the programmed tool axis (same --machine as plan?)"
         ));
     }
     let tip_limits = crate::planner::Limits {
@@ -139,9 +159,14 @@ fn run_five_axis(
             ..r.clone()
         })
         .collect();
-    let curves = PathCurves::new(toolpath);
     let report = verify(&curves, &tip_limits, &rows);
     violations.extend(report.violations);
+    let deviation = check_program_deviation(
+        prepared,
+        tips.iter().map(Vec::as_slice),
+        joint_limits.chord_tolerance,
+        &mut violations,
+    );
     println!(
         "{} setpoints ({:.6} s), joints x y z a c: max |v| {:?}, |a| {:?}, |jerk| {:?}; tool tip: max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
@@ -153,6 +178,10 @@ fn run_five_axis(
         report.max_chord_error,
         report.max_distance_to_curve,
     );
+    if let Some(line) = prepared.describe(deviation, joint_limits.chord_tolerance) {
+        println!("{line}");
+    }
+    print_programmed_feed(report.max_programmed_feed_ratio);
     for v in &violations {
         println!("VIOLATION: {v}");
     }
@@ -162,31 +191,67 @@ fn run_five_axis(
     Ok(violations.is_empty())
 }
 
+/// Largest distance of the tool tips to the programmed polyline (`None` when the program is
+/// not one); a violation when it exceeds --chord-tol.
+fn check_program_deviation<'a>(
+    prepared: &Prepared,
+    tips: impl IntoIterator<Item = &'a [f64]>,
+    tolerance: f64,
+    violations: &mut Vec<String>,
+) -> Option<f64> {
+    let deviation = prepared.deviation_from_program(tips);
+    if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + crate::planner::verify::SLACK)) {
+        violations.push(format!(
+            "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}"
+        ));
+    }
+    deviation
+}
+
+/// One line on the programmed feeds, when the toolpath has them.
+fn print_programmed_feed(ratio: f64) {
+    if ratio > 0.0 {
+        println!("programmed feed (per element): feed up to {ratio:.6} of it");
+    }
+}
+
 pub fn run(
     setpoints: &Path,
     toolpath: &Path,
     limits: &LimitArgs,
     round_corners: RoundCorners,
+    machine: &MachineArgs,
 ) -> Result<bool, Box<dyn std::error::Error>> {
+    let file = toolpath;
     let prepared = prepare(toolpath, round_corners, limits.chord_tol)?;
     let toolpath = &prepared.toolpath;
+    machine.refuse_unless_five_axis(toolpath, file)?;
     if read_columns(setpoints, &["a", "c", "tip_x"]).is_ok() {
-        return run_five_axis(setpoints, toolpath, limits);
+        if !is_five_axis(toolpath) {
+            return Err(format!(
+                "{}: joint setpoints (x,y,z,a,c) need a 5-axis toolpath, but {} has no top curve on every element",
+                setpoints.display(),
+                file.display()
+            )
+            .into());
+        }
+        return run_five_axis(setpoints, &prepared, limits, machine.kinematics());
     }
+    machine.refuse(&format!(
+        "{} holds tool-tip setpoints (no a, c columns): no machine kinematics to check",
+        setpoints.display()
+    ))?;
     let limits = limits.limits(toolpath.tip_dim())?;
     let rows = read_rows(setpoints, toolpath.tip_dim())?;
     let curves = PathCurves::new(toolpath);
     let mut report = verify(&curves, &limits, &rows);
     let tip = toolpath.tip_dim();
-    let deviation = prepared.deviation_from_program(rows.iter().map(|r| &r.q[..tip]));
-    if let Some(dev) = deviation {
-        if dev > limits.chord_tolerance * (1.0 + crate::planner::verify::SLACK) {
-            report.violations.push(format!(
-                "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {}",
-                limits.chord_tolerance
-            ));
-        }
-    }
+    let deviation = check_program_deviation(
+        &prepared,
+        rows.iter().map(|r| &r.q[..tip]),
+        limits.chord_tolerance,
+        &mut report.violations,
+    );
     println!(
         "{} setpoints ({:.6} s): max |v| {:?}, |a| {:?}, |jerk| {:?}; max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
@@ -201,6 +266,7 @@ pub fn run(
     if let Some(line) = prepared.describe(deviation, limits.chord_tolerance) {
         println!("{line}");
     }
+    print_programmed_feed(report.max_programmed_feed_ratio);
     for v in &report.violations {
         println!("VIOLATION: {v}");
     }

@@ -20,10 +20,12 @@ use crate::geometry::Toolpath;
 use nurbs_rtcore::executor::CurveSet;
 use nurbs_rtcore::CurveView;
 
-/// The curves of a toolpath as the realtime interpolator addresses them.
+/// The curves of a toolpath as the realtime interpolator addresses them, with their
+/// programmed feeds.
 pub struct PathCurves<'a> {
     views: Vec<CurveView<'a>>,
     tip: usize,
+    feeds: Vec<Option<f64>>,
 }
 
 impl<'a> PathCurves<'a> {
@@ -31,6 +33,7 @@ impl<'a> PathCurves<'a> {
         PathCurves {
             views: toolpath.elements.iter().map(|e| e.curve.view()).collect(),
             tip: toolpath.tip_dim(),
+            feeds: toolpath.elements.iter().map(|e| e.feed).collect(),
         }
     }
     pub fn len(&self) -> usize {
@@ -41,6 +44,10 @@ impl<'a> PathCurves<'a> {
     }
     pub fn view(&self, i: usize) -> &CurveView<'a> {
         &self.views[i]
+    }
+    /// Programmed feed of element `i` (mm/s; G-code `F`, JSON `feed_mm_s`), if the source gives one.
+    pub fn programmed_feed(&self, i: usize) -> Option<f64> {
+        self.feeds.get(i).copied().flatten()
     }
 }
 

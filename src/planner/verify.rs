@@ -1,6 +1,7 @@
 //! The project's own checker of a setpoint file (`nurbs-plan verify`): axial limits by finite
-//! differences (at rest before the first and after the last row), programmed feed, distance of
-//! every row to the curve, chord error between consecutive rows, start and end points.
+//! differences (at rest before the first and after the last row), feed (the limit and every
+//! element's programmed feed), distance of every row to the curve, chord error between
+//! consecutive rows, start and end points.
 
 use super::axial::{AxialPeaks, FiniteDifferences};
 use super::{Limits, PathCurves};
@@ -22,6 +23,9 @@ pub struct Report {
     pub max_feed: f64,
     pub max_chord_error: f64,
     pub max_distance_to_curve: f64,
+    /// Largest ratio of a step's feed to the programmed feed of its elements (0 when no element
+    /// has one).
+    pub max_programmed_feed_ratio: f64,
     pub violations: Vec<String>,
     pub rows: usize,
 }
@@ -77,6 +81,19 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
             qa[..tip].copy_from_slice(&a.q[..tip]);
             let step = norm(&sub(&q, &qa), tip);
             report.max_feed = report.max_feed.max(step / limits.period);
+            if let Some(programmed) = programmed_feed(curves, a.curve, r.curve) {
+                let ratio = step / limits.period / programmed;
+                if ratio > 1.0 + SLACK && report.max_programmed_feed_ratio <= 1.0 + SLACK {
+                    // The first overrun: where it starts.
+                    report.violations.push(format!(
+                        "t={}: feed {:.6} exceeds the programmed feed {programmed} of element {}",
+                        r.t,
+                        step / limits.period,
+                        r.curve
+                    ));
+                }
+                report.max_programmed_feed_ratio = report.max_programmed_feed_ratio.max(ratio);
+            }
             if a.curve == r.curve && r.u > a.u {
                 let view = curves.curve(r.curve).unwrap();
                 report.max_chord_error = report.max_chord_error.max(chord_error(&view, tip, a.u, r.u, &qa, &q));
@@ -119,6 +136,16 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
             .push("the last setpoint is not the end of the path".into());
     }
     report
+}
+
+/// The feed a step from element `from` to element `to` may not exceed: the highest programmed
+/// feed of the elements it touches (each part of the step runs at most at its own element's
+/// feed, so the chord does not exceed the highest); `None` when one of them has no programmed
+/// feed (only the feed limit applies).
+fn programmed_feed(curves: &PathCurves, from: usize, to: usize) -> Option<f64> {
+    (from.min(to)..=from.max(to))
+        .map(|e| curves.programmed_feed(e))
+        .try_fold(0.0f64, |m, f| f.map(|f| m.max(f)))
 }
 
 /// Distance from `p` to the segment from `a` to `b` (first `tip` coordinates).

@@ -6,10 +6,12 @@
 //! velocity `|q - q_j| <= V dt`, acceleration `|q - 2q_j + q_{j-1}| <= A dt^2`,
 //! jerk `|q - 3q_j + 3q_{j-1} - q_{j-2}| <= J dt^3` (eq. 14). The intersection of the slabs is
 //! a box; the feasible next positions are where the path crosses the box, inside the feed ball
-//! `|tip(s) - tip_j| <= F dt` and the chord-error cap. The crossing is located with the
-//! geometric derivative at the unknown point (eq. 13), re-linearised Newton-style at each
-//! estimate, and every returned point is checked with exactly the arithmetic of
-//! [`crate::planner::axial`], so no overrun can pass (the paper allowed 120 % jerk).
+//! `|tip(s) - tip_j| <= F dt` and the chord-error cap. F is the feed limit, lowered on every
+//! element to its programmed feed (G-code `F`); a step across elements takes the lowest. The
+//! crossing is located with the geometric derivative at the unknown point (eq. 13),
+//! re-linearised Newton-style at each estimate, and every returned point is checked with
+//! exactly the arithmetic of [`crate::planner::axial`], so no overrun can pass (the paper
+//! allowed 120 % jerk).
 
 use super::path::{JointPath, PathPoint};
 use crate::planner::axial::MAX_AXES;
@@ -50,6 +52,8 @@ pub struct Stepper<'p, 'a> {
     pub limits: &'p Limits,
     axes: usize,
     end: f64,
+    /// Feed cap of every element (mm/s): the feed limit, or the programmed feed if lower.
+    element_feed: Vec<f64>,
 }
 
 impl<'p, 'a> Stepper<'p, 'a> {
@@ -59,7 +63,20 @@ impl<'p, 'a> Stepper<'p, 'a> {
             limits,
             axes: path.axes(),
             end: path.end(),
+            element_feed: (0..path.elements())
+                .map(|e| path.programmed_feed(e).map_or(limits.feed, |f| f.min(limits.feed)))
+                .collect(),
         }
+    }
+
+    /// Feed cap of a step from element `from` to element `to`: the lowest of the elements it
+    /// touches, so that no part of the step runs faster than its element's programmed feed
+    /// (stricter than the verifier, which allows the highest).
+    fn step_feed(&self, from: usize, to: usize) -> f64 {
+        self.element_feed[from.min(to)..=from.max(to)]
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Largest step length (mm) allowed by the feed and the chord-error estimate
@@ -74,7 +91,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         } else {
             f64::INFINITY
         };
-        chord.min(self.limits.feed * self.limits.period)
+        chord.min(self.element_feed[cur.element] * self.limits.period)
     }
 
     /// Exact check of a candidate next point: the same floating-point operations as
@@ -101,7 +118,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
             }
         }
         let step = tip_distance(&p.tip, &cur.tip, self.path.tip_dim());
-        step / dt <= self.limits.feed && step <= cap
+        step / dt <= self.step_feed(cur.element, p.element) && step <= cap
     }
 
     /// Per-axis box of next joint positions (targets, slightly inside the limits).

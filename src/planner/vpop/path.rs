@@ -28,6 +28,8 @@ pub struct JointPath<'a> {
     kappa: CurvatureTable,
     tip: usize,
     kinematics: Option<(Xyzac, Vec<f64>)>,
+    /// Programmed feed of every element (mm/s), if the source gives one.
+    programmed_feeds: Vec<Option<f64>>,
 }
 
 /// Samples per element of the C-angle continuity table.
@@ -48,6 +50,7 @@ impl<'a> JointPath<'a> {
             kappa,
             tip,
             kinematics: None,
+            programmed_feeds: toolpath.elements.iter().map(|e| e.feed).collect(),
         }
     }
 
@@ -87,9 +90,17 @@ impl<'a> JointPath<'a> {
     pub fn tip_dim(&self) -> usize {
         self.tip
     }
+    /// Number of path elements.
+    pub fn elements(&self) -> usize {
+        self.views.len()
+    }
     /// Largest coordinate (path end).
     pub fn end(&self) -> f64 {
         self.views.len() as f64
+    }
+    /// Programmed feed of element `e` (mm/s), if the source gives one.
+    pub fn programmed_feed(&self, e: usize) -> Option<f64> {
+        self.programmed_feeds.get(e).copied().flatten()
     }
     pub fn machine(&self) -> Option<&Xyzac> {
         self.kinematics.as_ref().map(|(m, _)| m)
