@@ -5,9 +5,15 @@
 //! corrector on the remaining arc length. The printed eq. 9 has a slip (`sqrt(a^2 - 4ab)`); the
 //! correct root of eq. 5 is `(-b + sqrt(b^2 - 4ac)) / 2a`. With the chord replaced by the
 //! Simpson arc length `L` (as the paper does), eq. 5 becomes `(|C'| du + L)^2 = ds^2`, whose
-//! root is `du = (ds - L) / |C'|`; that closed form is what is used below.
+//! root is `du = (ds - L) / |C'|`; that closed form is what the evaluated corrector uses (the
+//! expanded one below adds the second-order term).
 //!
-//! Second improvement over the paper: the step aims at an absolute arc length `s_target` taken
+//! The step's normal case is cheaper than the paper's (2 curve evaluations, as many as a
+//! second-order Taylor step): the Heun predictor is replaced by a Taylor step from the speed and
+//! its slope carried in the cursor, and the corrector is applied by expansion about the
+//! predicted end; the paper's form remains the fallback (see [`rk2pc_step`]).
+//!
+//! Another improvement over the paper: the step aims at an absolute arc length `s_target` taken
 //! from the exact S-curve distance, not at `F(t_i) * dt`, so neither the feed quadrature nor the
 //! interpolation error accumulates along the path.
 //!
@@ -74,7 +80,7 @@ fn slope_of_speed(first: &Vector, second: &Vector, speed: f64, tip_axes: usize) 
 /// Taylor step of u(s) from the speed and its slope carried in `cur` (no evaluation); the
 /// predicted step is measured by Simpson's rule (the midpoint with one derivative, the end
 /// with two); and the corrector step is applied by a Taylor expansion about the predicted end
-/// rather than by evaluating and measuring again ([`taylor_correction`] says when it may).
+/// rather than by evaluating and measuring again (`taylor_correction` says when it may).
 ///
 /// Otherwise the robust path: Heun's predictor where the carried slope is not usable
 /// (1 evaluation), Simpson piecewise over the knot spans crossed, and a bracketed corrector
