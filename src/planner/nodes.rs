@@ -9,9 +9,15 @@
 //! window can change it:
 //! - scan samples, arc lengths and the arc-length grid are the same whether taken early or
 //!   late, and a critical point is final once the search has judged its neighbours;
-//! - the look-ahead of the window is run twice, with its far end at rest and with its far end
-//!   unconstrained: the leading nodes on which both runs agree (the same nodes kept, with the
-//!   same feeds) do not depend on what lies beyond the window, and are committed.
+//! - the look-ahead drops, round after round, every critical point whose feed reachability
+//!   binds, on the feeds of the round before. What lies beyond the window reaches a window node
+//!   only through the backward pass. A node `h` whose own cap holds in the backward pass even
+//!   with the window's far end at rest and every window node present (the most any
+//!   continuation can ask: dropping nodes and a faster far end only relax it) cuts that chain:
+//!   the nodes before it, and its own feed in every round, depend on the window alone. If `h`
+//!   also survives every round, the nodes up to it are committed with the rounds run on them
+//!   alone, and the next window starts each round from `h`'s feed in that round, as the
+//!   whole-path computation would.
 //!
 //! The nodes only steer the segment solver; whatever it emits is checked by finite differences.
 
@@ -101,9 +107,13 @@ pub(super) struct NodeStream<'a> {
     /// Element being scanned; `elements.len()` once every node is produced.
     current: usize,
     /// Produced nodes not yet committed, after the last committed one (`window[0]`), whose
-    /// look-ahead feed is `window_feed`.
+    /// look-ahead feed in each round of merging is `window_feeds` (the last one for later
+    /// rounds).
     window: Vec<Node>,
-    window_feed: f64,
+    window_feeds: Vec<f64>,
+    /// Window length at which to try committing again (after a try that committed nothing,
+    /// a quarter more: each try costs the window's length).
+    commit_at: usize,
     /// Committed nodes not yet taken.
     ready: VecDeque<Boundary>,
     /// Critical points and breaks per element, in path order (for the plan's report).
@@ -113,16 +123,8 @@ pub(super) struct NodeStream<'a> {
 /// A node is kept when the look-ahead reaches at least this fraction of its cap.
 const MERGE_TOLERANCE: f64 = 0.999;
 
-/// The far end of a look-ahead window.
-#[derive(Clone, Copy, PartialEq)]
-enum Frontier {
-    /// The end of the path (its cap holds).
-    PathEnd,
-    /// Assumed at rest: the lowest feed anything beyond could ask for.
-    AtRest,
-    /// Unconstrained: the highest.
-    Open,
-}
+/// Successor feeds sampled by [`NodeStream::backward_lowest`].
+const SUCCESSOR_FEEDS: usize = 16;
 
 impl<'a> NodeStream<'a> {
     pub fn new(toolpath: &'a Toolpath, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
@@ -138,7 +140,8 @@ impl<'a> NodeStream<'a> {
             options: options.clone(),
             start,
             window: Vec::new(),
-            window_feed: 0.0,
+            window_feeds: vec![0.0],
+            commit_at: 0,
             ready: VecDeque::new(),
             criticals: Vec::new(),
         }
@@ -158,7 +161,9 @@ impl<'a> NodeStream<'a> {
     pub fn next(&mut self, curves: &PathCurves) -> Option<Boundary> {
         while self.ready.is_empty() && !self.is_exhausted() {
             self.advance(curves);
-            self.commit();
+            if self.window.len() >= self.commit_at || self.is_exhausted() {
+                self.commit();
+            }
         }
         self.ready.pop_front()
     }
@@ -308,74 +313,119 @@ impl<'a> NodeStream<'a> {
         if self.window.len() < 2 {
             return;
         }
-        let done = self.is_exhausted();
-        let (kept, feeds) = self.settle(if done { Frontier::PathEnd } else { Frontier::AtRest });
-        let agreed = if done {
-            kept.len() - 1
-        } else {
-            let (open, open_feeds) = self.settle(Frontier::Open);
-            let last = kept.len().min(open.len()) - 1;
-            (1..last)
-                .take_while(|&i| kept[i] == open[i] && feeds[i] == open_feeds[i])
-                .last()
-                .unwrap_or(0)
-        };
-        if agreed == 0 {
+        if self.is_exhausted() {
+            let rounds = self.settle(self.window.len());
+            self.hand_out(&rounds, self.window.len() - 1, true);
             return;
         }
-        for i in 1..=agreed {
-            self.ready.push_back(Boundary {
-                node: self.window[kept[i]],
-                feed: feeds[i],
-                path_end: done && i == kept.len() - 1,
-            });
+        // From the far end back to the first node that cuts the backward chain and survives.
+        let last = self.window.len() - 1;
+        let reachable = self.forward_highest();
+        let mut lowest = 0.0;
+        for h in (1..last).rev() {
+            let node = self.window[h];
+            lowest = self.backward_lowest(h, lowest);
+            // A node the forward pass cannot bring to its cap is dropped in the first round (a
+            // quick filter: the rounds below decide).
+            if lowest < node.cap || (!node.hard && reachable[h] < MERGE_TOLERANCE * node.cap) {
+                continue;
+            }
+            let rounds = self.settle(h + 1);
+            let survives = |r: &Vec<Option<f64>>| r[h].is_some_and(|f| node.hard || f >= MERGE_TOLERANCE * node.cap);
+            if rounds.iter().all(survives) {
+                self.hand_out(&rounds, h, false);
+                self.commit_at = 0;
+                return;
+            }
         }
-        self.window.drain(..kept[agreed]);
-        self.window_feed = feeds[agreed];
+        self.commit_at = self.window.len() + self.window.len() / 4 + 1;
     }
 
-    /// Look-ahead and step 4 on the window: the node feeds by reachability, then every
-    /// critical point whose feed reachability binds (the segments around it are too short to
-    /// reach its cap) is dropped and its segments merged, until none is. Returns the window
-    /// indices of the nodes kept and their feeds.
-    fn settle(&self, frontier: Frontier) -> (Vec<usize>, Vec<f64>) {
-        let mut kept: Vec<usize> = (0..self.window.len()).collect();
+    /// Commits the window nodes up to `q` kept in the last of `rounds`; `q` starts the window.
+    fn hand_out(&mut self, rounds: &[Vec<Option<f64>>], q: usize, path_end: bool) {
+        let last = &rounds[rounds.len() - 1];
+        for i in 1..=q {
+            if let Some(feed) = last[i] {
+                self.ready.push_back(Boundary {
+                    node: self.window[i],
+                    feed,
+                    path_end: path_end && i == q,
+                });
+            }
+        }
+        self.window_feeds = rounds.iter().map(|r| r[q].expect("kept in every round")).collect();
+        self.window.drain(..q);
+    }
+
+    /// The lowest feed the backward pass can give window node `k`, whatever lies beyond the
+    /// far end and whichever window nodes are dropped, from that of its successor. Reachability
+    /// of a symmetric ramp is not monotone in the feed reached (a ramp from rest covers less
+    /// distance than one from a low feed), so it is the least over the feeds the successor may
+    /// get: between its lowest and the feed reachable from that (from higher ones, more is
+    /// reachable), sampled.
+    fn backward_lowest(&self, k: usize, successor_lowest: f64) -> f64 {
+        let length = (self.window[k + 1].end_s - self.window[k].start_s).max(0.0);
+        let cap = self.window[k].cap;
+        let reach = |v: f64| reachable_feed(v, length, self.accel, self.jerk, cap);
+        let (from, to) = (successor_lowest, reach(successor_lowest));
+        (0..=SUCCESSOR_FEEDS)
+            .map(|i| reach(from + (to - from) * i as f64 / SUCCESSOR_FEEDS as f64))
+            .fold(cap.min(to), f64::min)
+    }
+
+    /// Feeds of the window nodes by forward reachability alone (no node dropped).
+    fn forward_highest(&self) -> Vec<f64> {
+        let nodes = &self.window;
+        let mut feeds = vec![self.window_feeds[0]; nodes.len()];
+        for k in 0..nodes.len() - 1 {
+            let length = (nodes[k + 1].end_s - nodes[k].start_s).max(0.0);
+            let cap = nodes[k + 1].cap;
+            feeds[k + 1] = cap.min(reachable_feed(feeds[k], length, self.accel, self.jerk, cap));
+        }
+        feeds
+    }
+
+    /// Look-ahead and step 4 on the first `len` window nodes, the last one at its cap, in
+    /// rounds: the node feeds by reachability, then every critical point whose feed
+    /// reachability binds (the segments around it are too short to reach its cap) is dropped
+    /// and its segments merged, until none is. Returns per round the feed of each of those
+    /// nodes (`None`: dropped before).
+    fn settle(&self, len: usize) -> Vec<Vec<Option<f64>>> {
+        let mut kept: Vec<usize> = (0..len).collect();
+        let mut rounds = Vec::new();
         loop {
             let nodes: Vec<Node> = kept.iter().map(|&i| self.window[i]).collect();
             let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
-            let feeds = self.look_ahead(&nodes, &lengths, frontier);
+            let first = self.window_feeds[rounds.len().min(self.window_feeds.len() - 1)];
+            let feeds = self.look_ahead(&nodes, &lengths, first);
+            let mut round = vec![None; len];
+            for (&i, &f) in kept.iter().zip(&feeds) {
+                round[i] = Some(f);
+            }
+            rounds.push(round);
             let last = nodes.len() - 1;
             let before = kept.len();
             let mut j = 0;
             kept.retain(|_| {
                 let n = &nodes[j];
-                // The committed node and the window's far end stay (their neighbours decide).
+                // The committed node and the far end stay (the caller checks the far end).
                 let keep = j == 0 || j == last || n.hard || feeds[j] >= MERGE_TOLERANCE * n.cap;
                 j += 1;
                 keep
             });
             if kept.len() == before {
-                return (kept, feeds);
+                return rounds;
             }
         }
     }
 
     /// Backward and forward reachability of the node feeds with the nominal tangential limits,
-    /// from the committed feed of `nodes[0]`.
-    fn look_ahead(&self, nodes: &[Node], lengths: &[f64], frontier: Frontier) -> Vec<f64> {
+    /// from the committed feed `first` of `nodes[0]`.
+    fn look_ahead(&self, nodes: &[Node], lengths: &[f64], first: f64) -> Vec<f64> {
         let (accel, jerk) = (self.accel, self.jerk);
         let mut feeds: Vec<f64> = nodes.iter().map(|n| n.cap).collect();
-        feeds[0] = self.window_feed;
-        let last = nodes.len() - 1;
-        let backward_from = match frontier {
-            Frontier::PathEnd => last,
-            Frontier::AtRest => {
-                feeds[last] = 0.0;
-                last
-            }
-            Frontier::Open => last - 1,
-        };
-        for k in (1..backward_from).rev() {
+        feeds[0] = first;
+        for k in (1..lengths.len()).rev() {
             feeds[k] = feeds[k].min(reachable_feed(feeds[k + 1], lengths[k], accel, jerk, feeds[k]));
         }
         for k in 0..lengths.len() {
