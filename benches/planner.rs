@@ -11,7 +11,15 @@ use std::path::Path;
 use std::time::Instant;
 
 fn first_record(tp: &Toolpath, limits: &Limits) {
-    let mut planner = Planner::new(tp, limits, &PlanOptions::default()).unwrap();
+    let mut planner = Planner::new(
+        tp,
+        limits,
+        &PlanOptions {
+            stream: true,
+            ..PlanOptions::default()
+        },
+    )
+    .unwrap();
     planner.next().unwrap().unwrap();
 }
 

@@ -76,7 +76,15 @@ fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
     for name in ["trident.json", "butterfly.json", "fan.json", "open_pocket.json"] {
         let tp = example(name);
         let limits = Limits::uniform(tp.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
-        let mut planner = Planner::new(&tp, &limits, &PlanOptions::default()).unwrap();
+        let mut planner = Planner::new(
+            &tp,
+            &limits,
+            &PlanOptions {
+                stream: true,
+                ..PlanOptions::default()
+            },
+        )
+        .unwrap();
         let first = planner.next().expect("a record").unwrap();
         assert!(
             !planner.path_scanned(),
