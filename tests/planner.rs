@@ -6,7 +6,9 @@
 mod common;
 
 use common::{example, plan_and_verify, random_curve, try_plan_and_verify, Failure};
-use nurbs_motion::planner::{plan, Limits, PlanOptions};
+use nurbs_motion::geometry::ArcLengthTable;
+use nurbs_motion::planner::flf::{critical_points, CriticalPointSearch, FlfScan};
+use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
 use proptest::strategy::{Strategy, ValueTree};
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
@@ -64,6 +66,83 @@ fn trident_with_vpop_limits() {
     };
     let t = plan_and_verify(&tp, &limits);
     eprintln!("trident VPOp limits: {t:.4} s");
+}
+
+/// The planner streams: on the bundled curves the first record is final before the path is
+/// scanned to its end, and what is handed out is never revised (the records streamed are the
+/// records of the finished plan, in order).
+#[test]
+fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
+    for name in ["trident.json", "butterfly.json", "fan.json", "open_pocket.json"] {
+        let tp = example(name);
+        let limits = Limits::uniform(tp.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let mut planner = Planner::new(
+            &tp,
+            &limits,
+            &PlanOptions {
+                stream: true,
+                ..PlanOptions::default()
+            },
+        )
+        .unwrap();
+        let first = planner.next().expect("a record").unwrap();
+        assert!(
+            !planner.path_scanned(),
+            "{name}: the first record waited for the whole scan"
+        );
+        let mut streamed = vec![first];
+        streamed.extend(planner.by_ref().map(|r| r.unwrap()));
+        let plan = planner.finish();
+        assert_eq!(
+            streamed, plan.records,
+            "{name}: a record was revised after it was handed out"
+        );
+        assert!(streamed.iter().enumerate().all(|(k, r)| r.seq as usize == k));
+        assert!(plan.first_record_time < plan.plan_time);
+        eprintln!(
+            "{name}: first record after {:.2} ms, whole plan {:.2} ms",
+            plan.first_record_time * 1e3,
+            plan.plan_time * 1e3
+        );
+    }
+}
+
+/// The scans the planner takes lazily, a few samples at a time, equal the full scans: FLF
+/// samples, critical points (none found later lies below `settled_below`) and arc lengths.
+#[test]
+fn lazy_scans_equal_full_scans() {
+    for name in ["trident.json", "butterfly.json", "fan.json"] {
+        let tp = example(name);
+        let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let curve = &tp.elements[0].curve;
+        let view = curve.view();
+        let full = FlfScan::new(&view, 2, &limits, 500);
+        let points = critical_points(&view, 2, &limits, &full);
+        let table = ArcLengthTable::new(curve);
+        let mut lazy = FlfScan::lazy(&view, 500);
+        let mut lazy_table = ArcLengthTable::lazy(curve);
+        let mut search = CriticalPointSearch::default();
+        let mut found = Vec::new();
+        let mut chunk = 1;
+        while !lazy.is_complete() {
+            lazy.extend(&view, 2, &limits, chunk, &mut |_, _, _| {});
+            search.advance(&view, 2, &limits, &lazy, &mut found);
+            let settled = search.settled_below(&lazy);
+            assert!(points
+                .iter()
+                .filter(|p| p.u < settled)
+                .eq(found.iter().filter(|p| p.u < settled)));
+            let u = lazy.u[lazy.u.len() / 2];
+            lazy_table.extend_past(curve, u);
+            assert_eq!(lazy_table.length_to(curve, u), table.length_to(curve, u), "{name}");
+            chunk = chunk * 7 % 991 + 1; // uneven chunks
+        }
+        assert_eq!((&lazy.u, &lazy.value, &lazy.speed), (&full.u, &full.value, &full.speed));
+        assert_eq!(found, points, "{name}");
+        lazy_table.extend_past(curve, f64::INFINITY);
+        assert!(lazy_table.is_complete());
+        assert_eq!(lazy_table.total(), table.total());
+    }
 }
 
 #[test]

@@ -80,12 +80,19 @@ pub fn simpson_length(curve: &Nurbs, a: f64, b: f64, tol: f64) -> f64 {
 
 /// Cumulative arc length of a curve on a fine parameter grid (per knot span), for the total
 /// length, the length between two parameters and the inverse map s -> u.
+///
+/// The table can be built lazily ([`ArcLengthTable::lazy`], [`ArcLengthTable::extend_past`]):
+/// the pieces are added in the same order with the same arithmetic, so a lazily built table
+/// gives exactly the values of a full one where it is covered.
 #[derive(Clone, Debug)]
 pub struct ArcLengthTable {
     /// Parameter grid (increasing).
     u: Vec<f64>,
     /// Arc length from the curve start at each grid value.
     s: Vec<f64>,
+    /// Knot span boundaries of the curve, and the pieces added so far.
+    breaks: Vec<f64>,
+    pieces: usize,
 }
 
 /// Sub-intervals per knot span in the table.
@@ -93,33 +100,57 @@ const PIECES_PER_SPAN: usize = 8;
 
 impl ArcLengthTable {
     pub fn new(curve: &Nurbs) -> Self {
+        let mut table = Self::lazy(curve);
+        table.extend_past(curve, f64::INFINITY);
+        table
+    }
+
+    /// A table covering nothing yet but the curve start.
+    pub fn lazy(curve: &Nurbs) -> Self {
         let breaks = curve.breakpoints();
-        let mut u = vec![breaks[0]];
-        let mut s = vec![0.0];
-        let speed = |t: f64| curve.speed(t);
-        for w in breaks.windows(2) {
-            for i in 0..PIECES_PER_SPAN {
-                let a = w[0] + (w[1] - w[0]) * i as f64 / PIECES_PER_SPAN as f64;
-                let b = if i + 1 == PIECES_PER_SPAN {
-                    w[1]
-                } else {
-                    w[0] + (w[1] - w[0]) * (i + 1) as f64 / PIECES_PER_SPAN as f64
-                };
-                let whole = gauss16(&speed, a, b);
-                let piece = gauss_adaptive(&speed, a, b, whole, 1e-14 * (1.0 + whole), 12);
-                u.push(b);
-                s.push(s.last().unwrap() + piece);
-            }
+        ArcLengthTable {
+            u: vec![breaks[0]],
+            s: vec![0.0],
+            breaks,
+            pieces: 0,
         }
-        ArcLengthTable { u, s }
+    }
+
+    /// Whether the table reaches the curve end.
+    pub fn is_complete(&self) -> bool {
+        self.pieces == (self.breaks.len() - 1) * PIECES_PER_SPAN
+    }
+
+    /// Adds pieces until the table reaches beyond parameter `t` (or the curve end).
+    pub fn extend_past(&mut self, curve: &Nurbs, t: f64) {
+        let speed = |t: f64| curve.speed(t);
+        while !self.is_complete() && *self.u.last().unwrap() <= t {
+            let (span, i) = (self.pieces / PIECES_PER_SPAN, self.pieces % PIECES_PER_SPAN);
+            let w = &self.breaks[span..span + 2];
+            let a = w[0] + (w[1] - w[0]) * i as f64 / PIECES_PER_SPAN as f64;
+            let b = if i + 1 == PIECES_PER_SPAN {
+                w[1]
+            } else {
+                w[0] + (w[1] - w[0]) * (i + 1) as f64 / PIECES_PER_SPAN as f64
+            };
+            let whole = gauss16(&speed, a, b);
+            let piece = gauss_adaptive(&speed, a, b, whole, 1e-14 * (1.0 + whole), 12);
+            self.u.push(b);
+            self.s.push(self.s.last().unwrap() + piece);
+            self.pieces += 1;
+        }
     }
 
     pub fn total(&self) -> f64 {
         *self.s.last().unwrap()
     }
 
-    /// Arc length from the curve start to parameter `t`.
+    /// Arc length from the curve start to parameter `t` (which a lazy table must reach beyond).
     pub fn length_to(&self, curve: &Nurbs, t: f64) -> f64 {
+        debug_assert!(
+            self.is_complete() || t < *self.u.last().unwrap(),
+            "arc length table too short"
+        );
         let t = t.clamp(self.u[0], *self.u.last().unwrap());
         let i = match self.u.partition_point(|&x| x <= t) {
             0 => 0,

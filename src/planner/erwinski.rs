@@ -5,14 +5,14 @@
 //! start feed by re-planning the previous segment (step 9). Nothing that violates is emitted.
 
 use super::axial::FiniteDifferences;
-use super::flf::{critical_points, flf, CriticalPoint, FlfScan};
+use super::flf::CriticalPoint;
+use super::nodes::{Node, NodeStream};
 use super::quick_check::{estimate, ArcGrid, Estimate};
-use super::scurve_fit::{fit_ramps, reachable_feed, Ramp};
+use super::scurve_fit::{fit_ramps, ramp_distance, reachable_feed, Ramp};
 use super::simulate::{run_segment, SimState};
 use super::{Limits, LimitsError, PathCurves};
-use crate::geometry::{ArcLengthTable, Toolpath};
+use crate::geometry::Toolpath;
 use nurbs_rtcore::executor::CurveSet;
-use nurbs_rtcore::math::{dot, norm};
 use nurbs_rtcore::records::{CURVE_SHIFT, FLAG_LAST};
 use nurbs_rtcore::scurve::SCurve;
 use nurbs_rtcore::SegmentRecord;
@@ -30,6 +30,12 @@ pub struct PlanOptions {
     /// Plan the rest of the path from rest at this point instead of the whole path (resuming
     /// after a stop); `None`: from the start of the first element.
     pub start: Option<PlanStart>,
+    /// Hand each record out as soon as it is final ([`Planner`]), so motion can start before
+    /// the plan ends. The price: a back-tracking cascade that would reach a record already
+    /// handed out makes a segment stop instead, and rarely (1 of the 256 random curves of the
+    /// property test) that fails where the batch plan succeeds. `false`: records are handed
+    /// out when the whole plan is done, with back-tracking unbounded (paper 000, step 9).
+    pub stream: bool,
 }
 
 impl Default for PlanOptions {
@@ -38,6 +44,7 @@ impl Default for PlanOptions {
             samples_per_control_point: 500,
             flf_margin: 0.95,
             start: None,
+            stream: false,
         }
     }
 }
@@ -103,317 +110,317 @@ impl From<LimitsError> for PlanError {
     }
 }
 
-/// A segment boundary: where the previous segment ends and the next begins (the same point;
-/// at a join of two path elements the curve changes).
-#[derive(Clone, Copy, Debug)]
-struct Node {
-    /// Curve and parameter of the segment ending here.
-    #[allow(dead_code)]
-    end_curve: usize,
-    end_u: f64,
-    end_s: f64,
-    /// Curve and parameter of the segment starting here.
-    start_curve: usize,
-    start_u: f64,
-    start_s: f64,
-    /// Feed cap at this point.
-    cap: f64,
-    /// Path start/end, element joins and corners: never merged away.
-    hard: bool,
+/// The planner as a stream of segment records, each handed out as soon as it is final (with
+/// [`PlanOptions::stream`]; otherwise all of them when the whole plan is done).
+///
+/// Invariant: a record handed out is never revised. Back-tracking (step 9: a segment that
+/// cannot start at its start feed asks the previous one to end slower; if that one cannot end
+/// so slow within its length, it fails too and asks the one before, and so on) re-plans at
+/// most down to `settled`, the number of records final so far; a failure at the first
+/// unsettled segment is a refusal (as at the path start), never a revision.
+///
+/// Records before segment `j` become final once `j` and the segment after it are accepted
+/// and [`can_absorb`] holds for `j`: from its start feed it could brake to any lower end feed
+/// within its own length. A cascade of back-tracking from further on then stops at `j`
+/// (re-planning it with a lower end feed) instead of passing through it to the records before.
+/// A segment that can reach the lower feed and still fails the axial check passes the cascade
+/// on; at a settled record it is planned to stop at its end instead (a stop the whole-path
+/// planner would not make), and only if that fails too, the plan is refused (1 of the 256
+/// random curves of the property test, none of the bundled curves). A segment starting at
+/// rest always qualifies; at the path end every record is final.
+///
+/// A fixed count of segments would not do: on a dense G1 polyline with rounded corners the
+/// cascades reach 39 short segments back.
+///
+/// The nodes come from [`NodeStream`], which scans the path only as far as needed to commit
+/// them. [`plan`] collects this stream: a batch plan and a streamed one run the same code and
+/// differ only in when records settle.
+pub struct Planner<'a> {
+    toolpath: &'a Toolpath,
+    curves: PathCurves<'a>,
+    /// Limits as used, and the hair stricter ones of the check.
+    limits: Limits,
+    check_limits: Limits,
+    /// Highest planned feed (the programmed feed with headroom).
+    feed_cap: f64,
+    nodes: NodeStream<'a>,
+    /// Committed nodes, with the end feed each segment aims for and the peak feed cap of the
+    /// segment starting at each.
+    bounds: Vec<Node>,
+    feeds: Vec<f64>,
+    lengths: Vec<f64>,
+    peak_caps: Vec<f64>,
+    /// Whether `bounds` ends at the path end.
+    end_known: bool,
+    /// Accepted records (re-planned ones truncated), the interpolator state before each and
+    /// the feed each starts with.
+    records: Vec<SegmentRecord>,
+    states: Vec<SimState>,
+    start_feeds: Vec<f64>,
+    /// Segment being planned.
+    k: usize,
+    splits: usize,
+    backtracks: usize,
+    /// Records final (never revised) and records handed out.
+    settled: usize,
+    emitted: usize,
+    /// [`PlanOptions::stream`]: settle records before the path end.
+    stream: bool,
+    failed: bool,
+    started: Instant,
+    first_record_time: Option<f64>,
+    /// Nominal tangential acceleration and jerk.
+    accel: f64,
+    jerk: f64,
 }
 
-impl Node {
-    /// A hard node inside curve `c` at parameter `u`, arc length `s`, with feed cap `cap`.
-    fn within(c: usize, u: f64, s: f64, cap: f64) -> Node {
-        Node {
-            end_curve: c,
-            end_u: u,
-            end_s: s,
-            start_curve: c,
-            start_u: u,
-            start_s: s,
-            cap,
-            hard: true,
+/// Whether a segment of `length` starting at `feed` could end at any lower feed within its
+/// length, with the nominal tangential limits: a ramp down to any feed is at most the full
+/// stop's duration at most at the start feed, twice the stop distance of the symmetric ramp.
+fn can_absorb(feed: f64, length: f64, accel: f64, jerk: f64) -> bool {
+    2.0 * ramp_distance(feed, 0.0, accel, jerk) <= length
+}
+
+/// Segments accepted after an absorbing one before the records before it are final.
+const ABSORBER_LOOK_BEHIND: usize = 1;
+
+impl<'a> Planner<'a> {
+    /// Checks the inputs; no planning happens before the first [`Planner::next_record`].
+    pub fn new(toolpath: &'a Toolpath, limits: &Limits, options: &PlanOptions) -> Result<Self, PlanError> {
+        let started = Instant::now();
+        if toolpath.elements.is_empty() {
+            return Err(PlanError::EmptyPath);
         }
+        let tip = toolpath.tip_dim();
+        if toolpath.elements.iter().any(|e| e.curve.tip_dim() != tip) {
+            return Err(PlanError::MixedDimensions);
+        }
+        let limits = limits.for_axes(tip)?;
+        // Feed caps a hair below the programmed feed: the sampled path speed (chord / period)
+        // then stays below it through rounding, with no retry of the segment.
+        let planning = Limits {
+            feed: limits.feed * (1.0 - FEED_HEADROOM),
+            ..limits.clone()
+        };
+        let curves = PathCurves::new(toolpath);
+        let start = options.start.unwrap_or(PlanStart {
+            curve: 0,
+            u: curves.view(0).u_min(),
+            s: 0.0,
+        });
+        let start_ok = start.curve < toolpath.elements.len() && {
+            let view = curves.view(start.curve);
+            start.u >= view.u_min() && start.u < view.u_max() && start.s.is_finite() && start.s >= 0.0
+        };
+        if !start_ok {
+            return Err(PlanError::Infeasible {
+                curve: start.curve,
+                u: start.u,
+                reason: "the start point is not on the path (or at its end)".into(),
+            });
+        }
+        Ok(Planner {
+            toolpath,
+            curves,
+            check_limits: strict(&limits),
+            feed_cap: planning.feed,
+            nodes: NodeStream::new(toolpath, planning, options, start),
+            bounds: Vec::new(),
+            feeds: Vec::new(),
+            lengths: Vec::new(),
+            peak_caps: Vec::new(),
+            end_known: false,
+            records: Vec::new(),
+            states: vec![SimState::start(tip, limits.period)],
+            start_feeds: vec![0.0],
+            k: 0,
+            splits: 0,
+            backtracks: 0,
+            settled: 0,
+            emitted: 0,
+            stream: options.stream,
+            failed: false,
+            started,
+            first_record_time: None,
+            accel: limits.min_accel(),
+            jerk: limits.min_jerk(),
+            limits,
+        })
+    }
+
+    /// The next final record, planning as far as that needs; `None` after the last one.
+    pub fn next_record(&mut self) -> Option<Result<SegmentRecord, PlanError>> {
+        while !self.failed {
+            if self.emitted < self.settled {
+                self.emitted += 1;
+                self.first_record_time
+                    .get_or_insert_with(|| self.started.elapsed().as_secs_f64());
+                return Some(Ok(self.records[self.emitted - 1]));
+            }
+            if !self.commit_nodes() {
+                return None;
+            }
+            if let Err(e) = self.step() {
+                self.failed = true;
+                return Some(Err(e));
+            }
+        }
+        None
+    }
+
+    /// Whether the whole path has been scanned (every node produced); the first records are
+    /// normally final long before.
+    pub fn path_scanned(&self) -> bool {
+        self.nodes.is_exhausted()
+    }
+
+    /// The finished plan, once [`Planner::next_record`] has returned `None`.
+    pub fn finish(self) -> Plan {
+        // From the first setpoint to the last: the profiles plus the part-period waits at stops.
+        let samples = self.states.last().map_or(0, |s| s.samples);
+        Plan {
+            motion_time: samples.saturating_sub(1) as f64 * self.limits.period,
+            plan_time: self.started.elapsed().as_secs_f64(),
+            first_record_time: self.first_record_time.unwrap_or(0.0),
+            critical_points: self.nodes.criticals,
+            records: self.records,
+            limits: self.limits,
+        }
+    }
+
+    /// Commits the nodes of segment `k` (the end node says whether it is the last); `false`
+    /// when every segment is planned.
+    fn commit_nodes(&mut self) -> bool {
+        while !self.end_known && self.bounds.len() < self.k + 2 {
+            let Some(b) = self.nodes.next(&self.curves) else {
+                break;
+            };
+            if let Some(prev) = self.bounds.last() {
+                self.lengths.push((b.node.end_s - prev.start_s).max(0.0));
+            }
+            let programmed = self.toolpath.elements[b.node.start_curve].feed.unwrap_or(f64::INFINITY);
+            self.peak_caps
+                .push(self.feed_cap.min(programmed * (1.0 - FEED_HEADROOM)));
+            self.bounds.push(b.node);
+            self.feeds.push(b.feed);
+            self.end_known = b.path_end;
+        }
+        self.k + 1 < self.bounds.len()
+    }
+
+    /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.
+    fn step(&mut self) -> Result<(), PlanError> {
+        let k = self.k;
+        let nseg = self.bounds.len() - 1;
+        let c = self.bounds[k].start_curve;
+        let element = self.nodes.element(c);
+        let ctx = SegmentContext {
+            curves: &self.curves,
+            limits: &self.check_limits,
+            node_start: self.bounds[k],
+            node_end: self.bounds[k + 1],
+            length: self.lengths[k],
+            peak_cap: self.peak_caps[k],
+            grid: &element.grid,
+            last: self.end_known && k + 1 == nseg,
+            seq: k as u32,
+            accel: self.accel,
+            jerk: self.jerk,
+        };
+        let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
+        if k > 0 && k == self.settled && matches!(outcome, Err(SegmentFailure::StartTooFast(_))) {
+            // Back-tracking would revise a record handed out: this segment stops instead (the
+            // step-8 lowering of the end feed gives up before it reaches rest).
+            if let Ok(stop) = solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]) {
+                outcome = Ok(stop);
+            }
+        }
+        match outcome {
+            Ok((record, state)) => {
+                self.records.truncate(k);
+                self.records.push(record);
+                self.states.truncate(k + 1);
+                self.states.push(state);
+                self.start_feeds.truncate(k + 1);
+                // Rounding can leave -1e-14 at a stop; a record never starts below zero.
+                let end_v = record.profile().table().end().v.max(0.0);
+                self.start_feeds.push(end_v);
+                self.k += 1;
+                if ctx.last {
+                    self.settled = self.k;
+                } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
+                    if can_absorb(self.start_feeds[j], self.lengths[j], self.accel, self.jerk) {
+                        self.settled = self.settled.max(j);
+                    }
+                }
+            }
+            Err(SegmentFailure::Split { u, cap }) if self.splits < MAX_SPLITS => {
+                // Step 4 in reverse: a point inside the segment needs a lower feed than the
+                // profile gives it (a speed cap between FLF samples, or the fall towards a
+                // cusp outrunning its chord cap): it becomes a node of its own.
+                self.splits += 1;
+                let s = element.table.length_to(&self.toolpath.elements[c].curve, u);
+                let end_s = self.bounds[k + 1].end_s;
+                self.bounds.insert(k + 1, Node::within(c, u, s, cap));
+                self.lengths[k] = s - self.bounds[k].start_s;
+                self.lengths.insert(k + 1, end_s - s);
+                self.feeds.insert(k + 1, cap);
+                self.peak_caps.insert(k + 1, self.peak_caps[k]);
+                let reachable = reachable_feed(cap, self.lengths[k], self.accel, self.jerk, self.start_feeds[k]);
+                if reachable < self.start_feeds[k] && k > self.settled {
+                    self.feeds[k] = reachable;
+                    self.k -= 1;
+                }
+            }
+            Err(failure) => {
+                let start_max = match failure {
+                    SegmentFailure::StartTooFast(v) => v,
+                    SegmentFailure::Split { .. } => START_FEED_STEP * self.start_feeds[k],
+                };
+                self.backtracks += 1;
+                let reason = if k == 0 || self.backtracks > 50 * nseg + 100 {
+                    Some("segment violates the axis limits even from its lowest start feed")
+                } else if k <= self.settled {
+                    Some("segment violates the axis limits from the end feed of a segment already handed out")
+                } else {
+                    None
+                };
+                if let Some(reason) = reason {
+                    return Err(PlanError::Infeasible {
+                        curve: c,
+                        u: self.bounds[k].start_u,
+                        reason: reason.into(),
+                    });
+                }
+                // Step 9: the previous segment must end slower.
+                self.feeds[k] = start_max.min(self.feeds[k]);
+                self.k -= 1;
+            }
+        }
+        Ok(())
     }
 }
 
-/// Plans `toolpath` under `limits`; every record is passed to `on_record` as soon as it is final.
+impl Iterator for Planner<'_> {
+    type Item = Result<SegmentRecord, PlanError>;
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_record()
+    }
+}
+
+/// Plans `toolpath` under `limits`; every record is passed to `on_record` as soon as it is
+/// final (the collected [`Planner`] stream: at the end unless `options.stream`).
 pub fn plan(
     toolpath: &Toolpath,
     limits: &Limits,
     options: &PlanOptions,
     on_record: &mut dyn FnMut(&SegmentRecord),
 ) -> Result<Plan, PlanError> {
-    let started = Instant::now();
-    if toolpath.elements.is_empty() {
-        return Err(PlanError::EmptyPath);
+    let mut planner = Planner::new(toolpath, limits, options)?;
+    for record in &mut planner {
+        on_record(&record?);
     }
-    let tip = toolpath.tip_dim();
-    if toolpath.elements.iter().any(|e| e.curve.tip_dim() != tip) {
-        return Err(PlanError::MixedDimensions);
-    }
-    let limits = limits.for_axes(tip)?;
-    // Feed caps a hair below the programmed feed: the sampled path speed (chord / period) then
-    // stays below it through rounding, with no retry of the segment.
-    let planning = Limits {
-        feed: limits.feed * (1.0 - FEED_HEADROOM),
-        ..limits.clone()
-    };
-    let curves = PathCurves::new(toolpath);
-    let tables: Vec<ArcLengthTable> = toolpath
-        .elements
-        .iter()
-        .map(|e| ArcLengthTable::new(&e.curve))
-        .collect();
-
-    // Steps 1-3 per curve: FLF scan and refined minima; a programmed feed lowers the cap.
-    let mut scans = Vec::new();
-    let mut criticals = Vec::new();
-    let mut nodes: Vec<Node> = Vec::new();
-    let start = options.start.unwrap_or(PlanStart {
-        curve: 0,
-        u: curves.view(0).u_min(),
-        s: 0.0,
-    });
-    let start_ok = start.curve < toolpath.elements.len() && {
-        let view = curves.view(start.curve);
-        start.u >= view.u_min() && start.u < view.u_max() && start.s.is_finite() && start.s >= 0.0
-    };
-    if !start_ok {
-        return Err(PlanError::Infeasible {
-            curve: start.curve,
-            u: start.u,
-            reason: "the start point is not on the path (or at its end)".into(),
-        });
-    }
-    for (c, element) in toolpath.elements.iter().enumerate() {
-        let mut lim = planning.clone();
-        if let Some(f) = element.feed {
-            lim.feed = lim.feed.min(f * (1.0 - FEED_HEADROOM));
-        }
-        let view = curves.view(c);
-        let scan = FlfScan::new(view, tip, &lim, options.samples_per_control_point);
-        if c < start.curve {
-            // Before the start point: only the scan is kept (indexed by curve).
-            scans.push(scan);
-            continue;
-        }
-        let points = critical_points(view, tip, &lim, &scan);
-        let cap_of = |p: &CriticalPoint| {
-            let v = flf(view, tip, &lim, p.u);
-            v.speed_cap().min(options.flf_margin * v.accel.min(v.jerk))
-        };
-        let (u0, u1) = (view.u_min(), view.u_max());
-        let start_cap = if c == 0 { 0.0 } else { join_cap(&curves, &planning, c) };
-        match nodes.last_mut() {
-            Some(last) => {
-                last.start_curve = c;
-                last.start_u = u0;
-                last.start_s = 0.0;
-                last.cap = last.cap.min(start_cap);
-                last.hard = true;
-            }
-            None => nodes.push(Node {
-                end_curve: c,
-                end_u: start.u,
-                end_s: start.s,
-                start_curve: c,
-                start_u: start.u,
-                start_s: start.s,
-                cap: 0.0,
-                hard: true,
-            }),
-        }
-        // Interior knots where the curve is only C0 or C1: corners stop, curvature jumps cap.
-        let mut stops: Vec<CriticalPoint> = interior_breaks(view, tip, &lim)
-            .into_iter()
-            .map(|(u, cap)| CriticalPoint { u, flf: cap })
-            .collect();
-        let mut all: Vec<(CriticalPoint, Option<f64>)> = points.iter().map(|p| (*p, None)).collect();
-        // Critical points too close to a break are superseded by it.
-        all.retain(|(p, _)| stops.iter().all(|b| (b.u - p.u).abs() > 1e-9 * (u1 - u0)));
-        all.extend(stops.drain(..).map(|b| (b, Some(b.flf))));
-        all.sort_by(|a, b| a.0.u.total_cmp(&b.0.u));
-        if c == start.curve {
-            // Only what lies ahead of the start point (which is a stop itself).
-            all.retain(|(p, _)| p.u > start.u + 1e-9 * (u1 - u0));
-        }
-        for (p, fixed_cap) in &all {
-            let p = &p;
-            let s = tables[c].length_to(&element.curve, p.u);
-            let cap = fixed_cap.unwrap_or_else(|| cap_of(p));
-            nodes.push(Node {
-                end_curve: c,
-                end_u: p.u,
-                end_s: s,
-                start_curve: c,
-                start_u: p.u,
-                start_s: s,
-                cap,
-                hard: fixed_cap.is_some(),
-            });
-            criticals.push((c, **p));
-        }
-        let s1 = tables[c].total();
-        let end_cap = if c + 1 == toolpath.elements.len() {
-            0.0
-        } else {
-            join_cap(&curves, &planning, c + 1)
-        };
-        nodes.push(Node {
-            end_curve: c,
-            end_u: u1,
-            end_s: s1,
-            start_curve: c,
-            start_u: u1,
-            start_s: s1,
-            cap: end_cap,
-            hard: true,
-        });
-        // Feed cap inside every segment of this curve: no interior point may need less than the
-        // segment's ends (insert the dip as a node otherwise).
-        scans.push(scan);
-    }
-    // Peak caps (feed, chord, axial velocity) inside each segment, inserting nodes at dips.
-    let mut k = 0;
-    while k + 1 < nodes.len() {
-        let (a, b) = (nodes[k], nodes[k + 1]);
-        let scan = &scans[a.start_curve];
-        let dip = scan.min_speed_cap_between(a.start_u, b.end_u);
-        match dip {
-            // A dip below both end caps gets a node; any other dip is left to the exact check
-            // of the segment, which splits it there if the profile passes it too fast.
-            Some((m, u)) if m < a.cap.min(b.cap) && u > a.start_u && u < b.end_u => {
-                let c = a.start_curve;
-                let s = tables[c].length_to(&toolpath.elements[c].curve, u);
-                nodes.insert(k + 1, Node::within(c, u, s, m));
-            }
-            _ => k += 1,
-        }
-    }
-    let grids: Vec<ArcGrid> = scans
-        .iter()
-        .enumerate()
-        .map(|(c, scan)| ArcGrid::new(curves.view(c), tip, &scan.u))
-        .collect();
-    let (acc, jerk) = (limits.min_accel(), limits.min_jerk());
-    // Look-ahead, and step 4: a critical point whose feed is bound by reachability (the segments
-    // around it are too short to reach its cap) is dropped and its segments merged, so the
-    // acceleration need not return to zero there. Hard nodes (ends, joins, corners) stay.
-    let (mut lengths, feeds) = loop {
-        let lengths: Vec<f64> = nodes.windows(2).map(|w| (w[1].end_s - w[0].start_s).max(0.0)).collect();
-        let feeds = look_ahead(&nodes, &lengths, acc, jerk);
-        let before = nodes.len();
-        let mut k = 0;
-        nodes.retain(|n| {
-            let keep = n.hard || feeds[k] >= MERGE_TOLERANCE * n.cap;
-            k += 1;
-            keep
-        });
-        if nodes.len() == before {
-            break (lengths, feeds);
-        }
-    };
-    let mut peak_caps: Vec<f64> = nodes
-        .windows(2)
-        .map(|w| {
-            let programmed = toolpath.elements[w[0].start_curve].feed.unwrap_or(f64::INFINITY);
-            planning.feed.min(programmed * (1.0 - FEED_HEADROOM))
-        })
-        .collect();
-    let mut feeds = feeds;
-
-    // Segment by segment with axial checks and back-tracking.
-    let mut nseg = lengths.len();
-    let mut splits = 0usize;
-    let mut records: Vec<SegmentRecord> = Vec::with_capacity(nseg);
-    let mut states: Vec<SimState> = vec![SimState::start(tip, limits.period)];
-    let mut start_feeds: Vec<f64> = vec![0.0];
-    let check_limits = strict(&limits);
-    let mut k = 0;
-    let mut backtracks = 0usize;
-    while k < nseg {
-        let ctx = SegmentContext {
-            curves: &curves,
-            limits: &check_limits,
-            node_start: nodes[k],
-            node_end: nodes[k + 1],
-            length: lengths[k],
-            peak_cap: peak_caps[k],
-            grid: &grids[nodes[k].start_curve],
-            last: k + 1 == nseg,
-            seq: k as u32,
-            accel: acc,
-            jerk,
-        };
-        let outcome = solve_segment(&ctx, start_feeds[k], feeds[k + 1], &states[k]);
-        match outcome {
-            Ok((record, state)) => {
-                records.truncate(k);
-                records.push(record);
-                states.truncate(k + 1);
-                states.push(state);
-                start_feeds.truncate(k + 1);
-                // Rounding can leave -1e-14 at a stop; a record never starts below zero.
-                let end_v = record.profile().table().end().v.max(0.0);
-                start_feeds.push(end_v);
-                k += 1;
-            }
-            Err(SegmentFailure::Split { u, cap }) if splits < MAX_SPLITS => {
-                // Step 4 in reverse: a point inside the segment needs a lower feed than the
-                // profile gives it (a speed cap between FLF samples, or the fall towards a
-                // cusp outrunning its chord cap): it becomes a node of its own.
-                splits += 1;
-                let c = nodes[k].start_curve;
-                let s = tables[c].length_to(&toolpath.elements[c].curve, u);
-                let end_s = nodes[k + 1].end_s;
-                nodes.insert(k + 1, Node::within(c, u, s, cap));
-                lengths[k] = s - nodes[k].start_s;
-                lengths.insert(k + 1, end_s - s);
-                feeds.insert(k + 1, cap);
-                peak_caps.insert(k + 1, peak_caps[k]);
-                nseg += 1;
-                let reachable = reachable_feed(cap, lengths[k], acc, jerk, start_feeds[k]);
-                if reachable < start_feeds[k] && k > 0 {
-                    feeds[k] = reachable;
-                    k -= 1;
-                }
-            }
-            Err(failure) => {
-                let start_max = match failure {
-                    SegmentFailure::StartTooFast(v) => v,
-                    SegmentFailure::Split { .. } => START_FEED_STEP * start_feeds[k],
-                };
-                backtracks += 1;
-                if k == 0 || backtracks > 50 * nseg + 100 {
-                    return Err(PlanError::Infeasible {
-                        curve: nodes[k].start_curve,
-                        u: nodes[k].start_u,
-                        reason: "segment violates the axis limits even from its lowest start feed".into(),
-                    });
-                }
-                // Step 9: the previous segment must end slower.
-                feeds[k] = start_max.min(feeds[k]);
-                k -= 1;
-            }
-        }
-    }
-    let first_record_time = started.elapsed().as_secs_f64();
-    for r in &records {
-        on_record(r);
-    }
-    // From the first setpoint to the last: the profiles plus the part-period waits at stops.
-    let samples = states.last().map_or(0, |s| s.samples);
-    let motion_time = samples.saturating_sub(1) as f64 * limits.period;
-    Ok(Plan {
-        records,
-        critical_points: criticals,
-        motion_time,
-        plan_time: started.elapsed().as_secs_f64(),
-        first_record_time,
-        limits,
-    })
+    Ok(planner.finish())
 }
 
 /// Nodes inserted at most by segment splits (each one makes a segment shorter).
@@ -428,22 +435,7 @@ enum SegmentFailure {
 }
 
 /// Relative headroom of the planned feed below the programmed feed.
-const FEED_HEADROOM: f64 = 1e-7;
-
-/// A node is kept when the look-ahead reaches at least this fraction of its cap.
-const MERGE_TOLERANCE: f64 = 0.999;
-
-/// Forward and backward reachability of node feeds with the nominal tangential limits.
-fn look_ahead(nodes: &[Node], lengths: &[f64], acc: f64, jerk: f64) -> Vec<f64> {
-    let mut feeds: Vec<f64> = nodes.iter().map(|n| n.cap).collect();
-    for k in (0..lengths.len()).rev() {
-        feeds[k] = feeds[k].min(reachable_feed(feeds[k + 1], lengths[k], acc, jerk, feeds[k]));
-    }
-    for k in 0..lengths.len() {
-        feeds[k + 1] = feeds[k + 1].min(reachable_feed(feeds[k], lengths[k], acc, jerk, feeds[k + 1]));
-    }
-    feeds
-}
+pub(super) const FEED_HEADROOM: f64 = 1e-7;
 
 /// Limits a hair below the user's, so that the check has headroom for the last rounding.
 fn strict(limits: &Limits) -> Limits {
@@ -454,81 +446,6 @@ fn strict(limits: &Limits) -> Limits {
         jerk: shrink(&limits.jerk),
         ..limits.clone()
     }
-}
-
-/// Interior knots of multiplicity >= degree - 1 (continuity C1 or less) with the feed cap
-/// there: zero where the tangent turns, else the curvature-jump cap of [`jump_cap`].
-fn interior_breaks(view: &nurbs_rtcore::CurveView, tip: usize, limits: &Limits) -> Vec<(f64, f64)> {
-    let p = view.degree();
-    let knots = view.knots();
-    let n = view.control_point_count();
-    let mut out = Vec::new();
-    let mut i = p + 1;
-    while i < n {
-        let mut m = 1;
-        while i + m < n && knots[i + m] == knots[i] {
-            m += 1;
-        }
-        if m + 1 >= p {
-            let u = knots[i];
-            let left = view.derivatives_left(u, 3);
-            let right = view.derivatives(u, 3);
-            out.push((u, jump_cap(&left, &right, tip, limits)));
-        }
-        i += m;
-    }
-    out
-}
-
-/// Feed cap across a point where the derivatives jump from `left` to `right` (parameter
-/// derivatives; converted to arc length here): zero at a tangent break, otherwise the axial
-/// acceleration jump at feed v, |dx''| v^2, must stay within one period's jerk.
-fn jump_cap(
-    left: &nurbs_rtcore::executor::Derivs,
-    right: &nurbs_rtcore::executor::Derivs,
-    tip: usize,
-    limits: &Limits,
-) -> f64 {
-    let to_arc = |d: &nurbs_rtcore::executor::Derivs| {
-        let g2 = dot(&d[1], &d[1], tip);
-        let g = g2.sqrt();
-        let mut x1 = [0.0; nurbs_rtcore::MAX_DIM];
-        let mut x2 = [0.0; nurbs_rtcore::MAX_DIM];
-        if g > 0.0 {
-            let c12 = dot(&d[1], &d[2], tip);
-            for i in 0..tip {
-                x1[i] = d[1][i] / g;
-                x2[i] = d[2][i] / g2 - d[1][i] * c12 / (g2 * g2);
-            }
-        }
-        (x1, x2, g)
-    };
-    let (l1, l2, gl) = to_arc(left);
-    let (r1, r2, gr) = to_arc(right);
-    let gap = norm(&nurbs_rtcore::math::sub(&left[0], &right[0]), tip);
-    if gap > 1e-9 || gl == 0.0 || gr == 0.0 || dot(&l1, &r1, tip) < 1.0 - 1e-12 {
-        return 0.0;
-    }
-    let mut cap = limits.feed;
-    for i in 0..tip {
-        let jump = (l2[i] - r2[i]).abs();
-        if jump > 0.0 {
-            cap = cap.min(0.5 * (limits.jerk[i] * limits.period / jump).sqrt());
-        }
-    }
-    cap
-}
-
-/// Feed cap where curve `c - 1` joins curve `c`: zero at a tangent break; otherwise the axial
-/// acceleration jump between the two curves must not exceed one period's jerk.
-fn join_cap(curves: &PathCurves, limits: &Limits, c: usize) -> f64 {
-    let (a, b) = (curves.view(c - 1), curves.view(c));
-    jump_cap(
-        &a.derivatives(a.u_max(), 3),
-        &b.derivatives(b.u_min(), 3),
-        limits.velocity.len(),
-        limits,
-    )
 }
 
 #[derive(Clone, Copy)]

@@ -44,13 +44,18 @@ impl FlfValue {
 /// Derivatives of the tool-tip coordinates with respect to arc length at `u` (Faa di Bruno with
 /// u_s = 1/g, u_ss = -(C'.C'')/g^4, u_sss = -(|C''|^2 + C'.C''')/g^5 + 4 (C'.C'')^2/g^7).
 pub fn arc_derivatives(curve: &CurveView, tip: usize, u: f64) -> [Vector; 4] {
+    arc_derivatives_and_speed(curve, tip, u).0
+}
+
+/// [`arc_derivatives`] and the parametric speed |C'(u)| they are scaled by.
+pub fn arc_derivatives_and_speed(curve: &CurveView, tip: usize, u: f64) -> ([Vector; 4], f64) {
     let d = curve.derivatives(u, 3);
     let g2 = dot(&d[1], &d[1], tip);
     let g = g2.sqrt();
     let mut out = [[0.0; nurbs_rtcore::MAX_DIM]; 4];
     out[0] = d[0];
     if g == 0.0 {
-        return out;
+        return (out, g);
     }
     let c12 = dot(&d[1], &d[2], tip);
     let u_s = 1.0 / g;
@@ -62,12 +67,16 @@ pub fn arc_derivatives(curve: &CurveView, tip: usize, u: f64) -> [Vector; 4] {
         out[2][i] = d[2][i] * u_s * u_s + d[1][i] * u_ss;
         out[3][i] = d[3][i] * u_s * u_s * u_s + 3.0 * d[2][i] * u_s * u_ss + d[1][i] * u_sss;
     }
-    out
+    (out, g)
 }
 
 /// FLF components at `u`.
 pub fn flf(curve: &CurveView, tip: usize, limits: &Limits, u: f64) -> FlfValue {
-    let x = arc_derivatives(curve, tip, u);
+    flf_of(&arc_derivatives(curve, tip, u), tip, limits)
+}
+
+/// FLF components from the arc-length derivatives `x` at a point.
+pub fn flf_of(x: &[Vector; 4], tip: usize, limits: &Limits) -> FlfValue {
     if x[1][..tip].iter().all(|c| *c == 0.0) {
         // C'(u) = 0: a cusp or a degenerate point, where the direction may turn: stop.
         return FlfValue {
@@ -115,27 +124,64 @@ pub struct CriticalPoint {
 }
 
 /// FLF samples over a curve: `u[i]`, `value[i]` (full FLF) and `speed[i]` (speed caps only).
+///
+/// The samples can be taken lazily, front to back ([`FlfScan::lazy`], [`FlfScan::extend`]);
+/// each sample is the same whether taken early or late.
 #[derive(Clone, Debug, Default)]
 pub struct FlfScan {
     pub u: Vec<f64>,
     pub value: Vec<f64>,
     pub speed: Vec<f64>,
+    /// Number of equal parameter steps of the full scan (`steps + 1` samples).
+    steps: usize,
 }
 
 impl FlfScan {
     /// Step 1: sample at `per_point` equidistant parameters per control point.
     pub fn new(curve: &CurveView, tip: usize, limits: &Limits, per_point: usize) -> Self {
-        let n = (curve.control_point_count() * per_point).max(2);
-        let (a, b) = (curve.u_min(), curve.u_max());
-        let mut scan = FlfScan::default();
-        for k in 0..=n {
-            let u = a + (b - a) * k as f64 / n as f64;
-            let f = flf(curve, tip, limits, u);
-            scan.u.push(u);
-            scan.value.push(f.value());
-            scan.speed.push(f.speed_cap());
-        }
+        let mut scan = Self::lazy(curve, per_point);
+        scan.extend(curve, tip, limits, usize::MAX, &mut |_, _, _| {});
         scan
+    }
+
+    /// The scan of step 1 with no samples taken yet.
+    pub fn lazy(curve: &CurveView, per_point: usize) -> Self {
+        FlfScan {
+            steps: (curve.control_point_count() * per_point).max(2),
+            ..FlfScan::default()
+        }
+    }
+
+    /// Number of samples of the full scan.
+    pub fn full_len(&self) -> usize {
+        self.steps + 1
+    }
+
+    pub fn is_complete(&self) -> bool {
+        self.u.len() == self.full_len()
+    }
+
+    /// Takes up to `count` more samples; `each` gets the parameter, arc-length derivatives and
+    /// parametric speed of every one (they are computed anyway).
+    pub fn extend(
+        &mut self,
+        curve: &CurveView,
+        tip: usize,
+        limits: &Limits,
+        count: usize,
+        each: &mut dyn FnMut(f64, &[Vector; 4], f64),
+    ) {
+        let (a, b) = (curve.u_min(), curve.u_max());
+        let end = self.u.len().saturating_add(count).min(self.full_len());
+        for k in self.u.len()..end {
+            let u = a + (b - a) * k as f64 / self.steps as f64;
+            let (x, speed) = arc_derivatives_and_speed(curve, tip, u);
+            each(u, &x, speed);
+            let f = flf_of(&x, tip, limits);
+            self.u.push(u);
+            self.value.push(f.value());
+            self.speed.push(f.speed_cap());
+        }
     }
 
     /// Smallest speed cap among the samples strictly inside `(u0, u1)`, with its parameter.
@@ -151,26 +197,71 @@ impl FlfScan {
 /// Steps 2-3: samples lower than their five neighbours on each side, refined by Brent's method
 /// inside the bracket of their neighbours.
 pub fn critical_points(curve: &CurveView, tip: usize, limits: &Limits, scan: &FlfScan) -> Vec<CriticalPoint> {
-    const NEIGHBOURS: usize = 5;
-    let v = &scan.value;
     let mut out = Vec::new();
-    let n = v.len();
-    let mut i = 1;
-    while i + 1 < n {
-        let lo = i.saturating_sub(NEIGHBOURS);
-        let hi = (i + NEIGHBOURS).min(n - 1);
-        let is_min = (lo..=hi).all(|k| k == i || v[i] <= v[k]) && (lo..=hi).any(|k| v[i] < v[k]);
-        if is_min {
-            let f = |u: f64| flf(curve, tip, limits, u).value();
-            let (u, fu) = brent_min(&f, scan.u[i - 1], scan.u[i], scan.u[i + 1]);
-            let (u, fu) = if fu <= v[i] { (u, fu) } else { (scan.u[i], v[i]) };
-            out.push(CriticalPoint { u, flf: fu });
-            i += NEIGHBOURS; // a plateau yields one point
+    CriticalPointSearch::default().advance(curve, tip, limits, scan, &mut out);
+    out
+}
+
+/// Steps 2-3 run along a lazily extended [`FlfScan`]: a sample is judged once its neighbours
+/// are taken, so the points come out in increasing `u`, the same as on the full scan.
+#[derive(Clone, Copy, Debug)]
+pub struct CriticalPointSearch {
+    /// Next sample to judge.
+    next: usize,
+}
+
+impl Default for CriticalPointSearch {
+    fn default() -> Self {
+        CriticalPointSearch { next: 1 }
+    }
+}
+
+/// Neighbours on each side a critical sample must not exceed.
+const NEIGHBOURS: usize = 5;
+
+impl CriticalPointSearch {
+    /// Judges every sample whose neighbours `scan` holds, appending the critical points to `out`.
+    pub fn advance(
+        &mut self,
+        curve: &CurveView,
+        tip: usize,
+        limits: &Limits,
+        scan: &FlfScan,
+        out: &mut Vec<CriticalPoint>,
+    ) {
+        let v = &scan.value;
+        let n = scan.full_len();
+        let mut i = self.next;
+        while i + 1 < n {
+            let lo = i.saturating_sub(NEIGHBOURS);
+            let hi = (i + NEIGHBOURS).min(n - 1);
+            if hi >= v.len() {
+                break;
+            }
+            let is_min = (lo..=hi).all(|k| k == i || v[i] <= v[k]) && (lo..=hi).any(|k| v[i] < v[k]);
+            if is_min {
+                let f = |u: f64| flf(curve, tip, limits, u).value();
+                let (u, fu) = brent_min(&f, scan.u[i - 1], scan.u[i], scan.u[i + 1]);
+                let (u, fu) = if fu <= v[i] { (u, fu) } else { (scan.u[i], v[i]) };
+                out.push(CriticalPoint { u, flf: fu });
+                i += NEIGHBOURS; // a plateau yields one point
+            } else {
+                i += 1;
+            }
+        }
+        self.next = i;
+    }
+
+    /// No critical point found later lies below this parameter.
+    pub fn settled_below(&self, scan: &FlfScan) -> f64 {
+        if self.next + 1 >= scan.full_len() {
+            f64::INFINITY
+        } else if self.next > scan.u.len() {
+            f64::NEG_INFINITY
         } else {
-            i += 1;
+            scan.u[self.next - 1]
         }
     }
-    out
 }
 
 /// Brent's minimisation on the bracket `a < b < c` (Numerical Recipes `brent`), to a parameter

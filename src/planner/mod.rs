@@ -7,13 +7,14 @@ pub mod corner;
 pub mod erwinski;
 pub mod flf;
 mod limits;
+mod nodes;
 mod quick_check;
 pub mod scurve_fit;
 pub mod simulate;
 pub mod verify;
 pub mod vpop;
 
-pub use erwinski::{plan, Plan, PlanError, PlanOptions};
+pub use erwinski::{plan, Plan, PlanError, PlanOptions, Planner};
 pub use limits::{Limits, LimitsError};
 
 use crate::geometry::Toolpath;

@@ -7,10 +7,9 @@
 //! with x', x'', x''' (arc-length derivatives) tabulated once per curve. Whatever the searches
 //! choose is then confirmed by the exact check; nothing is emitted on this estimate alone.
 
-use super::flf::arc_derivatives;
 use super::Limits;
 use nurbs_rtcore::scurve::SCurveTable;
-use nurbs_rtcore::CurveView;
+use nurbs_rtcore::Vector;
 
 /// Axis count covered (tool-tip coordinates).
 const AXES: usize = 3;
@@ -21,36 +20,36 @@ pub struct ArcGrid {
     s: Vec<f64>,
     d: Vec<[[f64; AXES]; 3]>,
     tip: usize,
+    /// Parameter and parametric speed of the last point (the trapezoidal rule's left end).
+    last: (f64, f64),
 }
 
 impl ArcGrid {
-    /// Tabulates at the parameters `u` (increasing; e.g. the FLF scan), with the arc length by
-    /// the trapezoidal rule on the parametric speed.
-    pub fn new(view: &CurveView, tip: usize, u: &[f64]) -> Self {
-        let tip = tip.min(AXES);
-        let mut grid = ArcGrid {
-            s: Vec::with_capacity(u.len()),
-            d: Vec::with_capacity(u.len()),
-            tip,
-        };
-        let mut prev_speed = 0.0;
-        for (k, &uk) in u.iter().enumerate() {
-            let x = arc_derivatives(view, tip, uk);
-            let speed = view.speed(uk, tip);
-            let s = if k == 0 {
-                0.0
-            } else {
-                grid.s[k - 1] + 0.5 * (speed + prev_speed) * (uk - u[k - 1])
-            };
-            prev_speed = speed;
-            let mut d = [[0.0; AXES]; 3];
-            for order in 0..3 {
-                d[order][..tip].copy_from_slice(&x[order + 1][..tip]);
-            }
-            grid.s.push(s);
-            grid.d.push(d);
+    /// A grid with no points yet, to be extended with [`ArcGrid::push`] at increasing
+    /// parameters (e.g. the FLF scan's), the arc length by the trapezoidal rule on the
+    /// parametric speed.
+    pub fn empty(tip: usize) -> Self {
+        ArcGrid {
+            tip: tip.min(AXES),
+            ..ArcGrid::default()
         }
-        grid
+    }
+
+    /// Appends the point at parameter `u` (above the last one), with its arc-length derivatives
+    /// `x` and parametric speed (from [`super::flf::arc_derivatives_and_speed`]).
+    pub fn push(&mut self, u: f64, x: &[Vector; 4], speed: f64) {
+        let tip = self.tip;
+        let s = match self.s.last() {
+            None => 0.0,
+            Some(prev) => prev + 0.5 * (speed + self.last.1) * (u - self.last.0),
+        };
+        self.last = (u, speed);
+        let mut d = [[0.0; AXES]; 3];
+        for order in 0..3 {
+            d[order][..tip].copy_from_slice(&x[order + 1][..tip]);
+        }
+        self.s.push(s);
+        self.d.push(d);
     }
 
     /// Derivatives at arc length `s`, linearly interpolated; `hint` is a starting index that
