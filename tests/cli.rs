@@ -1,16 +1,13 @@
 //! The `nurbs-plan` binary as users run it: inspect figures, exit codes, plan then verify, and
 //! verify catching a tampered setpoint file.
 
+mod common;
+
+use common::{
+    assert_verifies, example_path as example, nurbs_plan as bin, scratch_dir, LAB1, TABLE1, TABLE1_TIP, TIP_VPOP,
+};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_nurbs-plan"))
-}
-
-fn example(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)
-}
 
 #[test]
 fn inspect_json_gives_the_independent_arc_lengths() {
@@ -38,8 +35,7 @@ fn inspect_json_gives_the_independent_arc_lengths() {
 
 #[test]
 fn bad_input_exits_non_zero_with_a_message() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli");
     let bad = dir.join("bad.json");
     std::fs::write(
         &bad,
@@ -59,22 +55,10 @@ fn bad_input_exits_non_zero_with_a_message() {
 
 #[test]
 fn plan_then_verify_and_verify_catches_a_jump() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-plan-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-plan");
     let csv = dir.join("trident.csv");
     let summary = dir.join("summary.json");
-    let limits = [
-        "--feed",
-        "2500",
-        "--accel",
-        "1e4",
-        "--jerk",
-        "6e4",
-        "--chord-tol",
-        "0.001",
-        "--period",
-        "0.00025",
-    ];
+    let limits = LAB1;
     let out = bin()
         .arg("plan")
         .arg(example("trident.json"))
@@ -189,28 +173,9 @@ fn plot_args(planner: &str, csv: &Path, png: &Path) -> Command {
     cmd
 }
 
-/// `nurbs-plan verify` passes on `csv` planned from `toolpath` under `limits`.
-fn assert_verifies(csv: &Path, toolpath: &Path, limits: &[&str]) {
-    let out = bin()
-        .arg("verify")
-        .arg(csv)
-        .arg(toolpath)
-        .args(limits)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}: {}{}",
-        csv.display(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 #[test]
 fn plan_draws_the_profile_as_a_png() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-plot-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-plot");
     const FEED: [u8; 3] = [31, 119, 180];
     const CRITICAL: [u8; 3] = [128, 0, 128];
     const CHORD_CAP: [u8; 3] = [255, 127, 14];
@@ -278,8 +243,7 @@ fn plan_draws_the_profile_as_a_png() {
 
 #[test]
 fn an_unwritable_plot_fails_after_the_csv_is_written() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-plot-bad-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-plot-bad");
     let csv = dir.join("trident.csv");
     let png = dir.join("no-such-dir").join("profile.png");
     let out = plot_args("erwinski", &csv, &png).output().unwrap();
@@ -295,19 +259,6 @@ fn an_unwritable_plot_fails_after_the_csv_is_written() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
-
-const LAB1: [&str; 10] = [
-    "--feed",
-    "2500",
-    "--accel",
-    "1e4",
-    "--jerk",
-    "6e4",
-    "--chord-tol",
-    "0.001",
-    "--period",
-    "0.00025",
-];
 
 /// A G1 program through `points` (2-D or 3-D) at F 150000 mm/min (2500 mm/s).
 fn g1_program(points: &[Vec<f64>]) -> String {
@@ -438,20 +389,7 @@ fn g1_polylines_are_rounded_planned_and_verified() {
         if name == "fan_5axis tip" {
             // The paper's limits (seed 003, tolerance 0.02 mm): VPOp flows through the rounded
             // corners faster than it stops at the programmed ones.
-            let lim = [
-                "--feed",
-                "166.667",
-                "--vel",
-                "500",
-                "--accel",
-                "2500,3000,2100",
-                "--jerk",
-                "5000,5000,50000",
-                "--chord-tol",
-                "0.02",
-                "--period",
-                "0.006",
-            ];
+            let lim = TIP_VPOP;
             let csv = dir.join("fan-paper.csv");
             let round = plan_summary(&program, "vpop", "auto", &csv, &lim);
             let stop = plan_summary(&program, "vpop", "off", &dir.join("fan-stop.csv"), &lim);
@@ -474,8 +412,7 @@ fn g1_polylines_are_rounded_planned_and_verified() {
 /// path as programmed.
 #[test]
 fn round_corners_on_needs_a_polyline() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-corners-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-corners");
     let run = |corners: &str| {
         bin()
             .arg("plan")
@@ -523,30 +460,13 @@ fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// The paper's Table 1 limits of the XYZAC machine (joint order x, y, z, a, c; degrees).
-const TABLE1: [&str; 12] = [
-    "--feed",
-    "83.333",
-    "--vel",
-    "500,500,500,90,120",
-    "--accel",
-    "2500,3000,2100,298.8,298.8",
-    "--jerk",
-    "5000,5000,50000,1800,36000",
-    "--chord-tol",
-    "0.02",
-    "--period",
-    "0.006",
-];
-
 /// `--pivot` moves the point where the A and C axes meet: the joints planned with it put the
 /// tool tip and the tool axis, by forward kinematics with that pivot, on the programmed curves;
 /// `verify` passes with the same pivot and fails with another one (or none).
 #[test]
 fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
     use nurbs_motion::kinematics::Xyzac;
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-pivot-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-pivot");
     let program = example("open_pocket.json");
     let pivot = [-15.0, 40.0, -60.0];
     let csv = dir.join("pivot.csv");
@@ -616,8 +536,7 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
 /// message naming the flag.
 #[test]
 fn machine_options_refuse_bad_values_and_tool_tip_paths() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-machine-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-machine");
     let plan = |program: &str, planner: &str, extra: &[&str]| {
         bin()
             .arg("plan")
@@ -668,20 +587,7 @@ fn machine_options_refuse_bad_values_and_tool_tip_paths() {
     }
     // verify: tool-tip setpoints (the Erwinski planner on the same path) have no kinematics
     // to check.
-    let tip_limits = [
-        "--feed",
-        "83.333",
-        "--vel",
-        "500",
-        "--accel",
-        "2500,3000,2100",
-        "--jerk",
-        "5000,5000,50000",
-        "--chord-tol",
-        "0.02",
-        "--period",
-        "0.006",
-    ];
+    let tip_limits = TABLE1_TIP;
     let csv = dir.join("tip.csv");
     let out = bin()
         .arg("plan")
@@ -719,8 +625,7 @@ fn two_feed_program(one_feed: bool) -> String {
 /// same geometry at a single feed fails against the two-feed program.
 #[test]
 fn programmed_gcode_feeds_cap_each_element() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-feeds-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-feeds");
     let (two, one) = (dir.join("two_feeds.ngc"), dir.join("one_feed.ngc"));
     std::fs::write(&two, two_feed_program(false)).unwrap();
     std::fs::write(&one, two_feed_program(true)).unwrap();
@@ -805,8 +710,7 @@ fn slow_spots(csv: &Path, below: f64) -> usize {
 /// programmed polyline and faster than with exact stops.
 #[test]
 fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
-    let dir = std::env::temp_dir().join(format!("nurbs-cli-fan5-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch_dir("nurbs-cli-fan5");
     let program = example("fan_5axis.json");
     let tol = 0.02;
     let verify = |csv: &Path, limits: &[&str], corners: &str| {
@@ -846,20 +750,7 @@ fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
     assert!(!verify(&round_csv, &TABLE1, "off").status.success());
     assert!(verify(&stop_csv, &TABLE1, "off").status.success());
     // The Erwinski planner plans the tool tip of the same rounded path.
-    let tip_limits = [
-        "--feed",
-        "83.333",
-        "--vel",
-        "500",
-        "--accel",
-        "2500,3000,2100",
-        "--jerk",
-        "5000,5000,50000",
-        "--chord-tol",
-        "0.02",
-        "--period",
-        "0.006",
-    ];
+    let tip_limits = TABLE1_TIP;
     let csv = dir.join("erwinski-auto.csv");
     let s = plan_summary(&program, "erwinski", "auto", &csv, &tip_limits);
     assert_eq!(s["rounding_corners"].as_u64(), Some(corners));

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{example, plan_and_verify, random_curve, try_plan_and_verify, Failure};
+use common::{example, plan_and_verify, random_curve, trident_vpop, try_plan_and_verify, Failure};
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::flf::{critical_points, CriticalPointSearch, FlfScan};
 use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
@@ -56,15 +56,7 @@ fn butterfly_table_iii_sets() {
 #[test]
 fn trident_with_vpop_limits() {
     let tp = example("trident.json");
-    let limits = Limits {
-        feed: 166.667,
-        velocity: vec![500.0, 500.0],
-        acceleration: vec![2500.0, 3000.0],
-        jerk: vec![5000.0, 5000.0],
-        chord_tolerance: 0.02,
-        period: 0.006,
-    };
-    let t = plan_and_verify(&tp, &limits);
+    let t = plan_and_verify(&tp, &trident_vpop());
     eprintln!("trident VPOp limits: {t:.4} s");
 }
 

@@ -2,16 +2,16 @@
 //! differences at the servo period, relative slack 1e-6, at rest before the first and after the
 //! last row; feed; chord error; distance to the curve; end points).
 
-use nurbs_motion::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+mod common;
+
+use common::{
+    assert_tighter_limit_fails, example, example_path, lab1, plan_and_verify_cli, scratch_dir, table1, tip_vpop,
+    trident_vpop, TABLE1, TRIDENT_VPOP,
+};
+use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::verify::{verify, Report, Row};
 use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_motion::readers::read_toolpath;
-use std::path::Path;
-
-fn example(name: &str) -> Toolpath {
-    read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)).unwrap()
-}
 
 fn rows(plan: &VpopPlan, tip: usize) -> Vec<Row> {
     plan.points
@@ -32,21 +32,10 @@ fn check(tp: &Toolpath, plan: &VpopPlan) -> Report {
     report
 }
 
-fn vpop_limits() -> Limits {
-    Limits {
-        feed: 166.667,
-        velocity: vec![500.0, 500.0],
-        acceleration: vec![2500.0, 3000.0],
-        jerk: vec![5000.0, 5000.0],
-        chord_tolerance: 0.02,
-        period: 0.006,
-    }
-}
-
 #[test]
 fn trident_vpop_limits() {
     let tp = example("trident.json");
-    let plan = plan_tip(&tp, &vpop_limits(), SearchOptions::default()).unwrap();
+    let plan = plan_tip(&tp, &trident_vpop(), SearchOptions::default()).unwrap();
     let r = check(&tp, &plan);
     eprintln!(
         "trident VPOp limits: {:.3} s, planned in {:.1} ms, {:?}, peaks jerk {:?}",
@@ -72,14 +61,7 @@ fn trident_vpop_limits() {
 #[test]
 fn straight_line_rest_to_rest() {
     let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![30.0, 0.0]], None).unwrap();
-    let tp = Toolpath {
-        elements: vec![PathElement {
-            kind: ElementKind::Polyline,
-            curve,
-            feed: None,
-            source_line: None,
-        }],
-    };
+    let tp = Toolpath::single(ElementKind::Polyline, curve);
     let limits = Limits::uniform(2, 100.0, 1000.0, 10000.0, 0.01, 0.001);
     let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
     let r = check(&tp, &plan);
@@ -101,7 +83,7 @@ fn straight_line_rest_to_rest() {
 #[test]
 fn butterfly_lab_set_1() {
     let tp = example("butterfly.json");
-    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let limits = lab1(2);
     let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
     check(&tp, &plan);
     eprintln!(
@@ -125,14 +107,7 @@ fn open_pocket_five_axis_table_1() {
     use nurbs_motion::planner::verify::SLACK;
     use nurbs_motion::planner::vpop::plan_five_axis;
     let tp = example("open_pocket.json");
-    let limits = Limits {
-        feed: 83.333,
-        velocity: vec![500.0, 500.0, 500.0, 90.0, 120.0],
-        acceleration: vec![2500.0, 3000.0, 2100.0, 298.8, 298.8],
-        jerk: vec![5000.0, 5000.0, 50000.0, 1800.0, 36000.0],
-        chord_tolerance: 0.02,
-        period: 0.006,
-    };
+    let limits = table1();
     let machine = Xyzac::default();
     let plan = plan_five_axis(&tp, machine, &limits, SearchOptions::default()).unwrap();
     let mut fd = FiniteDifferences::new(5, limits.period);
@@ -195,14 +170,8 @@ fn fan_5axis_tip_polyline_rounded() {
     // Uses the tolerance where the segments are long enough.
     assert!(rounded.max_deviation >= 0.9 * eps, "{}", rounded.max_deviation);
     let tp = rounded.toolpath;
-    let limits = Limits {
-        feed: 166.667,
-        velocity: vec![500.0, 500.0, 500.0],
-        acceleration: vec![2500.0, 3000.0, 2100.0],
-        jerk: vec![5000.0, 5000.0, 50000.0],
-        chord_tolerance: eps,
-        period: 0.006,
-    };
+    let limits = tip_vpop();
+    assert_eq!(limits.chord_tolerance, eps);
     let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
     check(&tp, &plan);
     // Every setpoint is within the rounding deviation plus nothing else of the programmed
@@ -248,86 +217,18 @@ fn fan_5axis_tip_polyline_rounded() {
 /// (columns t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element) and verified per joint.
 #[test]
 fn cli_plan_vpop_and_verify() {
-    use std::process::Command;
-    let bin = env!("CARGO_BIN_EXE_nurbs-plan");
-    let dir = std::env::temp_dir().join(format!("vpop-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let ex = |n: &str| Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(n);
-    let run = |args: &[&str]| Command::new(bin).args(args).output().unwrap();
-    let trident = ex("trident.json");
-    let out = dir.join("trident.csv");
-    let lim = [
-        "--feed",
-        "166.667",
-        "--vel",
-        "500,500",
-        "--accel",
-        "2500,3000",
-        "--jerk",
-        "5000,5000",
-        "--chord-tol",
-        "0.02",
-        "--period",
-        "0.006",
-    ];
-    let mut args = vec![
-        "plan",
-        trident.to_str().unwrap(),
-        "--planner",
-        "vpop",
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend(lim);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let dir = scratch_dir("vpop-cli");
+    let trident = example_path("trident.json");
+    let out = plan_and_verify_cli(&trident, "vpop", &TRIDENT_VPOP, &dir.join("trident.csv"));
     let head = std::fs::read_to_string(&out).unwrap();
     assert!(head.starts_with("t,u,x,y,feed,element\n"));
-    let mut args = vec!["verify", out.to_str().unwrap(), trident.to_str().unwrap()];
-    args.extend(lim);
-    assert!(run(&args).status.success());
-    let mut tight = args.clone();
-    let k = tight.iter().position(|a| *a == "5000,5000").unwrap();
-    tight[k] = "4950,4950";
-    assert!(!run(&tight).status.success());
+    assert_tighter_limit_fails(&out, &trident, &TRIDENT_VPOP, "5000,5000", "4950,4950");
 
-    let pocket = ex("open_pocket.json");
-    let out5 = dir.join("pocket.csv");
-    let lim5 = [
-        "--feed",
-        "83.333",
-        "--vel",
-        "500,500,500,90,120",
-        "--accel",
-        "2500,3000,2100,298.8,298.8",
-        "--jerk",
-        "5000,5000,50000,1800,36000",
-        "--chord-tol",
-        "0.02",
-        "--period",
-        "0.006",
-    ];
-    let mut args = vec![
-        "plan",
-        pocket.to_str().unwrap(),
-        "--planner",
-        "vpop",
-        "--out",
-        out5.to_str().unwrap(),
-    ];
-    args.extend(lim5);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let pocket = example_path("open_pocket.json");
+    let out5 = plan_and_verify_cli(&pocket, "vpop", &TABLE1, &dir.join("pocket.csv"));
     assert!(std::fs::read_to_string(&out5)
         .unwrap()
         .starts_with("t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element\n"));
-    let mut args = vec!["verify", out5.to_str().unwrap(), pocket.to_str().unwrap()];
-    args.extend(lim5);
-    let o = run(&args);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stdout));
-    let mut tight = args.clone();
-    let k = tight.iter().position(|a| *a == "500,500,500,90,120").unwrap();
-    tight[k] = "500,500,500,90,100";
-    assert!(!run(&tight).status.success());
+    assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "500,500,500,90,120", "500,500,500,90,100");
     std::fs::remove_dir_all(&dir).ok();
 }

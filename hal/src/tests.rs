@@ -3,7 +3,7 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::Mutex;
+use std::sync::{Mutex, MutexGuard};
 use std::time::Duration;
 
 use nurbs_motion::geometry::Toolpath;
@@ -94,6 +94,19 @@ fn load() -> (Component, &'static Channel) {
     (planner, channel)
 }
 
+/// Load the module, enable it and publish the geometry of `job`: ready for its records.
+fn load_enabled(job: &Job) -> (Component, &'static Channel) {
+    let (planner, channel) = load();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    geometry(job).publish(channel).unwrap();
+    (planner, channel)
+}
+
+/// The module statics for this test alone (see `MODULE`), also after another test panicked.
+fn lock_module() -> MutexGuard<'static, ()> {
+    MODULE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// A toolpath, its plan and the offline setpoints (what `nurbs-plan plan --out` writes).
 struct Job {
     toolpath: Toolpath,
@@ -144,7 +157,7 @@ fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize 
 
 #[test]
 fn module_creates_its_pins_and_function() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let (planner, _) = load();
     let names = mock::pin_names();
     for pin in [
@@ -214,7 +227,7 @@ fn run_module(channel: &Channel, job: &Job, batch: usize, periods: usize) -> (Ve
 
 #[test]
 fn trident_runs_exactly_the_offline_setpoints_without_allocating() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
     let (_planner, channel) = load();
     let update = mock::funct("nurbs_interp.update").unwrap();
@@ -262,7 +275,7 @@ fn trident_runs_exactly_the_offline_setpoints_without_allocating() {
 /// setpoints bit for bit.
 #[test]
 fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let dir = std::env::temp_dir().join(format!("nurbs-hal-test-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let ngc = dir.join("line-trident-line.ngc");
@@ -276,9 +289,7 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
     for path in [ngc, pocket] {
         let job = job_at(&path);
         let tip = job.toolpath.tip_dim();
-        let (_planner, channel) = load();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        geometry(&job).publish(channel).unwrap();
+        let (_planner, channel) = load_enabled(&job);
         let update = mock::funct("nurbs_interp.update").unwrap();
         let (mut sent, mut got) = (0, Vec::new());
         let mut allocated = 0;
@@ -334,12 +345,10 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
 
 #[test]
 fn an_underrun_stops_along_the_path_without_a_jump() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("butterfly.json");
-    let (_planner, channel) = load();
+    let (_planner, channel) = load_enabled(&job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    geometry(&job).publish(channel).unwrap();
     // Only the first records arrive, one whose end feed is well above zero is the last.
     let end_feed = |i: usize| job.records[i - 1].profile().table().end().v;
     let cut = (3..job.records.len() - 1)
@@ -414,13 +423,11 @@ fn an_underrun_stops_along_the_path_without_a_jump() {
 /// check, with no jump, and the update path allocates nothing.
 #[test]
 fn an_underrun_resumes_from_the_stop_point_on_command() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     for name in ["trident.json", "butterfly.json"] {
         let job = job(name);
-        let (_planner, channel) = load();
+        let (_planner, channel) = load_enabled(&job);
         let update = mock::funct("nurbs_interp.update").unwrap();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        geometry(&job).publish(channel).unwrap();
         let end_feed = |i: usize| job.records[i - 1].profile().table().end().v;
         let cut = (3..job.records.len() - 1)
             .max_by(|&a, &b| end_feed(a).total_cmp(&end_feed(b)))
@@ -523,12 +530,10 @@ fn an_underrun_resumes_from_the_stop_point_on_command() {
 /// whole path again, from C(0)) is refused with a fault and the position is held.
 #[test]
 fn a_resume_from_elsewhere_is_refused() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
-    let (_planner, channel) = load();
+    let (_planner, channel) = load_enabled(&job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    geometry(&job).publish(channel).unwrap();
     fill(channel, &job.records[..job.records.len() / 2], 0);
     for _ in 0..job.samples.len() {
         unsafe { mock::call(update, PERIOD_NS as _) };
@@ -563,7 +568,7 @@ fn fault_after(channel: &Channel, records: &[SegmentRecord]) -> u32 {
 
 #[test]
 fn malformed_records_fault_and_hold() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
     type Tamper = fn(&mut SegmentRecord);
     let cases: [(Tamper, FaultCode); 4] = [
@@ -573,9 +578,7 @@ fn malformed_records_fault_and_hold() {
         (|r| r.flags |= 7 << 16, FaultCode::BadRecord),
     ];
     for (tamper, code) in cases {
-        let (_planner, channel) = load();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        geometry(&job).publish(channel).unwrap();
+        let (_planner, channel) = load_enabled(&job);
         let mut records = job.records.clone();
         let k = records.len() / 2;
         tamper(&mut records[k]);
@@ -595,7 +598,7 @@ fn malformed_records_fault_and_hold() {
 
 #[test]
 fn invalid_geometry_is_refused() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
     let g = geometry(&job);
     let mut values = g.values().to_vec();
@@ -740,10 +743,8 @@ fn peak_periods(job: &Job) -> Vec<usize> {
 /// during the last segment, which has no boundary to stop at: the motion ends at C(1)), and the
 /// period the motion ended.
 fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Option<usize>, usize) {
-    let (_planner, channel) = load();
+    let (_planner, channel) = load_enabled(job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    geometry(job).publish(channel).unwrap();
     let mut records = job.records.clone();
     let (mut sent, mut out, mut allocated) = (0, Vec::new(), 0);
     let (mut rest_at, mut release_at, mut end, mut last_running) = (None, None, 0, false);
@@ -809,7 +810,7 @@ fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Optio
 /// the exact finite-difference check (`verify`, relative slack 1e-6), no jump, ends at C(1).
 #[test]
 fn hold_stops_on_the_path_and_resumes_within_the_limits() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     for name in ["trident.json", "butterfly.json"] {
         let job = job(name);
         let n = job.samples.len();
@@ -863,17 +864,15 @@ fn hold_stops_on_the_path_and_resumes_within_the_limits() {
 /// under hold is ignored.
 #[test]
 fn commands_wait_for_the_plan_from_the_stop_point() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
-    let (_planner, channel) = load();
+    let (_planner, channel) = load_enabled(&job);
     let update = mock::funct("nurbs_interp.update").unwrap();
     let periods = |k: usize| {
         for _ in 0..k {
             unsafe { mock::call(update, PERIOD_NS as _) };
         }
     };
-    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    geometry(&job).publish(channel).unwrap();
     fill(channel, &job.records, 0);
     periods(job.samples.len() / 3);
     mock::set_pin("nurbs_interp.hold", Value::Bit(true));
@@ -919,11 +918,9 @@ fn commands_wait_for_the_plan_from_the_stop_point() {
 /// over and the queue is discarded; within the limits.
 #[test]
 fn abort_stops_then_discards_the_queue() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("butterfly.json");
-    let (_planner, channel) = load();
-    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    geometry(&job).publish(channel).unwrap();
+    let (_planner, channel) = load_enabled(&job);
     let abort_at = job.samples.len() / 3;
     let samples = run_with(channel, &job, abort_at + 14_000, &mut |p| {
         if p == abort_at {
@@ -960,12 +957,10 @@ fn abort_stops_then_discards_the_queue() {
 #[test]
 #[ignore = "timing; run with --ignored --nocapture"]
 fn update_cost() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     for name in ["trident.json", "butterfly.json"] {
         let job = job(name);
-        let (_planner, channel) = load();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        geometry(&job).publish(channel).unwrap();
+        let (_planner, channel) = load_enabled(&job);
         let update = mock::funct("nurbs_interp.update").unwrap();
         // Prime: the first period takes the geometry (validation, once).
         unsafe { mock::call(update, PERIOD_NS as _) };
@@ -996,7 +991,7 @@ fn update_cost() {
 /// ring and a new geometry starts a new motion from its first record: the trident again, exactly.
 #[test]
 fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
-    let _guard = MODULE.lock().unwrap_or_else(|e| e.into_inner());
+    let _guard = lock_module();
     let job = job("trident.json");
     let n = job.samples.len();
     let update = || mock::funct("nurbs_interp.update").unwrap();
@@ -1019,9 +1014,7 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
         }),
     ];
     for (what, end) in endings {
-        let (_planner, channel) = load();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        geometry(&job).publish(channel).unwrap();
+        let (_planner, channel) = load_enabled(&job);
         end(channel, &job);
         periods(n + 12_000);
         assert!(!bit("nurbs_interp.active"), "{what}");

@@ -27,6 +27,30 @@ fn with_fields(mut summary: serde_json::Value, extra: serde_json::Value) -> serd
     summary
 }
 
+/// The summary keys both planners write: toolpath, planner, limits and the peaks of the first
+/// `axes` axes that `check` measured, with the worst ratio to a limit.
+fn summary_common(
+    args: &PlanArgs,
+    planner: &str,
+    limits: &crate::planner::Limits,
+    check: &FiniteDifferences,
+    axes: usize,
+) -> serde_json::Value {
+    let pk = &check.peaks;
+    serde_json::json!({
+        "toolpath": args.toolpath.display().to_string(),
+        "planner": planner,
+        "limits": {
+            "feed": limits.feed, "velocity": limits.velocity, "acceleration": limits.acceleration,
+            "jerk": limits.jerk, "chord_tolerance": limits.chord_tolerance, "period": limits.period,
+        },
+        "max_axial_velocity": &pk.vel[..axes],
+        "max_axial_acceleration": &pk.acc[..axes],
+        "max_axial_jerk": &pk.jerk[..axes],
+        "worst_ratio_to_limit": check.worst_ratio(limits),
+    })
+}
+
 /// Figure title: file, planner, limits and motion time.
 fn plot_title(args: &PlanArgs, planner: &str, limits: &crate::planner::Limits, motion_time: f64) -> String {
     let name = args.toolpath.file_name().map_or_else(
@@ -95,26 +119,18 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("{line}");
     }
     if let Some(path) = args.summary {
-        let pk = &check.peaks;
-        let summary = serde_json::json!({
-            "toolpath": args.toolpath.display().to_string(),
-            "planner": "erwinski",
-            "motion_time_s": motion_time,
-            "profile_time_s": plan.motion_time,
-            "plan_time_s": plan.plan_time,
-            "first_segment_s": plan.first_record_time,
-            "segments": plan.records.len(),
-            "critical_points": plan.critical_points.len(),
-            "setpoints": samples.len(),
-            "limits": {
-                "feed": plan.limits.feed, "velocity": plan.limits.velocity, "acceleration": plan.limits.acceleration,
-                "jerk": plan.limits.jerk, "chord_tolerance": plan.limits.chord_tolerance, "period": plan.limits.period,
-            },
-            "max_axial_velocity": &pk.vel[..tip],
-            "max_axial_acceleration": &pk.acc[..tip],
-            "max_axial_jerk": &pk.jerk[..tip],
-            "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
-        });
+        let summary = with_fields(
+            summary_common(&args, "erwinski", &plan.limits, &check, tip),
+            serde_json::json!({
+                "motion_time_s": motion_time,
+                "profile_time_s": plan.motion_time,
+                "plan_time_s": plan.plan_time,
+                "first_segment_s": plan.first_record_time,
+                "segments": plan.records.len(),
+                "critical_points": plan.critical_points.len(),
+                "setpoints": samples.len(),
+            }),
+        );
         let summary = with_fields(summary, prepared.summary_fields(deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
@@ -217,25 +233,17 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("{line}");
     }
     if let Some(path) = args.summary {
-        let pk = &check.peaks;
-        let summary = serde_json::json!({
-            "toolpath": args.toolpath.display().to_string(),
-            "planner": "vpop",
-            "motion_time_s": plan.motion_time,
-            "plan_time_s": plan.plan_time,
-            "setpoints": plan.points.len(),
-            "dead_ends": plan.stats.dead_ends,
-            "deceleration_checks": plan.stats.brakes,
-            "limits": {
-                "feed": plan.limits.feed, "velocity": plan.limits.velocity, "acceleration": plan.limits.acceleration,
-                "jerk": plan.limits.jerk, "chord_tolerance": plan.limits.chord_tolerance, "period": plan.limits.period,
-            },
-            "axes": if five { "x,y,z,a,c" } else { "tool tip" },
-            "max_axial_velocity": &pk.vel[..axes],
-            "max_axial_acceleration": &pk.acc[..axes],
-            "max_axial_jerk": &pk.jerk[..axes],
-            "worst_ratio_to_limit": check.worst_ratio(&plan.limits),
-        });
+        let summary = with_fields(
+            summary_common(&args, "vpop", &plan.limits, &check, axes),
+            serde_json::json!({
+                "motion_time_s": plan.motion_time,
+                "plan_time_s": plan.plan_time,
+                "setpoints": plan.points.len(),
+                "dead_ends": plan.stats.dead_ends,
+                "deceleration_checks": plan.stats.brakes,
+                "axes": if five { "x,y,z,a,c" } else { "tool tip" },
+            }),
+        );
         let mut summary = with_fields(summary, prepared.summary_fields(deviation));
         if five {
             summary = with_fields(summary, args.machine.summary_fields());

@@ -28,6 +28,18 @@ pub struct Toolpath {
 }
 
 impl Toolpath {
+    /// A toolpath of one element: `curve` as a `kind`, with no programmed feed or source line.
+    pub fn single(kind: ElementKind, curve: Nurbs) -> Self {
+        Toolpath {
+            elements: vec![PathElement {
+                kind,
+                curve,
+                feed: None,
+                source_line: None,
+            }],
+        }
+    }
+
     /// Number of tool-tip coordinates (2 or 3); a path mixing 2-D and 3-D elements counts as 3-D.
     pub fn tip_dim(&self) -> usize {
         self.elements.iter().map(|e| e.curve.tip_dim()).max().unwrap_or(2)

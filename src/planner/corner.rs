@@ -499,14 +499,7 @@ mod tests {
             .unwrap()
             .with_top_curve(&Nurbs::new(1, knots, &rows(&tops), None).unwrap())
             .unwrap();
-        let tp = Toolpath {
-            elements: vec![PathElement {
-                kind: ElementKind::Polyline,
-                curve,
-                feed: None,
-                source_line: None,
-            }],
-        };
+        let tp = Toolpath::single(ElementKind::Polyline, curve);
         let r = round_toolpath(&tp, 0.01).unwrap();
         assert_eq!(r.corners, 0);
         assert_eq!(r.toolpath.elements.len(), 3);

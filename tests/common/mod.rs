@@ -2,16 +2,99 @@
 //! with the project's own checker, and the random-curve generator of the property tests.
 #![allow(dead_code)] // each test crate uses a different subset
 
-use nurbs_motion::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::{plan, Limits, PathCurves, PlanError, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use proptest::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+pub mod limits;
+pub use limits::*;
 
 pub fn example(name: &str) -> Toolpath {
     read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)).unwrap()
+}
+
+/// Path of a bundled example.
+pub fn example_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)
+}
+
+/// A fresh scratch folder `name-<pid>` in the system's temporary folder.
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The `nurbs-plan` binary.
+pub fn nurbs_plan() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_nurbs-plan"))
+}
+
+/// `nurbs-plan verify csv program limits`.
+pub fn verify_cli(csv: &Path, program: &Path, limits: &[&str]) -> std::process::Output {
+    nurbs_plan()
+        .arg("verify")
+        .arg(csv)
+        .arg(program)
+        .args(limits)
+        .output()
+        .unwrap()
+}
+
+/// `nurbs-plan verify` passes on `csv` planned from `program` under `limits`.
+pub fn assert_verifies(csv: &Path, program: &Path, limits: &[&str]) {
+    let out = verify_cli(csv, program, limits);
+    assert!(
+        out.status.success(),
+        "{}: {}{}",
+        csv.display(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// `nurbs-plan plan program --planner planner limits --out csv` must succeed and `nurbs-plan
+/// verify` must accept its setpoints under the same limits; returns `csv`.
+pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
+    let out = nurbs_plan()
+        .arg("plan")
+        .arg(program)
+        .args(["--planner", planner])
+        .arg("--out")
+        .arg(csv)
+        .args(limits)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{} {planner}: {}",
+        program.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_verifies(csv, program, limits);
+    csv.to_path_buf()
+}
+
+/// `nurbs-plan verify` rejects `csv` once the limit value `value` in `limits` is replaced by
+/// the tighter `tighter`: the plan uses that limit.
+pub fn assert_tighter_limit_fails(csv: &Path, program: &Path, limits: &[&str], value: &str, tighter: &str) {
+    let mut tight = limits.to_vec();
+    let k = tight
+        .iter()
+        .position(|a| *a == value)
+        .unwrap_or_else(|| panic!("no limit value {value} in {limits:?}"));
+    tight[k] = tighter;
+    let bad = verify_cli(csv, program, &tight);
+    assert!(
+        !bad.status.success(),
+        "verify passed with {tight:?}: {}",
+        String::from_utf8_lossy(&bad.stdout)
+    );
 }
 
 /// Why a plan did not pass.
@@ -115,14 +198,7 @@ pub fn random_curve() -> impl Strategy<Value = (Toolpath, Limits)> {
             let jerk = 10f64.powf(3.0 + 4.0 * rj);
             let eps = 10f64.powf(-4.0 + 3.0 * re);
             let dt = 1e-4 * 10f64.powf(rdt * 1.778); // 1e-4 .. 6e-3
-            let tp = Toolpath {
-                elements: vec![PathElement {
-                    kind: ElementKind::Nurbs,
-                    curve,
-                    feed: None,
-                    source_line: None,
-                }],
-            };
+            let tp = Toolpath::single(ElementKind::Nurbs, curve);
             (tp.clone(), Limits::uniform(dim, feed, accel, jerk, eps, dt))
         })
 }
