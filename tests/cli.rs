@@ -4,7 +4,8 @@
 mod common;
 
 use common::{
-    assert_verifies, example_path as example, nurbs_plan as bin, scratch_dir, LAB1, TABLE1, TABLE1_TIP, TIP_VPOP,
+    assert_verifies, example_path as example, nurbs_plan as bin, plan_cli, scratch_dir, LAB1, TABLE1, TABLE1_TIP,
+    TIP_VPOP,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -641,23 +642,7 @@ fn programmed_gcode_feeds_cap_each_element() {
         "--period",
         "0.001",
     ];
-    let plan = |program: &Path, planner: &str, csv: &Path| {
-        let out = bin()
-            .arg("plan")
-            .arg(program)
-            .args(limits)
-            .args(["--planner", planner])
-            .arg("--out")
-            .arg(csv)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{} {planner}: {}",
-            program.display(),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
+    let plan = |program: &Path, planner: &str, csv: &Path| plan_cli(program, planner, &limits, csv);
     for planner in ["erwinski", "vpop"] {
         let csv = dir.join(format!("{planner}-two.csv"));
         plan(&two, planner, &csv);

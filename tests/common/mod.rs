@@ -58,9 +58,8 @@ pub fn assert_verifies(csv: &Path, program: &Path, limits: &[&str]) {
     );
 }
 
-/// `nurbs-plan plan program --planner planner limits --out csv` must succeed and `nurbs-plan
-/// verify` must accept its setpoints under the same limits; returns `csv`.
-pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
+/// `nurbs-plan plan program --planner planner limits --out csv` must succeed; returns `csv`.
+pub fn plan_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
     let out = nurbs_plan()
         .arg("plan")
         .arg(program)
@@ -76,12 +75,17 @@ pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: 
         program.display(),
         String::from_utf8_lossy(&out.stderr)
     );
+    csv.to_path_buf()
+}
+
+/// [`plan_cli`], and `nurbs-plan verify` must accept its setpoints under the same limits;
+/// returns `csv`.
+pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
+    plan_cli(program, planner, limits, csv);
     assert_verifies(csv, program, limits);
     csv.to_path_buf()
 }
 
-/// `nurbs-plan verify` rejects `csv` once the limit value `value` in `limits` is replaced by
-/// the tighter `tighter`: the plan uses that limit.
 pub fn assert_tighter_limit_fails(csv: &Path, program: &Path, limits: &[&str], value: &str, tighter: &str) {
     let mut tight = limits.to_vec();
     let k = tight
