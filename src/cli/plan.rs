@@ -125,7 +125,6 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "motion_time_s": motion_time,
                 "profile_time_s": plan.motion_time,
                 "plan_time_s": plan.plan_time,
-                "first_segment_s": plan.first_record_time,
                 "segments": plan.records.len(),
                 "critical_points": plan.critical_points.len(),
                 "setpoints": samples.len(),
