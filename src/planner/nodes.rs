@@ -36,9 +36,8 @@ use std::collections::VecDeque;
 /// at a join of two path elements the curve changes).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Node {
-    /// Curve and parameter of the segment ending here.
-    #[allow(dead_code)]
-    pub end_curve: usize,
+    /// Parameter and arc length where the segment ending here ends (on the curve the previous
+    /// node's segment starts on).
     pub end_u: f64,
     pub end_s: f64,
     /// Curve and parameter of the segment starting here.
@@ -55,7 +54,6 @@ impl Node {
     /// A hard node inside curve `c` at parameter `u`, arc length `s`, with feed cap `cap`.
     pub fn within(c: usize, u: f64, s: f64, cap: f64) -> Node {
         Node {
-            end_curve: c,
             end_u: u,
             end_s: s,
             start_curve: c,
@@ -237,7 +235,6 @@ impl<'a> NodeStream<'a> {
             } else {
                 // The join: the next element starts here.
                 Node {
-                    end_curve: c,
                     end_u: u1,
                     end_s: s1,
                     start_curve: next,
