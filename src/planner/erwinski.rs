@@ -16,6 +16,7 @@ use nurbs_rtcore::executor::CurveSet;
 use nurbs_rtcore::records::{CURVE_SHIFT, FLAG_LAST};
 use nurbs_rtcore::scurve::SCurve;
 use nurbs_rtcore::SegmentRecord;
+use std::cell::Cell;
 use std::fmt;
 use std::time::Instant;
 
@@ -161,6 +162,9 @@ pub struct Planner<'a> {
     k: usize,
     splits: usize,
     backtracks: usize,
+    /// Periods simulated by the exact trials so far, and their budget ([`WORK_BUDGET_BASE`]).
+    work: Cell<u64>,
+    work_budget: (u64, u64),
     /// Records final (never revised) and records handed out.
     settled: usize,
     emitted: usize,
@@ -236,6 +240,8 @@ impl<'a> Planner<'a> {
             k: 0,
             splits: 0,
             backtracks: 0,
+            work: Cell::new(0),
+            work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
             settled: 0,
             emitted: 0,
             stream: options.stream,
@@ -326,7 +332,20 @@ impl<'a> Planner<'a> {
             seq: k as u32,
             accel: self.accel,
             jerk: self.jerk,
+            work: &self.work,
         };
+        let budget = self.work_budget.0 + self.work_budget.1 * self.states[k].samples as u64;
+        if self.work.get() > budget {
+            return Err(PlanError::Infeasible {
+                curve: c,
+                u: self.bounds[k].start_u,
+                reason: format!(
+                    "planning gave up after simulating {} servo periods of trial profiles for {} planned ones (its work budget)",
+                    self.work.get(),
+                    self.states[k].samples
+                ),
+            });
+        }
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
         if k > 0 && k == self.settled && matches!(outcome, Err(SegmentFailure::StartTooFast(_))) {
             // Back-tracking would revise a record handed out: this segment stops instead (the
@@ -377,9 +396,19 @@ impl<'a> Planner<'a> {
                     SegmentFailure::StartTooFast(v) => v,
                     SegmentFailure::Split { .. } => START_FEED_STEP * self.start_feeds[k],
                 };
+                // Far below the feed cap, passing the node slowly gains nothing over stopping
+                // there, and each further step down would make the trials crawl for longer.
+                let start_max = if start_max < START_FEED_FLOOR * self.feed_cap {
+                    0.0
+                } else {
+                    start_max
+                };
                 self.backtracks += 1;
+                let from_rest = self.start_feeds[k] <= REST_FEED * self.feed_cap;
                 let reason = if k == 0 || self.backtracks > 50 * nseg + 100 {
                     Some("segment violates the axis limits even from its lowest start feed")
+                } else if from_rest {
+                    Some("segment violates the axis limits even when started from rest")
                 } else if k <= self.settled {
                     Some("segment violates the axis limits from the end feed of a segment already handed out")
                 } else {
@@ -426,6 +455,16 @@ pub fn plan(
 /// Nodes inserted at most by segment splits (each one makes a segment shorter).
 const MAX_SPLITS: usize = 10_000;
 
+/// Fraction of the feed cap below which a back-tracked start feed becomes a stop at the node.
+const START_FEED_FLOOR: f64 = 1e-3;
+/// Fraction of the feed cap at or below which a segment counts as starting from rest.
+const REST_FEED: f64 = 1e-9;
+/// Servo periods the exact trials may simulate before the plan is refused: this many, plus
+/// so many per period planned so far. The bundled curves simulate 3-10 per planned period;
+/// the base is some 20 s of planning.
+const WORK_BUDGET_BASE: u64 = 20_000_000;
+const WORK_PER_PLANNED_PERIOD: u64 = 200;
+
 /// Why a segment could not be planned.
 enum SegmentFailure {
     /// Not from this start feed: retry with the previous segment ending at most this fast.
@@ -461,6 +500,7 @@ struct SegmentContext<'a> {
     seq: u32,
     accel: f64,
     jerk: f64,
+    work: &'a Cell<u64>,
 }
 
 /// One candidate profile, interpolated and measured.
@@ -579,7 +619,9 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         prev = Some(*s);
         last_sample = Some(*s);
     };
-    if !run_segment(ctx.curves, ctx.limits, &mut state, record, sink) {
+    let finished = run_segment(ctx.curves, ctx.limits, &mut state, record, sink);
+    ctx.work.set(ctx.work.get() + count as u64);
+    if !finished {
         return None;
     }
     let check: &FiniteDifferences = &state.check;
@@ -814,3 +856,43 @@ fn solve_segment(
 /// A speed excess inside a segment is split off as a node when the profile there is below this
 /// fraction of the peak (at the peak, lowering the peak is the cure).
 const SPLIT_BELOW_PEAK: f64 = 0.99;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{ElementKind, Nurbs, PathElement};
+
+    /// Two 10 mm lines at a right angle (a stop at the corner, so two segments).
+    fn toolpath() -> Toolpath {
+        let cps = vec![vec![0.0, 0.0], vec![10.0, 0.0], vec![10.0, 10.0]];
+        let curve = Nurbs::new(1, vec![0.0, 0.0, 10.0, 20.0, 20.0], &cps, None).unwrap();
+        Toolpath {
+            elements: vec![PathElement {
+                kind: ElementKind::Polyline,
+                curve,
+                feed: None,
+                source_line: None,
+            }],
+        }
+    }
+
+    /// The work budget ends a plan with a clear refusal; with the real budget the same path plans.
+    #[test]
+    fn work_budget_refuses_clearly() {
+        let tp = toolpath();
+        let limits = Limits::uniform(2, 200.0, 2000.0, 2e4, 0.001, 0.001);
+        let options = PlanOptions::default();
+        let mut planner = Planner::new(&tp, &limits, &options).unwrap();
+        planner.work_budget = (0, 0);
+        let outcome: Result<Vec<_>, _> = (&mut planner).collect();
+        let message = outcome.unwrap_err().to_string();
+        assert!(message.contains("work budget"), "{message}");
+        assert!(planner.work.get() > 0);
+
+        let records: Vec<_> = Planner::new(&tp, &limits, &options)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert!(!records.is_empty());
+    }
+}
