@@ -2,7 +2,7 @@
 # the limit sets of the papers (mm, s).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bin=target/release/nurbs-plan
+bin=${CARGO_TARGET_DIR:-target}/release/nurbs-plan
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"

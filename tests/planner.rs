@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{example, plan_and_verify, random_curve, trident_vpop, try_plan_and_verify, Failure};
+use common::{example, plan_and_verify, random_curve, trident_vpop, try_plan_and_verify_with, Failure};
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::flf::{critical_points, CriticalPointSearch, FlfScan};
 use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
@@ -164,9 +164,28 @@ fn random_curves_never_violate() {
     let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
     let (cases, seed) = (env("PROPTEST_CASES", 256), env("PROPTEST_RNG_SEED", 20261122));
     let (first_case, verbose) = (env("PROPTEST_FIRST_CASE", 0), env("PROPTEST_VERBOSE", 0) != 0);
-    let run = random_run(seed, first_case..cases, verbose);
+    let run = random_run(seed, first_case..cases, verbose, &PlanOptions::default());
     assert!(
         run.refused.len() * 100 <= cases as usize,
+        "too many refusals: {:?}",
+        run.refused
+    );
+}
+
+/// The same random curves planned as a stream ([`PlanOptions::stream`]: records final before
+/// the path end, so back-tracking reaches less far): every plan must pass the checker; a
+/// refusal is allowed for at most 2 % of the cases. `PROPTEST_STREAM_CASES` (default 128).
+#[test]
+fn random_curves_never_violate_when_streamed() {
+    let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
+    let (cases, seed) = (env("PROPTEST_STREAM_CASES", 128), env("PROPTEST_RNG_SEED", 20261122));
+    let options = PlanOptions {
+        stream: true,
+        ..PlanOptions::default()
+    };
+    let run = random_run(seed, 0..cases, false, &options);
+    assert!(
+        run.refused.len() * 50 <= cases as usize,
         "too many refusals: {:?}",
         run.refused
     );
@@ -177,7 +196,7 @@ fn random_curves_never_violate() {
 /// ever longer. A start feed that low now becomes a stop at the node.
 #[test]
 fn long_run_case_7317_is_planned() {
-    let run = random_run(20261122, 7317..7318, false);
+    let run = random_run(20261122, 7317..7318, false, &PlanOptions::default());
     assert_eq!(
         (run.planned, run.refused.len(), run.skipped),
         (1, 0, 0),
@@ -192,9 +211,9 @@ struct RandomRun {
     skipped: usize,
 }
 
-/// Plans and verifies cases `cases` of the random curves of `seed` (the ones before are drawn
-/// and passed over); panics at the first violation.
-fn random_run(seed: u64, cases: std::ops::Range<u64>, verbose: bool) -> RandomRun {
+/// Plans (with `options`) and verifies cases `cases` of the random curves of `seed` (the ones
+/// before are drawn and passed over); panics at the first violation.
+fn random_run(seed: u64, cases: std::ops::Range<u64>, verbose: bool, options: &PlanOptions) -> RandomRun {
     let mut key = [0u8; 32];
     key[..8].copy_from_slice(&seed.to_le_bytes());
     let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &key);
@@ -231,7 +250,7 @@ fn random_run(seed: u64, cases: std::ops::Range<u64>, verbose: bool) -> RandomRu
                 curve.control_point_count()
             );
         }
-        match try_plan_and_verify(&tp, &limits) {
+        match try_plan_and_verify_with(&tp, &limits, options) {
             Ok(_) => run.planned += 1,
             Err(Failure::Refused(e)) => run.refused.push(format!("case {case}: {e}")),
             Err(Failure::Violation(v)) => panic!("case {case} (seed {seed}): violation {v}\n{tp:?}\n{limits:?}"),

@@ -112,7 +112,12 @@ pub enum Failure {
 
 /// Plans, samples and verifies; returns the sampled motion time, or why it failed.
 pub fn try_plan_and_verify(toolpath: &Toolpath, limits: &Limits) -> Result<f64, Failure> {
-    let plan = plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(Failure::Refused)?;
+    try_plan_and_verify_with(toolpath, limits, &PlanOptions::default())
+}
+
+/// [`try_plan_and_verify`] with planner options (e.g. streaming).
+pub fn try_plan_and_verify_with(toolpath: &Toolpath, limits: &Limits, options: &PlanOptions) -> Result<f64, Failure> {
+    let plan = plan(toolpath, limits, options, &mut |_| {}).map_err(Failure::Refused)?;
     let curves = PathCurves::new(toolpath);
     let samples = setpoints(&curves, &plan.limits, &plan.records);
     let tip = toolpath.tip_dim();
