@@ -68,7 +68,9 @@ pub fn adaptive_simpson(f: &dyn Fn(f64) -> f64, a: f64, b: f64, tol: f64) -> f64
 
 /// Arc length of `curve` between parameters `a < b` by adaptive Simpson, span by span.
 pub fn simpson_length(curve: &Nurbs, a: f64, b: f64, tol: f64) -> f64 {
-    let speed = |u: f64| curve.speed(u);
+    // One validated view for all evaluations (building one validates the whole curve).
+    let (view, tip) = (curve.view(), curve.tip_dim());
+    let speed = |u: f64| view.speed(u, tip);
     let mut cuts: Vec<f64> = vec![a];
     cuts.extend(curve.breakpoints().into_iter().filter(|&k| k > a && k < b));
     cuts.push(b);
@@ -123,7 +125,8 @@ impl ArcLengthTable {
 
     /// Adds pieces until the table reaches beyond parameter `t` (or the curve end).
     pub fn extend_past(&mut self, curve: &Nurbs, t: f64) {
-        let speed = |t: f64| curve.speed(t);
+        let (view, tip) = (curve.view(), curve.tip_dim());
+        let speed = |t: f64| view.speed(t, tip);
         while !self.is_complete() && *self.u.last().unwrap() <= t {
             let (span, i) = (self.pieces / PIECES_PER_SPAN, self.pieces % PIECES_PER_SPAN);
             let w = &self.breaks[span..span + 2];
@@ -159,7 +162,8 @@ impl ArcLengthTable {
         if i + 1 >= self.u.len() {
             return self.total();
         }
-        let speed = |x: f64| curve.speed(x);
+        let (view, tip) = (curve.view(), curve.tip_dim());
+        let speed = |x: f64| view.speed(x, tip);
         let whole = gauss16(&speed, self.u[i], t);
         self.s[i] + gauss_adaptive(&speed, self.u[i], t, whole, 1e-14 * (1.0 + whole), 12)
     }
@@ -174,6 +178,7 @@ impl ArcLengthTable {
         }
         let i = self.s.partition_point(|&x| x <= target).max(1) - 1;
         let (mut lo, mut hi) = (self.u[i], self.u[i + 1]);
+        let (view, tip) = (curve.view(), curve.tip_dim());
         let mut t = lo + (hi - lo) * (target - self.s[i]) / (self.s[i + 1] - self.s[i]).max(f64::MIN_POSITIVE);
         for _ in 0..60 {
             let err = self.length_to(curve, t) - target;
@@ -185,7 +190,7 @@ impl ArcLengthTable {
             } else {
                 lo = t;
             }
-            let sp = curve.speed(t);
+            let sp = view.speed(t, tip);
             let newton = t - err / sp;
             t = if sp > 0.0 && newton > lo && newton < hi {
                 newton

@@ -396,13 +396,11 @@ impl<'a> Planner<'a> {
                     SegmentFailure::StartTooFast(v) => v,
                     SegmentFailure::Split { .. } => START_FEED_STEP * self.start_feeds[k],
                 };
-                // Far below the feed cap, passing the node slowly gains nothing over stopping
-                // there, and each further step down would make the trials crawl for longer.
-                let start_max = if start_max < START_FEED_FLOOR * self.feed_cap {
-                    0.0
-                } else {
-                    start_max
-                };
+                // Below the feed one period of the nominal jerk gives from rest, passing the node
+                // gains about a period over stopping there, and each further step down would
+                // make the trials crawl for longer.
+                let floor = 0.5 * self.jerk * self.limits.period * self.limits.period;
+                let start_max = if start_max < floor { 0.0 } else { start_max };
                 self.backtracks += 1;
                 let from_rest = self.start_feeds[k] <= REST_FEED * self.feed_cap;
                 let reason = if k == 0 || self.backtracks > 50 * nseg + 100 {
@@ -455,8 +453,6 @@ pub fn plan(
 /// Nodes inserted at most by segment splits (each one makes a segment shorter).
 const MAX_SPLITS: usize = 10_000;
 
-/// Fraction of the feed cap below which a back-tracked start feed becomes a stop at the node.
-const START_FEED_FLOOR: f64 = 1e-3;
 /// Fraction of the feed cap at or below which a segment counts as starting from rest.
 const REST_FEED: f64 = 1e-9;
 /// Servo periods the exact trials may simulate before the plan is refused: this many, plus
