@@ -466,7 +466,7 @@ fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
 /// `verify` passes with the same pivot and fails with another one (or none).
 #[test]
 fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
-    use nurbs_motion::kinematics::Xyzac;
+    use nurbs_motion::kinematics::TableTilting;
     let dir = scratch_dir("nurbs-cli-pivot");
     let program = example("open_pocket.json");
     let pivot = [-15.0, 40.0, -60.0];
@@ -489,9 +489,9 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
     assert_eq!(s["pivot_mm"], serde_json::json!(pivot));
     // Every row: the joints' tool tip and tool axis on the programmed tip and top curves.
     let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
-    let machine = Xyzac {
+    let machine = TableTilting {
         pivot,
-        ..Xyzac::default()
+        ..TableTilting::default()
     };
     let rows = csv_columns(&csv, &["x", "y", "z", "a", "c", "element", "u"]);
     assert!(rows.len() > 100);
@@ -501,7 +501,7 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
         let d = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
         let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let (tip, axis) = machine.forward(&r[..5]);
-        let (tip0, _) = Xyzac::default().forward(&r[..5]);
+        let (tip0, _) = TableTilting::default().forward(&r[..5]);
         for i in 0..3 {
             tip_error = tip_error.max((tip[i] - p[i]).abs());
             axis_error = axis_error.max((axis[i] - d[i] / n).abs());
@@ -530,6 +530,71 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
         assert!(!bad.status.success(), "{other:?}: {text}");
         assert!(text.contains("off the joints' tool tip"), "{other:?}: {text}");
     }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `--machine xyzbc --negative-tilt`: the joints are x, y, z, b, c with B <= 0, their forward
+/// kinematics put the tool tip and axis on the programmed curves, and `verify` passes with the
+/// same machine (either branch: the forward kinematics are the same) and fails with XYZAC.
+#[test]
+fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
+    use nurbs_motion::kinematics::{TableTilting, Tilt};
+    let dir = scratch_dir("nurbs-cli-xyzbc");
+    let program = example("open_pocket.json");
+    let csv = dir.join("bc.csv");
+    let flags = ["--machine", "xyzbc", "--negative-tilt"];
+    let out = bin()
+        .arg("plan")
+        .arg(&program)
+        .args(TABLE1)
+        .args(["--planner", "vpop"])
+        .args(flags)
+        .arg("--out")
+        .arg(&csv)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
+    let machine = TableTilting {
+        tilt: Tilt::Y,
+        negative_tilt: true,
+        ..TableTilting::default()
+    };
+    let rows = csv_columns(&csv, &["x", "y", "z", "b", "c", "element", "u"]);
+    assert!(rows.len() > 100);
+    let (mut tip_error, mut axis_error, mut b_max) = (0.0f64, 0.0f64, f64::NEG_INFINITY);
+    for r in &rows {
+        let p = toolpath.elements[r[5] as usize].curve.point(r[6]);
+        let d = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
+        let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        let (tip, axis) = machine.forward(&r[..5]);
+        for i in 0..3 {
+            tip_error = tip_error.max((tip[i] - p[i]).abs());
+            axis_error = axis_error.max((axis[i] - d[i] / n).abs());
+        }
+        b_max = b_max.max(r[3]);
+    }
+    assert!(tip_error < 1e-6 && axis_error < 1e-9, "{tip_error} {axis_error}");
+    assert!(b_max <= 1e-9, "B on the negative branch reached {b_max}");
+    let verify = |extra: &[&str]| {
+        bin()
+            .arg("verify")
+            .arg(&csv)
+            .arg(&program)
+            .args(TABLE1)
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    for same in [&flags[..], &["--machine", "xyzbc"]] {
+        let ok = verify(same);
+        let text = String::from_utf8_lossy(&ok.stdout);
+        assert!(ok.status.success(), "{same:?}: {text}");
+        assert!(text.contains("joints x y z b c"), "{text}");
+    }
+    // XYZAC reads an `a` column, which this file does not have.
+    let other_machine = verify(&["--machine", "xyzac", "--negative-tilt"]);
+    assert!(!other_machine.status.success());
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -568,8 +633,8 @@ fn machine_options_refuse_bad_values_and_tool_tip_paths() {
         (
             "open_pocket.json",
             "vpop",
-            &["--machine", "xyzbc"],
-            "possible values: xyzac",
+            &["--machine", "hexapod"],
+            "possible values: xyzac, xyzbc",
         ),
         ("trident.json", "vpop", &["--pivot", "1,2,3"], "2-axis tool-tip path"),
         (

@@ -102,13 +102,13 @@ fn butterfly_lab_set_1() {
 /// chord error, tool-tip feed, end points).
 #[test]
 fn open_pocket_five_axis_table_1() {
-    use nurbs_motion::kinematics::Xyzac;
+    use nurbs_motion::kinematics::TableTilting;
     use nurbs_motion::planner::axial::FiniteDifferences;
     use nurbs_motion::planner::verify::SLACK;
     use nurbs_motion::planner::vpop::plan_five_axis;
     let tp = example("open_pocket.json");
     let limits = table1();
-    let machine = Xyzac::default();
+    let machine = TableTilting::default();
     let plan = plan_five_axis(&tp, machine, &limits, SearchOptions::default()).unwrap();
     let mut fd = FiniteDifferences::new(5, limits.period);
     for p in &plan.points {

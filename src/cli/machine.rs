@@ -1,18 +1,21 @@
-//! `--machine` and `--pivot`: the kinematics a 5-axis toolpath (tool tip and top curve on
+//! `--machine`, `--pivot` and `--negative-tilt`: the kinematics a 5-axis toolpath (tool tip and top curve on
 //! every element) is planned and verified on. Built here, in one place, for `plan` and
 //! `verify`, so that `verify` recovers the tool tip with the kinematics `plan` used.
 
 use crate::geometry::Toolpath;
-use crate::kinematics::Xyzac;
+use crate::kinematics::{TableTilting, Tilt};
 
 /// Machine structures by name. Another structure is another variant here and another arm in
 /// [`MachineArgs::kinematics`].
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MachineKind {
-    /// Table-tilting XYZAC (Mikron UCP 710 type): the tool stays along Z, the table tilts about
-    /// X (A) and rotates about its own normal (C).
+    /// Table-tilting XYZAC (Mikron UCP 710 type, LinuxCNC `xyzac-trt-kins`): the tool stays
+    /// along Z, the table tilts about X (A) and rotates about its own normal (C).
     #[default]
     Xyzac,
+    /// Table-tilting XYZBC (LinuxCNC `xyzbc-trt-kins`): the table tilts about Y (B) and rotates
+    /// about its own normal (C). Joints and limits in order x, y, z, b, c.
+    Xyzbc,
 }
 
 /// `--pivot X,Y,Z` (mm).
@@ -42,41 +45,53 @@ pub struct MachineArgs {
     /// every element (--planner vpop); refused for 2-/3-axis paths.
     #[arg(long, value_enum, value_name = "NAME")]
     pub machine: Option<MachineKind>,
-    /// xyzac: the point where the A and C axes meet, in workpiece (program) coordinates, mm
-    /// (default 0,0,0: the program origin on the rotary centre). `verify` needs the same value.
+    /// The point where the tilt (A or B) and C axes meet, in workpiece (program) coordinates,
+    /// mm (default 0,0,0: the program origin on the rotary centre). `verify` needs the same value.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub pivot: Option<Pivot>,
+    /// Use the second solution of the inverse kinematics: tilt angle (A or B) <= 0 and C turned
+    /// by 180° (default: tilt >= 0). `verify` accepts either: the joints' forward kinematics
+    /// are the same on both branches.
+    #[arg(long)]
+    pub negative_tilt: bool,
 }
 
 impl MachineArgs {
     /// The flags given on the command line, for messages (`None`: none given).
-    fn given(&self) -> Option<&'static str> {
-        match (self.machine.is_some(), self.pivot.is_some()) {
-            (false, false) => None,
-            (true, false) => Some("--machine"),
-            (false, true) => Some("--pivot"),
-            (true, true) => Some("--machine and --pivot"),
-        }
+    fn given(&self) -> Option<String> {
+        let flags: Vec<&str> = [
+            (self.machine.is_some(), "--machine"),
+            (self.pivot.is_some(), "--pivot"),
+            (self.negative_tilt, "--negative-tilt"),
+        ]
+        .into_iter()
+        .filter_map(|(given, name)| given.then_some(name))
+        .collect();
+        (!flags.is_empty()).then(|| flags.join(", "))
     }
 
     /// The machine the flags describe.
-    pub fn kinematics(&self) -> Xyzac {
-        match self.machine.unwrap_or_default() {
-            MachineKind::Xyzac => Xyzac {
-                pivot: self.pivot.map_or([0.0; 3], |p| p.0),
-                ..Xyzac::default()
+    pub fn kinematics(&self) -> TableTilting {
+        TableTilting {
+            tilt: match self.machine.unwrap_or_default() {
+                MachineKind::Xyzac => Tilt::X,
+                MachineKind::Xyzbc => Tilt::Y,
             },
+            pivot: self.pivot.map_or([0.0; 3], |p| p.0),
+            negative_tilt: self.negative_tilt,
         }
     }
 
     /// Summary JSON fields: the machine's name and geometry.
     pub fn summary_fields(&self) -> serde_json::Value {
         use clap::ValueEnum;
-        let kind = self.machine.unwrap_or_default();
-        let name = kind.to_possible_value().map(|v| v.get_name().to_owned());
-        match kind {
-            MachineKind::Xyzac => serde_json::json!({ "machine": name, "pivot_mm": self.kinematics().pivot }),
-        }
+        let name = self
+            .machine
+            .unwrap_or_default()
+            .to_possible_value()
+            .map(|v| v.get_name().to_owned());
+        let k = self.kinematics();
+        serde_json::json!({ "machine": name, "pivot_mm": k.pivot, "negative_tilt": k.negative_tilt })
     }
 
     /// Fails with `reason` when a machine flag was given (where no kinematics is used, a

@@ -171,7 +171,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
     args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
-    // A top curve on every element: 5-axis on the machine (XYZAC by default), limits in joint order.
+    // A top curve on every element: 5-axis on the machine (XYZAC unless --machine says otherwise), limits in joint order.
     let five = is_five_axis(toolpath);
     let plan = if five {
         let limits = args.limits.limits(5)?;
@@ -182,7 +182,8 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let axes = plan.axes;
     let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
     if five {
-        writeln!(out, "t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element")?;
+        let joints = args.machine.kinematics().joint_names().join(",");
+        writeln!(out, "t,u,{joints},tip_x,tip_y,tip_z,feed,element")?;
     } else {
         writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
     }
@@ -240,7 +241,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "setpoints": plan.points.len(),
                 "dead_ends": plan.stats.dead_ends,
                 "deceleration_checks": plan.stats.brakes,
-                "axes": if five { "x,y,z,a,c" } else { "tool tip" },
+                "axes": if five { args.machine.kinematics().joint_names().join(",") } else { "tool tip".into() },
             }),
         );
         let mut summary = with_fields(summary, prepared.summary_fields(deviation));
@@ -250,11 +251,8 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
-        let names: &[&str] = if five {
-            &["x", "y", "z", "a", "c"]
-        } else {
-            &["x", "y", "z"][..tip]
-        };
+        let joints = args.machine.kinematics().joint_names();
+        let names: &[&str] = if five { &joints } else { &["x", "y", "z"][..tip] };
         let profile = Profile {
             toolpath,
             limits: &plan.limits,

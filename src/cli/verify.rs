@@ -83,7 +83,7 @@ fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, String> {
     Ok(out)
 }
 
-/// 5-axis setpoints (`--planner vpop` on a two-curve toolpath): joint limits in order x y z a c
+/// 5-axis setpoints (`--planner vpop` on a two-curve toolpath): joint limits in joint order
 /// by finite differences; the tool tip columns against the curve (distance, chord error, feed,
 /// end points) and against the forward kinematics of the joints on `machine` (tool tip and
 /// tool axis).
@@ -91,14 +91,15 @@ fn run_five_axis(
     setpoints: &Path,
     prepared: &Prepared,
     limits: &LimitArgs,
-    machine: crate::kinematics::Xyzac,
+    machine: crate::kinematics::TableTilting,
 ) -> Result<bool, Box<dyn std::error::Error>> {
+    let names = machine.joint_names();
     use crate::planner::axial::FiniteDifferences;
     use crate::planner::verify::SLACK;
     use nurbs_rtcore::executor::CurveSet;
     let toolpath = &prepared.toolpath;
     let joint_limits = limits.limits(5)?;
-    let joints = read_columns(setpoints, &["x", "y", "z", "a", "c"])?;
+    let joints = read_columns(setpoints, &names)?;
     let tips = read_columns(setpoints, &["tip_x", "tip_y", "tip_z"])?;
     let base = read_rows(setpoints, 0)?;
     let curves = PathCurves::new(toolpath);
@@ -123,7 +124,6 @@ fn run_five_axis(
     }
     fd.finish(&joint_limits);
     let mut violations = Vec::new();
-    let names = ["x", "y", "z", "a", "c"];
     for i in 0..5 {
         for (what, peak, limit) in [
             ("velocity", fd.peaks.vel[i], joint_limits.velocity[i]),
@@ -168,9 +168,10 @@ fn run_five_axis(
         &mut violations,
     );
     println!(
-        "{} setpoints ({:.6} s), joints x y z a c: max |v| {:?}, |a| {:?}, |jerk| {:?}; tool tip: max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
+        "{} setpoints ({:.6} s), joints {}: max |v| {:?}, |a| {:?}, |jerk| {:?}; tool tip: max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,
         report.rows.saturating_sub(1) as f64 * joint_limits.period,
+        names.join(" "),
         &fd.peaks.vel[..5],
         &fd.peaks.acc[..5],
         &fd.peaks.jerk[..5],
@@ -226,10 +227,10 @@ pub fn run(
     let prepared = prepare(toolpath, round_corners, limits.chord_tol)?;
     let toolpath = &prepared.toolpath;
     machine.refuse_unless_five_axis(toolpath, file)?;
-    if read_columns(setpoints, &["a", "c", "tip_x"]).is_ok() {
+    if read_columns(setpoints, &["c", "tip_x"]).is_ok() {
         if !is_five_axis(toolpath) {
             return Err(format!(
-                "{}: joint setpoints (x,y,z,a,c) need a 5-axis toolpath, but {} has no top curve on every element",
+                "{}: joint setpoints (x,y,z,a|b,c) need a 5-axis toolpath, but {} has no top curve on every element",
                 setpoints.display(),
                 file.display()
             )
@@ -238,7 +239,7 @@ pub fn run(
         return run_five_axis(setpoints, &prepared, limits, machine.kinematics());
     }
     machine.refuse(&format!(
-        "{} holds tool-tip setpoints (no a, c columns): no machine kinematics to check",
+        "{} holds tool-tip setpoints (no c, tip_x columns): no machine kinematics to check",
         setpoints.display()
     ))?;
     let limits = limits.limits(toolpath.tip_dim())?;

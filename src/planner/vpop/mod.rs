@@ -1,6 +1,6 @@
 //! VPOp (Beudaert, Lavernhe, Tournier 2012, seed 003): time-discretised feedrate planning by
 //! constraint intersection at the servo period, with per-axis velocity, acceleration and jerk
-//! limits of any machine structure (2-/3-axis tool tip, XYZAC 5-axis), dichotomy back-tracking
+//! limits of any machine structure (2-/3-axis tool tip, XYZAC or XYZBC 5-axis), dichotomy back-tracking
 //! and look-ahead to the path end.
 //!
 //! The output is one path position per servo period; by construction every sample passes the
@@ -15,7 +15,7 @@ pub use backtrack::{SearchOptions, SearchStats};
 pub use path::{JointPath, PathPoint};
 
 use crate::geometry::Toolpath;
-use crate::kinematics::Xyzac;
+use crate::kinematics::TableTilting;
 use crate::planner::{Limits, LimitsError};
 use std::time::Instant;
 
@@ -62,11 +62,11 @@ pub fn plan_tip(toolpath: &Toolpath, limits: &Limits, options: SearchOptions) ->
     run(&path, limits, options)
 }
 
-/// Plans a two-curve (tip + top) toolpath on an XYZAC machine; limits in joint order
-/// x, y, z, a, c (rotary in degrees).
+/// Plans a two-curve (tip + top) toolpath on a table-tilting machine; limits in joint order
+/// x, y, z, tilt (a or b), c (rotary in degrees).
 pub fn plan_five_axis(
     toolpath: &Toolpath,
-    machine: Xyzac,
+    machine: TableTilting,
     limits: &Limits,
     options: SearchOptions,
 ) -> Result<VpopPlan, VpopError> {

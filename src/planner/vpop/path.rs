@@ -1,10 +1,10 @@
 //! The path as VPOp sees it: one coordinate `w` over the whole toolpath (element `e` covers
 //! `[e, e + 1]`, linear in its curve parameter), and at every `w` the joint positions q(w) that
-//! the limits apply to (the tool tip for 2-/3-axis paths, x y z a c on the XYZAC machine) and
+//! the limits apply to (the tool tip for 2-/3-axis paths, x y z a|b c on a table-tilting machine) and
 //! the tool tip in the workpiece frame (feed and chord error).
 
 use crate::geometry::Toolpath;
-use crate::kinematics::Xyzac;
+use crate::kinematics::TableTilting;
 use crate::planner::axial::MAX_AXES;
 use nurbs_rtcore::{CurveView, MAX_DIM};
 
@@ -27,7 +27,7 @@ pub struct JointPath<'a> {
     /// Upper estimate of the tool-tip curvature over cells of `w` (range maximum table).
     kappa: CurvatureTable,
     tip: usize,
-    kinematics: Option<(Xyzac, Vec<f64>)>,
+    kinematics: Option<(TableTilting, Vec<f64>)>,
     /// Programmed feed of every element (mm/s), if the source gives one.
     programmed_feeds: Vec<Option<f64>>,
 }
@@ -54,8 +54,8 @@ impl<'a> JointPath<'a> {
         }
     }
 
-    /// Five-axis path on an XYZAC machine: every element must carry a top curve (dim 6).
-    pub fn five_axis(toolpath: &'a Toolpath, machine: Xyzac) -> Result<Self, String> {
+    /// Five-axis path on a table-tilting machine: every element must carry a top curve (dim 6).
+    pub fn five_axis(toolpath: &'a Toolpath, machine: TableTilting) -> Result<Self, String> {
         if toolpath
             .elements
             .iter()
@@ -102,7 +102,7 @@ impl<'a> JointPath<'a> {
     pub fn programmed_feed(&self, e: usize) -> Option<f64> {
         self.programmed_feeds.get(e).copied().flatten()
     }
-    pub fn machine(&self) -> Option<&Xyzac> {
+    pub fn machine(&self) -> Option<&TableTilting> {
         self.kinematics.as_ref().map(|(m, _)| m)
     }
 
