@@ -232,3 +232,50 @@ fn cli_plan_vpop_and_verify() {
     assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "500,500,500,90,120", "500,500,500,90,100");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// VPOp on the random curves of the planner's property test (`random_curve`: degree 1-7, 2-D
+/// and 3-D, weights 0.2-5, near-repeated control points, straight stretches, random limits):
+/// every plan must pass the checker; a clear refusal is allowed for at most 2 % of the cases.
+/// VPOp's cost grows with the number of periods times the length of its deceleration checks,
+/// so cases over 20,000 periods at full feed are skipped. `PROPTEST_VPOP_CASES` (default 64)
+/// and `PROPTEST_RNG_SEED` (default 20261122) select the run.
+#[test]
+fn random_curves_never_violate() {
+    use proptest::strategy::{Strategy, ValueTree};
+    use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+    let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
+    let (cases, seed) = (env("PROPTEST_VPOP_CASES", 64), env("PROPTEST_RNG_SEED", 20261122));
+    let mut key = [0u8; 32];
+    key[..8].copy_from_slice(&seed.to_le_bytes());
+    let mut runner = TestRunner::new_with_rng(Config::default(), TestRng::from_seed(RngAlgorithm::ChaCha, &key));
+    let strategy = common::random_curve();
+    let (mut planned, mut refused, mut skipped) = (0usize, Vec::new(), 0usize);
+    for case in 0..cases {
+        let (tp, limits) = strategy.new_tree(&mut runner).expect("generate").current();
+        let len = nurbs_motion::geometry::ArcLengthTable::new(&tp.elements[0].curve).total();
+        if len / limits.feed / limits.period >= 2e4 {
+            skipped += 1;
+            continue;
+        }
+        match plan_tip(&tp, &limits, SearchOptions::default()) {
+            Ok(plan) => {
+                let report = verify(&PathCurves::new(&tp), &plan.limits, &rows(&plan, tp.tip_dim()));
+                assert!(
+                    report.violations.is_empty(),
+                    "case {case} (seed {seed}): violations {:?}\n{tp:?}\n{limits:?}",
+                    report.violations
+                );
+                planned += 1;
+            }
+            Err(e) => refused.push(format!("case {case}: {e}")),
+        }
+    }
+    eprintln!(
+        "VPOp random curves, seed {seed}: {planned} planned and verified, {} refused, {skipped} skipped",
+        refused.len()
+    );
+    for r in &refused {
+        eprintln!("  refused {r}");
+    }
+    assert!(refused.len() * 50 <= cases as usize, "too many refusals: {refused:?}");
+}
