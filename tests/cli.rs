@@ -4,8 +4,8 @@
 mod common;
 
 use common::{
-    assert_verifies, example_path as example, nurbs_plan as bin, plan_cli, scratch_dir, LAB1, TABLE1, TABLE1_TIP,
-    TIP_VPOP,
+    assert_verifies, example_path as example, nurbs_plan as bin, plan_cli, scratch_dir, verify_cli, LAB1, TABLE1,
+    TABLE1_TIP, TIP_VPOP,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -541,19 +541,9 @@ fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
     use nurbs_motion::kinematics::{TableTilting, Tilt};
     let dir = scratch_dir("nurbs-cli-xyzbc");
     let program = example("open_pocket.json");
-    let csv = dir.join("bc.csv");
+    let with = |extra: &[&'static str]| [&TABLE1[..], extra].concat();
     let flags = ["--machine", "xyzbc", "--negative-tilt"];
-    let out = bin()
-        .arg("plan")
-        .arg(&program)
-        .args(TABLE1)
-        .args(["--planner", "vpop"])
-        .args(flags)
-        .arg("--out")
-        .arg(&csv)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = plan_cli(&program, "vpop", &with(&flags), &dir.join("bc.csv"));
     let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
     let machine = TableTilting {
         tilt: Tilt::Y,
@@ -576,16 +566,7 @@ fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
     }
     assert!(tip_error < 1e-6 && axis_error < 1e-9, "{tip_error} {axis_error}");
     assert!(b_max <= 1e-9, "B on the negative branch reached {b_max}");
-    let verify = |extra: &[&str]| {
-        bin()
-            .arg("verify")
-            .arg(&csv)
-            .arg(&program)
-            .args(TABLE1)
-            .args(extra)
-            .output()
-            .unwrap()
-    };
+    let verify = |extra: &[&'static str]| verify_cli(&csv, &program, &with(extra));
     for same in [&flags[..], &["--machine", "xyzbc"]] {
         let ok = verify(same);
         let text = String::from_utf8_lossy(&ok.stdout);
