@@ -5,12 +5,10 @@
 
 mod common;
 
-use common::{example, plan_and_verify, random_curve, trident_vpop, try_plan_and_verify_with, Failure};
+use common::{example, plan_and_verify, random_cases, trident_vpop, try_plan_and_verify_with, Failure};
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::flf::{critical_points, CriticalPointSearch, FlfScan};
 use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
-use proptest::strategy::{Strategy, ValueTree};
-use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
 
 const LAB_SETS: [(f64, f64, f64); 2] = [(2500.0, 1e4, 6e4), (2500.0, 1.5e4, 2e5)];
 
@@ -151,7 +149,7 @@ fn bad_limits_are_refused() {
     assert!(plan(&tp, &limits, &PlanOptions::default(), &mut |_| {}).is_err());
 }
 
-/// The seeded property test: random curves under random limits (see [`random_curve`]), drawn
+/// The seeded property test: random curves under random limits (see [`common::random_curve`]), drawn
 /// by proptest's runner from a fixed seed. Every emitted plan must pass the checker; a clear
 /// refusal (`PlanError`) is allowed for at most 1 % of the cases and each one is listed.
 ///
@@ -214,21 +212,12 @@ struct RandomRun {
 /// Plans (with `options`) and verifies cases `cases` of the random curves of `seed` (the ones
 /// before are drawn and passed over); panics at the first violation.
 fn random_run(seed: u64, cases: std::ops::Range<u64>, verbose: bool, options: &PlanOptions) -> RandomRun {
-    let mut key = [0u8; 32];
-    key[..8].copy_from_slice(&seed.to_le_bytes());
-    let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &key);
-    let mut runner = TestRunner::new_with_rng(Config::default(), rng);
-    let strategy = random_curve();
     let mut run = RandomRun {
         planned: 0,
         refused: Vec::new(),
         skipped: 0,
     };
-    for case in 0..cases.end {
-        let (tp, limits) = strategy.new_tree(&mut runner).expect("generate").current();
-        if case < cases.start {
-            continue;
-        }
+    for (case, tp, limits) in random_cases(seed, cases) {
         // Bound the work: motions over 200,000 periods at full feed take long, test nothing new.
         let len = ArcLengthTable::new(&tp.elements[0].curve).total();
         if len / limits.feed / limits.period >= 2e5 {

@@ -237,21 +237,15 @@ fn cli_plan_vpop_and_verify() {
 /// and 3-D, weights 0.2-5, near-repeated control points, straight stretches, random limits):
 /// every plan must pass the checker; a clear refusal is allowed for at most 2 % of the cases.
 /// VPOp's cost grows with the number of periods times the length of its deceleration checks,
-/// so cases over 20,000 periods at full feed are skipped. `PROPTEST_VPOP_CASES` (default 64)
-/// and `PROPTEST_RNG_SEED` (default 20261122) select the run.
+/// so cases over 20,000 periods at full feed are skipped. `PROPTEST_VPOP_CASES` (default 64),
+/// `PROPTEST_RNG_SEED` (default 20261122) and `PROPTEST_FIRST_CASE` select the run.
 #[test]
 fn random_curves_never_violate() {
-    use proptest::strategy::{Strategy, ValueTree};
-    use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
     let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
     let (cases, seed) = (env("PROPTEST_VPOP_CASES", 64), env("PROPTEST_RNG_SEED", 20261122));
-    let mut key = [0u8; 32];
-    key[..8].copy_from_slice(&seed.to_le_bytes());
-    let mut runner = TestRunner::new_with_rng(Config::default(), TestRng::from_seed(RngAlgorithm::ChaCha, &key));
-    let strategy = common::random_curve();
+    let first_case = env("PROPTEST_FIRST_CASE", 0);
     let (mut planned, mut refused, mut skipped) = (0usize, Vec::new(), 0usize);
-    for case in 0..cases {
-        let (tp, limits) = strategy.new_tree(&mut runner).expect("generate").current();
+    for (case, tp, limits) in common::random_cases(seed, first_case..cases) {
         let len = nurbs_motion::geometry::ArcLengthTable::new(&tp.elements[0].curve).total();
         if len / limits.feed / limits.period >= 2e4 {
             skipped += 1;

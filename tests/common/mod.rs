@@ -151,6 +151,21 @@ pub fn plan_and_verify(toolpath: &Toolpath, limits: &Limits) -> f64 {
     try_plan_and_verify(toolpath, limits).unwrap_or_else(|e| panic!("{e:?}"))
 }
 
+/// Cases `cases` of the random curves of `seed` (see [`random_curve`]), each with its number;
+/// the cases before are drawn and passed over, so case `k` is the same in every run of `seed`.
+pub fn random_cases(seed: u64, cases: std::ops::Range<u64>) -> impl Iterator<Item = (u64, Toolpath, Limits)> {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
+    let mut key = [0u8; 32];
+    key[..8].copy_from_slice(&seed.to_le_bytes());
+    let mut runner = TestRunner::new_with_rng(Config::default(), TestRng::from_seed(RngAlgorithm::ChaCha, &key));
+    let strategy = random_curve();
+    (0..cases.end).filter_map(move |case| {
+        let (tp, limits) = strategy.new_tree(&mut runner).expect("generate").current();
+        (case >= cases.start).then_some((case, tp, limits))
+    })
+}
+
 /// A random clamped curve: degree 1-7, 2-D or 3-D, weights 0.2-5, some near-repeated control
 /// points and straight stretches, scaled to `size` mm.
 pub fn random_curve() -> impl Strategy<Value = (Toolpath, Limits)> {
