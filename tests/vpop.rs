@@ -77,6 +77,30 @@ fn straight_line_rest_to_rest() {
     assert!(r.max_feed > 0.99 * f);
 }
 
+/// A polyline with two corners and a reversal, as one degree-1 curve, at a coarse 5.6 ms period
+/// with a high jerk limit (a case the property test found refused): VPOp stops exactly on every
+/// corner (a sample on the vertex, then at rest there) and the plan passes the checker.
+#[test]
+fn tangent_breaks_are_exact_stops() {
+    let vertices = [[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 12.0], [10.0, 12.0]];
+    let cps: Vec<Vec<f64>> = vertices.iter().map(|v| v.to_vec()).collect();
+    let curve = Nurbs::new(1, vec![0.0, 0.0, 0.25, 0.5, 0.75, 1.0, 1.0], &cps, None).unwrap();
+    let tp = Toolpath::single(ElementKind::Polyline, curve);
+    let limits = Limits::uniform(2, 100.0, 3360.0, 8.37e6, 0.0119, 0.0056);
+    let plan = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
+    check(&tp, &plan);
+    for v in &vertices[1..4] {
+        let at = plan
+            .points
+            .iter()
+            .position(|p| (p.tip[0] - v[0]).abs() < 1e-9 && (p.tip[1] - v[1]).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("no sample on the corner {v:?}"));
+        let rest = &plan.points[at..at + 3];
+        assert!(rest.iter().all(|p| p.w == rest[0].w), "not at rest on {v:?}");
+    }
+    eprintln!("corners: {:.4} s", plan.motion_time);
+}
+
 /// Butterfly, Erwinski lab set 1 (dt 0.25 ms, about 15 000 periods): measured 3.817 s of
 /// motion (best known 3.163 s, lower bound 2.404 s), planned in about 7 s on this 2-core machine
 /// (release build).

@@ -51,7 +51,6 @@ pub struct Stepper<'p, 'a> {
     pub path: &'p JointPath<'a>,
     pub limits: &'p Limits,
     axes: usize,
-    end: f64,
     /// Feed cap of every element (mm/s): the feed limit, or the programmed feed if lower.
     element_feed: Vec<f64>,
 }
@@ -62,7 +61,6 @@ impl<'p, 'a> Stepper<'p, 'a> {
             path,
             limits,
             axes: path.axes(),
-            end: path.end(),
             element_feed: (0..path.elements())
                 .map(|e| path.programmed_feed(e).map_or(limits.feed, |f| f.min(limits.feed)))
                 .collect(),
@@ -79,12 +77,18 @@ impl<'p, 'a> Stepper<'p, 'a> {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// How far the next point may go: the next exact stop (a tangent break or the path end),
+    /// or past the one the machine stands at once it is at rest there.
+    fn bound(&self, h: &History) -> f64 {
+        self.path.next_stop(h.current().w, h.is_rest())
+    }
+
     /// Largest step length (mm) allowed by the feed and the chord-error estimate
     /// (chord error ~ kappa l^2 / 8), at `scale` of the chord cap.
     pub fn step_cap(&self, h: &History, chord_scale: f64) -> f64 {
         let cur = h.current();
-        let pred = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.end);
-        let reach = (2.0 * pred - cur.w).min(self.end);
+        let pred = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.bound(h));
+        let reach = (2.0 * pred - cur.w).min(self.bound(h));
         let kappa = self.path.max_curvature(cur.w, reach);
         let chord = if kappa > 0.0 {
             chord_scale * (8.0 * self.limits.chord_tolerance / kappa).sqrt()
@@ -98,7 +102,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
     /// [`crate::planner::axial::FiniteDifferences::push`] and the verifier's feed check.
     pub fn feasible(&self, h: &History, p: &PathPoint, cap: f64) -> bool {
         let cur = h.current();
-        if p.w < cur.w || p.w > self.end {
+        if p.w < cur.w || p.w > self.bound(h) {
             return false;
         }
         let dt = self.limits.period;
@@ -154,7 +158,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
     ) -> (f64, f64, PathPoint) {
         let (p, dq, dtip) = self.path.eval_d(w0);
         let mut a = h.current().w;
-        let mut b = self.end;
+        let mut b = self.bound(h);
         let strongest = (0..self.axes).map(|i| dq[i].abs()).fold(0.0, f64::max);
         for i in 0..self.axes {
             let (lo, hi) = (bx.0[i], bx.1[i]);
@@ -191,7 +195,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
     /// does not find an exactly feasible point.
     pub fn project(&self, h: &History, target: f64, cap: f64) -> Option<PathPoint> {
         let cur = h.current().w;
-        let p = self.path.eval(target.clamp(cur, self.end));
+        let p = self.path.eval(target.clamp(cur, self.bound(h)));
         if self.feasible(h, &p, cap) {
             return Some(p);
         }
@@ -202,7 +206,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
             if a.is_nan() || b.is_nan() || a > b {
                 return None;
             }
-            let next = target.clamp(a, b).clamp(cur, self.end);
+            let next = target.clamp(a, b).clamp(cur, self.bound(h));
             if next == w {
                 return None;
             }
@@ -222,7 +226,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         let cap = self.step_cap(h, chord_scale);
         let cur = *h.current();
         // Eq. 13: the next point predicted from the last steps; then Newton on the centre.
-        let mut w = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.end);
+        let mut w = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.bound(h));
         let mut centre = None;
         let mut ab = (f64::INFINITY, f64::NEG_INFINITY);
         for _ in 0..6 {
@@ -238,7 +242,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
             if !(a.is_finite() && b.is_finite()) {
                 break;
             }
-            let next = (0.5 * (a + b)).clamp(cur.w, self.end);
+            let next = (0.5 * (a + b)).clamp(cur.w, self.bound(h));
             if next == w {
                 break;
             }
@@ -247,7 +251,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         if centre.is_none() {
             // Fallback: drop the axes whose linear model is weak (reversals), and scan the
             // interval of the others with the exact check.
-            let w0 = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.end);
+            let w0 = (3.0 * cur.w - 3.0 * h.p[1].w + h.p[0].w).clamp(cur.w, self.bound(h));
             let (a, b, _) = self.linear_interval(h, &bx, w0, cap, true);
             if a <= b {
                 const N: usize = 48;
@@ -255,7 +259,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
                     // From the middle outwards.
                     let off = (k as f64 / N as f64 - 0.5) * (b - a);
                     let wk = 0.5 * (a + b) + if k % 2 == 0 { off } else { -off };
-                    let p = self.path.eval(wk.clamp(cur.w, self.end));
+                    let p = self.path.eval(wk.clamp(cur.w, self.bound(h)));
                     if self.feasible(h, &p, cap) {
                         centre = Some(p);
                         ab = (a, b);
@@ -286,7 +290,7 @@ impl<'p, 'a> Stepper<'p, 'a> {
         estimate: f64,
         upper: bool,
     ) -> PathPoint {
-        let clamp = |w: f64| w.clamp(h.current().w, self.end);
+        let clamp = |w: f64| w.clamp(h.current().w, self.bound(h));
         let mut x = clamp(estimate);
         for _ in 0..3 {
             let (a, b, _) = self.linear_interval(h, bx, x, cap, false);

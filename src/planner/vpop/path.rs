@@ -30,6 +30,8 @@ pub struct JointPath<'a> {
     kinematics: Option<(TableTilting, Vec<f64>)>,
     /// Programmed feed of every element (mm/s), if the source gives one.
     programmed_feeds: Vec<Option<f64>>,
+    /// Where the motion must stop: the tangent breaks (increasing `w`), then the path end.
+    stops: Vec<f64>,
 }
 
 /// Samples per element of the C-angle continuity table.
@@ -43,6 +45,8 @@ impl<'a> JointPath<'a> {
         let fast: Vec<PowerCurve> = views.iter().map(PowerCurve::new).collect();
         let tip = toolpath.tip_dim();
         let kappa = CurvatureTable::new(&fast, tip);
+        let mut stops = tangent_breaks(&views);
+        stops.push(views.len() as f64);
         JointPath {
             views,
             spans,
@@ -51,6 +55,7 @@ impl<'a> JointPath<'a> {
             tip,
             kinematics: None,
             programmed_feeds: toolpath.elements.iter().map(|e| e.feed).collect(),
+            stops,
         }
     }
 
@@ -104,6 +109,18 @@ impl<'a> JointPath<'a> {
     }
     pub fn machine(&self) -> Option<&TableTilting> {
         self.kinematics.as_ref().map(|(m, _)| m)
+    }
+
+    /// The first exact stop at or after `w` (a tangent break or the path end); past the one at
+    /// `w` itself once the machine is `at_rest` there.
+    pub fn next_stop(&self, w: f64, at_rest: bool) -> f64 {
+        let k = self.stops.partition_point(|&s| s < w);
+        let k = if at_rest && self.stops.get(k) == Some(&w) {
+            k + 1
+        } else {
+            k
+        };
+        self.stops[k.min(self.stops.len() - 1)]
     }
 
     /// Element and curve parameter at `w` (the end of an element belongs to it only at the path end).
@@ -224,6 +241,53 @@ impl<'a> JointPath<'a> {
         pb[..3].copy_from_slice(&b.tip);
         crate::planner::verify::chord_error(&self.views[a.element], self.tip, a.u, b.u, &pa, &pb)
     }
+}
+
+/// `w` of every point where the path's direction turns (in all coordinates of the curves: for a
+/// two-curve path, a kink of the top curve turns the joints too): an interior knot of
+/// multiplicity >= degree (C0) or an element join whose unit tangents differ. A finite-jerk
+/// motion must stop there, and VPOp lands its last sample exactly on the point.
+fn tangent_breaks(views: &[CurveView]) -> Vec<f64> {
+    let unit = |d: &[f64; MAX_DIM], n: usize| {
+        let len = d[..n].iter().map(|x| x * x).sum::<f64>().sqrt();
+        let mut t = [0.0; MAX_DIM];
+        if len > 0.0 {
+            for i in 0..n {
+                t[i] = d[i] / len;
+            }
+        }
+        t
+    };
+    let turns = |left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize| {
+        let (l, r) = (unit(left, n), unit(right, n));
+        (0..n).map(|i| l[i] * r[i]).sum::<f64>() < 1.0 - 1e-12
+    };
+    let mut out = Vec::new();
+    for (e, view) in views.iter().enumerate() {
+        let n = view.dim();
+        if e > 0 {
+            let before = &views[e - 1];
+            let left = before.derivatives(before.u_max(), 1)[1];
+            if turns(&left, &view.derivatives(view.u_min(), 1)[1], n) {
+                out.push(e as f64);
+            }
+        }
+        let (p, knots, count) = (view.degree(), view.knots(), view.control_point_count());
+        let (a, b) = (view.u_min(), view.u_max());
+        let mut i = p + 1;
+        while i < count {
+            let mut m = 1;
+            while i + m < count && knots[i + m] == knots[i] {
+                m += 1;
+            }
+            let u = knots[i];
+            if m >= p && turns(&view.derivatives_left(u, 1)[1], &view.derivatives(u, 1)[1], n) {
+                out.push(e as f64 + (u - a) / (b - a));
+            }
+            i += m;
+        }
+    }
+    out
 }
 
 /// Curvature of the first `n` coordinates from a point and its first two derivatives.
