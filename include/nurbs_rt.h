@@ -130,6 +130,13 @@ typedef struct PathBlock {
    * Samples used (1..=[`BLOCK_SAMPLES`]).
    */
   uint32_t count;
+  /**
+   * Non-zero: the stop after this block is not the tangential one but `stop_len` planned
+   * positions (the planner's own deceleration sequence, to rest) stored in the geometry
+   * arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+   */
+  uint32_t stop_len;
+  uint32_t stop_offset;
   uint32_t reserved;
   double stop_accel;
   double stop_jerk;

@@ -155,6 +155,8 @@ pub struct RtGeometry {
     stop_jerk: f64,
     /// `(accel, jerk)` of the stop after each record, by sequence number.
     stop_table: &'static [f64],
+    /// The geometry arena (stored stop sequences of path blocks).
+    values: &'static [f64],
     views: CurveViews<'static>,
 }
 
@@ -166,6 +168,7 @@ impl RtGeometry {
         stop_accel: 0.0,
         stop_jerk: 0.0,
         stop_table: &[],
+        values: &[],
         views: [None; MAX_CURVES],
     };
 
@@ -278,6 +281,9 @@ struct BlockPlayer {
     s: f64,
     s_before: f64,
     point: [f64; 3],
+    /// Running a stored stop sequence: its arena offset and length, and samples output.
+    stored: Option<(usize, usize)>,
+    stored_index: usize,
 }
 
 impl BlockPlayer {
@@ -286,6 +292,8 @@ impl BlockPlayer {
             seq: 0,
             flags: 0,
             count: 0,
+            stop_len: 0,
+            stop_offset: 0,
             reserved: 0,
             stop_accel: 0.0,
             stop_jerk: 0.0,
@@ -302,6 +310,8 @@ impl BlockPlayer {
         s: 0.0,
         s_before: 0.0,
         point: [0.0; 3],
+        stored: None,
+        stored_index: 0,
     };
 
     fn remaining(&self) -> usize {
@@ -423,6 +433,11 @@ pub fn underrun_stop(curve: Option<ValidCurve>, last: &SegmentRecord, accel: f64
 /// circle (arc / chord of a semicircle = pi / 2). Only catches arc lengths that do not belong to
 /// the positions; the planner's own arc lengths are exact.
 const ARC_PER_CHORD: f64 = core::f64::consts::FRAC_PI_2;
+
+/// A step's chord fits its arc length: no longer (to rounding), and not shorter than 2/pi of it.
+fn step_fits(chord: f64, ds: f64) -> bool {
+    chord <= ds * (1.0 + 1e-9) + 1e-9 && ds <= ARC_PER_CHORD * chord + 1e-9
+}
 
 /// The state a stop after `block` starts from: arc length, feed and tangential acceleration at
 /// its last sample, from the quadratic through its last three arc lengths (backward
@@ -608,6 +623,7 @@ impl Instance {
         match validate_geometry(&header, values, &mut self.geometry.views) {
             Ok(table) if channel.geometry.unchanged(generation) => {
                 self.geometry.stop_table = table;
+                self.geometry.values = values;
                 self.set_geometry(generation, &header);
             }
             Ok(_) => {} // rewritten while validating: again next period
@@ -759,7 +775,8 @@ impl Instance {
                     return false; // not started yet: waiting for the first record
                 };
                 if self.stopping {
-                    self.stop_over(channel, last.seq);
+                    let held = self.held_by_interp();
+                    self.stop_over(channel, last.seq, held);
                     return false;
                 }
                 self.begin_stop(hold, abort);
@@ -781,13 +798,25 @@ impl Instance {
         }
     }
 
-    /// The stop is over: at rest on the path.
-    fn stop_over(&mut self, channel: &Channel, seq: u32) {
+    /// The stop is over: at rest on the path at `held`.
+    fn stop_over(&mut self, channel: &Channel, seq: u32, held: Held) {
         self.stopped = true;
         if self.cause == StopCause::Abort {
             self.end_motion(channel);
         } else {
-            self.publish_stop(channel, seq);
+            self.publish_stop(channel, seq, held);
+        }
+    }
+
+    /// Where the interpolator stands (after a stop it ran).
+    fn held_by_interp(&self) -> Held {
+        let c = *self.interp.cursor();
+        let [x, y, z, ..] = c.point;
+        Held {
+            curve: self.interp.curve_index(),
+            u: c.u,
+            s: c.s,
+            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
         }
     }
 
@@ -809,6 +838,9 @@ impl Instance {
     /// without a next block (underrun) or under hold/abort, the stop from the block's end state
     /// along the curve, run by the interpolator.
     fn advance_blocks(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
+        if let (true, Some((offset, len))) = (self.stopping, self.player.stored) {
+            return self.advance_stored_stop(channel, offset, len);
+        }
         if self.stopping {
             return match self.interp.step(&self.geometry, dt, &mut || None) {
                 Step::Sample(s) => {
@@ -820,7 +852,8 @@ impl Instance {
                     false
                 }
                 Step::Starved | Step::Finished => {
-                    self.stop_over(channel, self.player.block.seq);
+                    let held = self.held_by_interp();
+                    self.stop_over(channel, self.player.block.seq, held);
                     false
                 }
             };
@@ -854,6 +887,12 @@ impl Instance {
                 // Underrun, hold or abort at the block end: the checked stop from here.
                 self.begin_stop(hold, abort);
                 let last = self.player.block;
+                if last.stop_len > 0 {
+                    // The planner's own deceleration sequence, stored with the geometry.
+                    self.player.stored = Some((last.stop_offset as usize, last.stop_len as usize));
+                    self.player.stored_index = 0;
+                    return self.advance_blocks(channel, dt, hold, abort);
+                }
                 let curve = self.geometry.views.get(last.curve()).copied().flatten();
                 let (stop, a0) = block_stop(curve, &last, dt);
                 let table = stop.profile().table_from(a0);
@@ -869,6 +908,61 @@ impl Instance {
             }
         }
         self.output_block_sample()
+    }
+
+    /// One period of a stored stop sequence: the next position (checked as a block sample);
+    /// after the last one, at rest there.
+    fn advance_stored_stop(&mut self, channel: &Channel, offset: usize, len: usize) -> bool {
+        let p = self.player;
+        let k = p.stored_index;
+        if k >= len {
+            let held = Held {
+                curve: p.curve,
+                u: p.u,
+                s: p.s,
+                point: p.point,
+            };
+            self.stop_over(channel, p.block.seq, held);
+            return false;
+        }
+        let at = offset.saturating_add(2 * k);
+        let values = self.geometry.values;
+        let (Some(&u), Some(&s), Some(view)) = (
+            values.get(at),
+            values.get(at.saturating_add(1)),
+            self.geometry.curve(p.block.curve()),
+        ) else {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        };
+        let point = view.point(u);
+        let sample = Sample {
+            curve: p.block.curve(),
+            u,
+            s,
+            point,
+            feed: 0.0,
+            accel: 0.0,
+        };
+        let here = self.point_of(&sample);
+        let ds = s - p.s;
+        let chord = distance(&p.point, &here);
+        let on_curve = u.is_finite() && s.is_finite() && u >= p.u && u <= view.u_max();
+        if !(on_curve && step_fits(chord, ds)) {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        }
+        self.output(&Sample {
+            feed: chord / self.period,
+            ..sample
+        });
+        let player = &mut self.player;
+        player.stored_index = k + 1;
+        player.s_before = p.s;
+        player.u = u;
+        player.s = s;
+        player.point = here;
+        true
     }
 
     /// Validates `block` against the sequence, the curve, the previous block and (on a
@@ -950,7 +1044,7 @@ impl Instance {
         } else if p.has_sample {
             // Not the motion's first sample: the step's chord must fit its arc length.
             let ds = s - b.s_history(k + 1);
-            if !(chord <= ds * (1.0 + 1e-9) + 1e-9 && ds <= ARC_PER_CHORD * chord + 1e-9) {
+            if !step_fits(chord, ds) {
                 self.fault = FaultCode::BlockPath;
                 return false;
             }
@@ -977,15 +1071,7 @@ impl Instance {
     }
 
     /// At rest after a hold or underrun stop: remember where, and tell the planner.
-    fn publish_stop(&mut self, channel: &Channel, seq: u32) {
-        let c = *self.interp.cursor();
-        let [x, y, z, ..] = c.point;
-        let held = Held {
-            curve: self.interp.curve_index(),
-            u: c.u,
-            s: c.s,
-            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
-        };
+    fn publish_stop(&mut self, channel: &Channel, seq: u32, held: Held) {
         self.held = Some(held);
         self.stops = self.stops.wrapping_add(1).max(1);
         channel.stop.publish(&StopPoint {

@@ -15,7 +15,8 @@ use nurbs_hal::user::GeometryBuilder;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
-use nurbs_motion::planner::vpop::{plan_tip, PathPoint, SearchOptions, VpopPlan};
+use nurbs_motion::planner::verify::SLACK;
+use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_rtcore::executor::{Interpolator, Step};
 
@@ -60,6 +61,9 @@ pub struct StopChoice {
     /// Worst ratio of an axial velocity, acceleration or jerk to its limit, from three samples
     /// before the stop to rest (<= 1: within the limits).
     pub ratio: f64,
+    /// Path blocks only: the stop is the planner's own deceleration sequence of this many
+    /// positions, stored with the geometry (0: the module's tangential stop).
+    pub stored: usize,
 }
 
 /// Runs the plan through the interpolator and, at every segment boundary, the module's stop
@@ -102,6 +106,7 @@ pub fn choose_stops(toolpath: &Toolpath, plan: &Plan, valid: &CurveViews, fracti
                 accel,
                 jerk,
                 ratio: f.worst_ratio(limits),
+                stored: 0,
             };
             if best.is_none_or(|b| choice.ratio < b.ratio) {
                 best = Some(choice);
@@ -239,8 +244,7 @@ impl<'a> ArcLengths<'a> {
 /// points and of the two points before it, the last flagged. `anchor`: the stop point a
 /// re-plan starts from (its arc length is kept exactly). Stop limits are left at zero
 /// ([`choose_block_stops`] sets them).
-pub fn pack_blocks(toolpath: &Toolpath, points: &[PathPoint], anchor: Option<&StopPoint>) -> Vec<PathBlock> {
-    let arcs = ArcLengths::new(toolpath, anchor);
+fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
     let mut blocks: Vec<PathBlock> = Vec::new();
     let mut i = 0;
     while i < points.len() {
@@ -268,22 +272,32 @@ pub fn pack_blocks(toolpath: &Toolpath, points: &[PathPoint], anchor: Option<&St
     blocks
 }
 
+/// VPOp's deceleration sequence chosen as the stop after a block, and the tangential choice it
+/// replaces (kept if the sequence does not fit the channel).
+pub type StoredStop = (Vec<PathPoint>, StopChoice);
+
 /// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
 /// every block end, the module's stop ([`block_stop`]) with each jerk fraction of the
 /// tangential limits there (largest first) and deceleration shares 1, 1/2, 1/4, 1/10 of it,
 /// until one stays within the axis limits by finite differences, as [`choose_stops`] does for
 /// segment records, then bisects towards the next larger fraction (the tangential limits hold
 /// for the direction at the block end only, so the largest stop that passes is often just
-/// below them). Stores the choice in each block (the least violating one where none passes)
-/// and returns the choices.
+/// below them). Where none passes, VPOp's own deceleration sequence from the block end
+/// ([`brake_points`]) is checked the same way and taken if it does better (it is stored with
+/// the geometry; returned with the tangential choice it replaces). Stores the limits in each
+/// block (the least violating ones where none passes) and returns the choices.
 pub fn choose_block_stops(
     toolpath: &Toolpath,
     limits: &Limits,
     blocks: &mut [PathBlock],
     valid: &CurveViews,
     fractions: &[f64],
-) -> Vec<StopChoice> {
+    points: &[PathPoint],
+) -> (Vec<StopChoice>, Vec<Option<StoredStop>>) {
     let curves = PathCurves::new(toolpath);
+    let path = JointPath::tip(toolpath);
+    let mut sequences = Vec::with_capacity(blocks.len());
+    let mut end = 0;
     let tip = limits.velocity.len();
     let dt = limits.period;
     let mut fd = FiniteDifferences::new(tip, dt);
@@ -293,6 +307,7 @@ pub fn choose_block_stops(
         for &u in &b.u[..b.len()] {
             fd.push(&view.point(u)[..tip], limits);
         }
+        end += b.len();
         let curve = valid.get(b.curve()).copied().flatten();
         // Tangential limits at the block end: what the axes allow along the path direction
         // there (each axis limit over its share of the unit tangent; at least the smallest axis
@@ -329,25 +344,26 @@ pub fn choose_block_stops(
                 accel,
                 jerk,
                 ratio,
+                stored: 0,
             }
         };
         let mut best: Option<StopChoice> = None;
         let mut previous = None;
         'search: for &fraction in fractions {
             for accel_share in [1.0, 0.5, 0.25, 0.1] {
-                let bound = best.map_or(f64::INFINITY, |c| c.ratio.max(1.0));
+                let bound = best.map_or(f64::INFINITY, |c| c.ratio.max(1.0 + SLACK));
                 let choice = simulate(fraction, accel_share, bound);
                 if best.is_none_or(|c| choice.ratio < c.ratio) {
                     best = Some(choice);
                 }
-                if choice.ratio <= 1.0 {
+                if choice.ratio <= 1.0 + SLACK {
                     // Refine towards the larger fraction that failed (bisection, 5 steps).
                     let mut good = choice;
                     if let Some(mut bad) = previous {
                         for _ in 0..5 {
                             let mid = 0.5 * (good.fraction + bad);
-                            let c = simulate(mid, accel_share, 1.0);
-                            if c.ratio <= 1.0 {
+                            let c = simulate(mid, accel_share, 1.0 + SLACK);
+                            if c.ratio <= 1.0 + SLACK {
                                 good = c;
                             } else {
                                 bad = mid;
@@ -360,13 +376,41 @@ pub fn choose_block_stops(
             }
             previous = Some(fraction);
         }
+        // No tangential stop within the limits (near a tight turn, where VPOp balances the
+        // tangential jerk against the curvature terms): VPOp's own deceleration sequence from
+        // this state, run as the module runs it (each position the curve point at its u).
+        let mut sequence = None;
+        if best.is_some_and(|c| c.ratio > 1.0 + SLACK) && end >= 1 && !b.is_last() {
+            let at = |k: usize| points[end.saturating_sub(k + 1)];
+            let last = [at(2), at(1), at(0)];
+            if let Ok(Some(brake)) = brake_points(&path, limits, SearchOptions::default(), last) {
+                if !brake.is_empty() && brake.iter().all(|p| p.element == b.curve()) {
+                    let mut f = fd;
+                    f.reset_peaks();
+                    for p in &brake {
+                        f.push(&view.point(p.u)[..tip], limits);
+                    }
+                    f.finish(limits);
+                    let ratio = f.worst_ratio(limits);
+                    if let Some(tangential) = best.filter(|c| ratio < c.ratio) {
+                        best = Some(StopChoice {
+                            ratio,
+                            stored: brake.len(),
+                            ..tangential
+                        });
+                        sequence = Some((brake, tangential));
+                    }
+                }
+            }
+        }
+        sequences.push(sequence);
         if let Some(c) = best {
             b.stop_accel = c.accel;
             b.stop_jerk = c.jerk;
             choices.push(c);
         }
     }
-    choices
+    (choices, sequences)
 }
 
 /// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the
@@ -425,15 +469,32 @@ pub fn block_geometry(
     max_fraction: f64,
 ) -> Result<(GeometryBuilder, Vec<PathBlock>, Vec<StopChoice>), String> {
     check_tip_path(toolpath)?;
-    let mut blocks = pack_blocks(toolpath, &plan.points, anchor);
+    let arcs = ArcLengths::new(toolpath, anchor);
+    let mut blocks = pack_blocks(&arcs, &plan.points);
     let stops = block_stop_points(toolpath, &blocks, plan.limits.period);
     let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stops)?;
     g.set_stop_table(&[])?;
-    let choices = {
+    let (mut choices, sequences) = {
         let mut valid: CurveViews = [None; MAX_CURVES];
         validate_geometry(g.header(), g.values(), &mut valid).map_err(|e| format!("geometry refused: {e:?}"))?;
-        choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions(max_fraction))
+        let fractions = fractions(max_fraction);
+        choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions, &plan.points)
     };
+    // The stored stop sequences, as (u, s) pairs in the blocks' arc-length measure. Where the
+    // arena is full, the tangential stop (and its check result) stays.
+    for ((b, c), sequence) in blocks.iter_mut().zip(&mut choices).zip(sequences) {
+        let Some((points, tangential)) = sequence else {
+            continue;
+        };
+        let values: Vec<f64> = points.iter().flat_map(|p| [p.u, arcs.s(p, b.curve())]).collect();
+        match g.add_values(&values) {
+            Ok(offset) => {
+                b.stop_offset = offset;
+                b.stop_len = points.len() as u32;
+            }
+            Err(_) => *c = tangential,
+        }
+    }
     Ok((g, blocks, choices))
 }
 

@@ -124,6 +124,6 @@ impl From<&PathBlock> for Slot {
 // The shared-memory layout is an ABI between two separately built programs: pin it.
 const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 160);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
-const _: () = assert!(core::mem::size_of::<PathBlock>() == 304);
-const _: () = assert!(core::mem::size_of::<Slot>() == 312);
+const _: () = assert!(core::mem::size_of::<PathBlock>() == 312);
+const _: () = assert!(core::mem::size_of::<Slot>() == 320);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

@@ -113,6 +113,11 @@ pub struct PathBlock {
     pub flags: u32,
     /// Samples used (1..=[`BLOCK_SAMPLES`]).
     pub count: u32,
+    /// Non-zero: the stop after this block is not the tangential one but `stop_len` planned
+    /// positions (the planner's own deceleration sequence, to rest) stored in the geometry
+    /// arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+    pub stop_len: u32,
+    pub stop_offset: u32,
     pub reserved: u32,
     pub stop_accel: f64,
     pub stop_jerk: f64,

@@ -1,7 +1,8 @@
 #!/bin/bash
-# underrun_test.sh unload|freeze [PLANNER]: a planner that falls behind, in real LinuxCNC
-# (PLANNER erwinski, the default, or vpop: then the module stops from the end of a path block,
-# where the acceleration is not zero, and the feed may rise before it falls). nurbs-planner
+# underrun_test.sh unload|freeze [PLANNER TOOLPATH KILL_AFTER]: a planner that falls behind, in
+# real LinuxCNC (PLANNER erwinski, the default, or vpop: then the module stops from the end of a
+# path block, where the acceleration is not zero, and the feed may rise before it falls;
+# TOOLPATH default examples/butterfly.json, cut after KILL_AFTER s, default 1). nurbs-planner
 # streams the butterfly with a 0.1 s margin (limits and period from halfiles/sim.ini, the same as
 # $LIMITS below); after 1 s it is either unloaded (SIGTERM; a second nurbs-planner is started
 # later) or frozen (SIGSTOP, by its pid; later continued with SIGCONT and it must notice the
@@ -17,6 +18,8 @@ source "$here/lib.sh"
 
 mode=$1
 planner=${2:-erwinski}
+toolpath=$(realpath "${3:-$here/../../examples/butterfly.json}")
+kill_after=${4:-1}
 case $mode in
     unload)
         cut="unloadusr nurbs-planner"
@@ -27,7 +30,6 @@ case $mode in
     *) echo "usage: underrun_test.sh unload|freeze"; exit 2 ;;
 esac
 
-toolpath=$(realpath "$here/../../examples/butterfly.json")
 PERIOD=0.00025
 JERK=6e4
 LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
@@ -37,7 +39,7 @@ chmod 755 "$work"
 nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" --out "$work/offline.csv"
 sed -e "s|@CUT@|$cut|" -e "s|@REPLAN@|$replan|" -e "s|@TOOLPATH@|$toolpath|g" \
     -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
-    -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner|g" -e "s|@KILL_AFTER@|1|g" -e "s|@WORK@|$work|g" \
+    -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner|g" -e "s|@KILL_AFTER@|$kill_after|g" -e "s|@WORK@|$work|g" \
     "$here/underrun.hal.in" >"$work/underrun.hal"
 
 cat >"$work/signal.sh" <<'SH'

@@ -227,6 +227,30 @@ impl Search<'_, '_, '_> {
         (w, full)
     }
 
+    /// The positions of the deceleration sequence of [`Self::brakes`] from `h`, to rest (the
+    /// machine stays at the last one), or `None` where it does not reach rest.
+    pub fn brake_points(&mut self, mut h: History) -> Option<Vec<PathPoint>> {
+        let l = self.stepper.limits;
+        let vmax = l.feed.max(l.velocity.iter().copied().fold(0.0, f64::max));
+        let amin = l.min_accel();
+        let limit = (10.0 * (vmax / amin + amin / l.min_jerk()) / l.period) as usize + 100;
+        let mut points = Vec::new();
+        for _ in 0..limit.min(self.options.max_steps) {
+            if h.is_rest() {
+                return Some(points);
+            }
+            let (target, jw) = self.brake_target(&h);
+            if let Some(p) = self.finish_point(&h, jw) {
+                points.push(p);
+                return Some(points);
+            }
+            let p = self.brake_step_to(&h, target)?;
+            points.push(p);
+            h.push(p);
+        }
+        None
+    }
+
     fn brakes_after(&mut self, h: &History, p: PathPoint) -> bool {
         let mut n = *h;
         n.push(p);
