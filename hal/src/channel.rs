@@ -39,9 +39,11 @@ pub const SEGMENT_SLOTS: usize = 1024;
 /// Most curves (path elements) one geometry can hold.
 pub const MAX_CURVES: usize = 64;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together): 512 KiB, e.g. 64 cubic 3-D curves of 250 control points each, or the butterfly
-/// (51 planar control points, 208 values) about 300 times over.
-pub const GEOMETRY_VALUES: usize = 1 << 16;
+/// together, and the stop sequences of path blocks): 8 MiB. The curves need little (e.g. 64
+/// cubic 3-D curves of 250 control points each: 64,000 values; the butterfly: 208); the stored
+/// VPOp deceleration sequences need two values per period of each (the butterfly at lab set 1:
+/// 693,416 values in all).
+pub const GEOMETRY_VALUES: usize = 1 << 20;
 
 /// Why a channel cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

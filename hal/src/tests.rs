@@ -1072,8 +1072,9 @@ mod blocks {
         let failing = choices.iter().filter(|c| c.ratio > 1.0 + 1e-6).count();
         let stored = choices.iter().filter(|c| c.stored > 0).count();
         println!(
-            "{name}: {} blocks, {stored} with a stored stop, {failing} without a stop within the limits, worst ratio {worst:.9}",
-            blocks.len()
+            "{name}: {} blocks, {stored} with a stored stop, {failing} without a stop within the limits, worst ratio {worst:.9}, {} arena values",
+            blocks.len(),
+            geometry.values().len()
         );
         for (k, c) in choices
             .iter()
@@ -1339,6 +1340,12 @@ mod blocks {
         let at_last = last.is_some_and(|l| [l[0], l[1]] == held);
         unsafe { rtapi_app_exit() };
         (code, still && at_last)
+    }
+
+    /// Every block end of the butterfly's VPOp plan has a stop within the limits.
+    #[test]
+    fn butterfly_block_ends_all_have_a_checked_stop() {
+        block_job("butterfly.json");
     }
 
     /// What `nurbs-planner` streams: Erwinski plans as segment slots, VPOp plans as block
