@@ -1342,6 +1342,84 @@ mod blocks {
         (code, still && at_last)
     }
 
+    /// Hold during a path-block motion: the module stops at the end of the current block with
+    /// the stop checked there, publishes the stop point (cause hold); the VPOp plan from there
+    /// runs when `hold` is released; the whole run (held periods included) passes `verify`.
+    /// Abort: the same stop, then the queue is discarded and the stop point withdrawn.
+    #[test]
+    fn hold_and_abort_stop_at_the_block_end_within_the_limits() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        for abort in [false, true] {
+            let (_planner, channel) = load();
+            mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+            job.geometry.publish(channel).unwrap();
+            let mut sent = 0;
+            let (mut samples, mut allocated) = (Vec::new(), 0u64);
+            let pin = if abort {
+                "nurbs_interp.abort"
+            } else {
+                "nurbs_interp.hold"
+            };
+            let mut stop = None;
+            for k in 0..job.plan.points.len() {
+                sent = push_blocks(channel, &job.blocks, sent);
+                if k == 1234 {
+                    mock::set_pin(pin, Value::Bit(true)); // mid-block (1234 = 77 * 16 + 2)
+                }
+                let (s, a) = period();
+                allocated += a;
+                samples.extend(s);
+                if bit("nurbs_interp.held") {
+                    stop = channel.stop.read();
+                    break;
+                }
+            }
+            assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.fault"));
+            // The stop began at the end of the block the request came in (block 77).
+            let planned: usize = job.blocks[..=77].iter().map(PathBlock::len).sum();
+            for (k, (g, p)) in samples.iter().zip(&job.plan.points).take(planned).enumerate() {
+                assert!((g[0] - p.tip[0]).hypot(g[1] - p.tip[1]) <= 1e-9, "sample {k}");
+            }
+            assert!(samples.len() > planned);
+            if abort {
+                assert!(stop.is_none(), "abort withdraws the stop point");
+                for _ in 0..20 {
+                    assert!(period().0.is_none());
+                }
+                assert!(channel.segments.is_empty(), "queue not discarded");
+                assert!(!bit("nurbs_interp.done"));
+                unsafe { rtapi_app_exit() };
+                continue;
+            }
+            let stop = stop.expect("no stop point");
+            assert_eq!((stop.cause, stop.seq), (2, 77));
+            let plan2 = vpop_plan(&job.toolpath, &job.plan.limits, Some(&stop)).unwrap();
+            let (g2, blocks2, _) = block_geometry(&job.toolpath, &plan2, Some(&stop), 1.0).unwrap();
+            for _ in 0..5 {
+                samples.push(*samples.last().unwrap());
+                assert!(period().0.is_none());
+            }
+            g2.publish(channel).unwrap();
+            let mut sent = push_blocks(channel, &blocks2, 0);
+            for _ in 0..5 {
+                samples.push(*samples.last().unwrap());
+                assert!(period().0.is_none(), "moved under hold");
+            }
+            mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+            for _ in 0..plan2.points.len() + 20 {
+                sent = push_blocks(channel, &blocks2, sent);
+                let (s, a) = period();
+                allocated += a;
+                samples.extend(s);
+            }
+            assert_eq!(allocated, 0);
+            assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
+            assert_verifies(&job, &samples);
+            unsafe { rtapi_app_exit() };
+        }
+    }
+
     /// Every block end of the butterfly's VPOp plan has a stop within the limits.
     #[test]
     fn butterfly_block_ends_all_have_a_checked_stop() {
