@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 4
+#define CHANNEL_VERSION 5
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -36,10 +36,12 @@
 
 /**
  * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
- * together): 512 KiB, e.g. 64 cubic 3-D curves of 250 control points each, or the butterfly
- * (51 planar control points, 208 values) about 300 times over.
+ * together, and the stop sequences of path blocks): 8 MiB. The curves need little (e.g. 64
+ * cubic 3-D curves of 250 control points each: 64,000 values; the butterfly: 208); the stored
+ * VPOp deceleration sequences need two values per period of each (the butterfly at lab set 1:
+ * 693,416 values in all).
  */
-#define GEOMETRY_VALUES (1 << 16)
+#define GEOMETRY_VALUES (1 << 20)
 
 /**
  * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
@@ -53,6 +55,21 @@
  * spelled out for the C header).
  */
 #define PHASES 7
+
+/**
+ * Samples one path block holds at most (spelled out for the C header).
+ */
+#define BLOCK_SAMPLES 16
+
+/**
+ * [`Slot::kind`] of a [`SegmentRecord`].
+ */
+#define KIND_SEGMENT 1
+
+/**
+ * [`Slot::kind`] of a [`PathBlock`].
+ */
+#define KIND_BLOCK 2
 
 /**
  * One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
@@ -89,6 +106,67 @@ typedef struct SegmentRecord {
    */
   double jerks[PHASES];
 } SegmentRecord;
+
+/**
+ * A run of per-period path positions on one curve (`#[repr(C)]`, no pointers): what a planner
+ * that works period by period (VPOp) sends. The module sets the position of each period to
+ * the curve point at `u[k]`, with no integration, so it outputs exactly the planned positions.
+ *
+ * `s` is the arc length from the curve start (mm, the measure of [`SegmentRecord::s_start`]);
+ * `s_before` are the arc lengths of the two samples before `u[0]` in this curve's measure
+ * (negative on the previous curve; equal to `s[0]` at the start of the motion, at rest). So the
+ * block alone gives the tangential feed and acceleration at every sample, and at its end the
+ * state the module's stop starts from. `stop_accel`, `stop_jerk`: the tangential limits of that
+ * stop (after an underrun, hold or abort at the block's end), chosen and checked by the planner.
+ */
+typedef struct PathBlock {
+  /**
+   * Consecutive number from 0, as for segment records.
+   */
+  uint32_t seq;
+  /**
+   * `FLAG_*` bits and the curve index (upper 16 bits), as for segment records.
+   */
+  uint32_t flags;
+  /**
+   * Samples used (1..=[`BLOCK_SAMPLES`]).
+   */
+  uint32_t count;
+  /**
+   * Non-zero: the stop after this block is not the tangential one but `stop_len` planned
+   * positions (the planner's own deceleration sequence, to rest) stored in the geometry
+   * arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+   */
+  uint32_t stop_len;
+  uint32_t stop_offset;
+  uint32_t reserved;
+  double stop_accel;
+  double stop_jerk;
+  double s_before[2];
+  double u[BLOCK_SAMPLES];
+  double s[BLOCK_SAMPLES];
+} PathBlock;
+
+/**
+ * The payload of a [`Slot`]; which field is meant is [`Slot::kind`]. Both are plain numbers,
+ * so any bytes read as either are valid values (the module still validates them).
+ */
+typedef union SlotData {
+  struct SegmentRecord segment;
+  struct PathBlock block;
+} SlotData;
+
+/**
+ * One ring slot: a record of either kind, tagged.
+ */
+typedef struct Slot {
+  /**
+   * `KIND_*`; anything else is refused.
+   */
+  uint32_t kind;
+  uint32_t reserved;
+  union SlotData data;
+} Slot;
 
 /**
  * Where one curve's data lies in the geometry arena (offsets and lengths in `f64` values).

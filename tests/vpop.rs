@@ -297,3 +297,45 @@ fn random_curves_never_violate() {
     }
     assert!(refused.len() * 50 <= cases as usize, "too many refusals: {refused:?}");
 }
+
+/// A plan from rest at an arbitrary point of the path (the rest of the path after a stop): it
+/// starts exactly at that element and parameter, stays within the limits by the finite-
+/// difference check (at rest before its first sample) and ends at rest at the path end; a
+/// start off the path is refused.
+#[test]
+fn starts_from_rest_at_any_point() {
+    use nurbs_motion::planner::axial::FiniteDifferences;
+    let tp = example("trident.json");
+    let limits = lab1(2);
+    for u0 in [0.0, 0.37, 0.9] {
+        let options = SearchOptions {
+            start: Some((0, u0)),
+            ..SearchOptions::default()
+        };
+        let plan = plan_tip(&tp, &limits, options).unwrap();
+        let first = plan.points[0];
+        assert_eq!((first.element, first.u), (0, u0));
+        let c = tp.elements[0].curve.point(u0);
+        assert!((first.tip[0] - c[0]).abs() < 1e-12 && (first.tip[1] - c[1]).abs() < 1e-12);
+        let mut fd = FiniteDifferences::new(2, plan.limits.period);
+        for p in &plan.points {
+            fd.push(&p.tip[..2], &plan.limits);
+        }
+        fd.finish(&plan.limits);
+        let ratio = fd.worst_ratio(&plan.limits);
+        assert!(ratio <= 1.0 + 1e-6, "u0 {u0}: worst ratio {ratio}");
+        let last = plan.points.last().unwrap();
+        assert_eq!((last.element, last.u), (0, 1.0));
+        eprintln!("from u = {u0}: {} periods, worst ratio {ratio:.4}", plan.points.len());
+    }
+    let off = SearchOptions {
+        start: Some((0, 1.5)),
+        ..SearchOptions::default()
+    };
+    assert!(plan_tip(&tp, &limits, off).is_err());
+    let off = SearchOptions {
+        start: Some((3, 0.5)),
+        ..SearchOptions::default()
+    };
+    assert!(plan_tip(&tp, &limits, off).is_err());
+}

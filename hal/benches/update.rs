@@ -10,7 +10,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_hal::channel::Channel;
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
-use nurbs_hal::record::SegmentRecord;
+use nurbs_hal::record::{SegmentRecord, Slot};
 use nurbs_hal::user::Component;
 use nurbs_motion::planner::{plan, Limits, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
@@ -23,7 +23,7 @@ const PERIOD_NS: i64 = 250_000;
 
 fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize {
     while let Some(r) = records.get(from) {
-        if channel.segments.push(r).is_err() {
+        if channel.segments.push(&Slot::segment(r)).is_err() {
             break;
         }
         from += 1;

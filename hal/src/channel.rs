@@ -3,7 +3,8 @@
 //! The realtime module creates one RTAPI shared-memory block ([`CHANNEL_KEY`], created in
 //! `rtapi_app_main`, zeroed by RTAPI) and lays a [`Channel`] over it; the planner attaches to the
 //! same key and checks the header before writing. The block holds a single-producer /
-//! single-consumer ring of fixed-size [`SegmentRecord`]s: the planner only advances `head`, the
+//! single-consumer ring of fixed-size tagged [`Slot`]s (a [`SegmentRecord`] or a
+//! [`crate::record::PathBlock`]): the planner only advances `head`, the
 //! module only advances `tail`, each with release ordering after touching a slot and acquire
 //! ordering before reading the other side's counter. No locks, no syscalls, no allocation.
 //!
@@ -24,23 +25,25 @@ use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
 use nurbs_rtcore::CurveView;
 
-pub use crate::record::SegmentRecord;
+pub use crate::record::{PathBlock, Record, SegmentRecord, Slot};
 
 /// RTAPI shared-memory key of the channel ("NRB0").
 pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 4;
+pub const CHANNEL_VERSION: u32 = 5;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
 /// Most curves (path elements) one geometry can hold.
 pub const MAX_CURVES: usize = 64;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together): 512 KiB, e.g. 64 cubic 3-D curves of 250 control points each, or the butterfly
-/// (51 planar control points, 208 values) about 300 times over.
-pub const GEOMETRY_VALUES: usize = 1 << 16;
+/// together, and the stop sequences of path blocks): 8 MiB. The curves need little (e.g. 64
+/// cubic 3-D curves of 250 control points each: 64,000 values; the butterfly: 208); the stored
+/// VPOp deceleration sequences need two values per period of each (the butterfly at lab set 1:
+/// 693,416 values in all).
+pub const GEOMETRY_VALUES: usize = 1 << 20;
 
 /// Why a channel cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -116,6 +119,25 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
         Ok(())
     }
 
+    /// Consumer side: a copy of the oldest record without taking it.
+    pub fn peek(&self) -> Result<Option<T>, ChannelError> {
+        let tail = self.tail.0.load(Ordering::Relaxed);
+        let head = self.head.0.load(Ordering::Acquire);
+        let used = head.wrapping_sub(tail) as usize;
+        if used == 0 {
+            return Ok(None);
+        }
+        if used > N {
+            return Err(ChannelError::Corrupt);
+        }
+        let slot = self
+            .slots
+            .get((tail & Self::MASK) as usize)
+            .ok_or(ChannelError::Corrupt)?;
+        // SAFETY: as in `pop`: the slot is inside [tail, head).
+        Ok(Some(unsafe { slot.get().read_volatile() }))
+    }
+
     /// Consumer side: take the oldest record. Never allocates, locks or panics.
     pub fn pop(&self) -> Result<Option<T>, ChannelError> {
         let tail = self.tail.0.load(Ordering::Relaxed);
@@ -152,8 +174,8 @@ pub struct Channel {
     planned_time: AtomicU64,
     /// Module → planner: where the module stands after a hold or underrun stop.
     pub stop: StopStatus,
-    /// Planner → module segment records.
-    pub segments: SpscRing<SegmentRecord, SEGMENT_SLOTS>,
+    /// Planner → module records (segments or path blocks).
+    pub segments: SpscRing<Slot, SEGMENT_SLOTS>,
     /// Planner → module curve geometry.
     pub geometry: GeometryArea,
 }
@@ -174,7 +196,7 @@ impl Channel {
         channel.version.store(CHANNEL_VERSION, Ordering::Relaxed);
         channel
             .record_size
-            .store(core::mem::size_of::<SegmentRecord>() as u32, Ordering::Relaxed);
+            .store(core::mem::size_of::<Slot>() as u32, Ordering::Relaxed);
         channel.segment_slots.store(SEGMENT_SLOTS as u32, Ordering::Relaxed);
         channel.geometry_values.store(GEOMETRY_VALUES as u32, Ordering::Relaxed);
         channel.max_curves.store(MAX_CURVES as u32, Ordering::Relaxed);
@@ -201,7 +223,7 @@ impl Channel {
             return Err(ChannelError::NotInitialised);
         }
         let layout_ok = self.version.load(Ordering::Relaxed) == CHANNEL_VERSION
-            && self.record_size.load(Ordering::Relaxed) as usize == core::mem::size_of::<SegmentRecord>()
+            && self.record_size.load(Ordering::Relaxed) as usize == core::mem::size_of::<Slot>()
             && self.segment_slots.load(Ordering::Relaxed) as usize == SEGMENT_SLOTS
             && self.geometry_values.load(Ordering::Relaxed) as usize == GEOMETRY_VALUES
             && self.max_curves.load(Ordering::Relaxed) as usize == MAX_CURVES;
@@ -551,11 +573,21 @@ mod tests {
         unsafe { p.add(p.align_offset(64)) }
     }
 
-    fn record(seq: u32) -> SegmentRecord {
-        SegmentRecord {
-            seq,
-            u_start: seq as f64 / 7.0,
-            ..SegmentRecord::default()
+    fn record(seq: u32) -> Slot {
+        if seq.is_multiple_of(3) {
+            let mut b = PathBlock {
+                seq,
+                count: 1,
+                ..PathBlock::default()
+            };
+            b.u[0] = seq as f64 / 7.0;
+            Slot::block(&b)
+        } else {
+            Slot::segment(&SegmentRecord {
+                seq,
+                u_start: seq as f64 / 7.0,
+                ..SegmentRecord::default()
+            })
         }
     }
 

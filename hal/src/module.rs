@@ -71,13 +71,13 @@ use core::sync::atomic::{AtomicI32, Ordering};
 use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::CurveView;
 
-use nurbs_rtcore::scurve::SCurveTable;
+use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
     validate_geometry, Channel, CurveViews, GeometryHeader, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
 };
 use crate::pins::Pin;
-use crate::record::{SegmentRecord, FLAG_LAST, PHASES};
+use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
 use crate::sys;
 
 /// Component name: must equal the module's file name (`loadrt` dlopens `NAME.so`).
@@ -110,6 +110,12 @@ pub enum FaultCode {
     /// After a stop, the first record of the resumed motion does not start at rest
     /// exactly where the machine stands (element, parameter, position): refused, position held.
     ResumePoint = 7,
+    /// A record of the other kind (segment / path block) within one motion, or of no known
+    /// kind: one motion is planned by one planner.
+    RecordKind = 8,
+    /// A path block's positions do not match its arc lengths or the curve (parameter outside
+    /// the curve, chord longer than the arc, a step back, or not continuing the previous block).
+    BlockPath = 9,
 }
 
 /// The component's pins, in HAL shared memory.
@@ -149,6 +155,8 @@ pub struct RtGeometry {
     stop_jerk: f64,
     /// `(accel, jerk)` of the stop after each record, by sequence number.
     stop_table: &'static [f64],
+    /// The geometry arena (stored stop sequences of path blocks).
+    values: &'static [f64],
     views: CurveViews<'static>,
 }
 
@@ -160,6 +168,7 @@ impl RtGeometry {
         stop_accel: 0.0,
         stop_jerk: 0.0,
         stop_table: &[],
+        values: &[],
         views: [None; MAX_CURVES],
     };
 
@@ -237,6 +246,77 @@ pub struct Instance {
     resuming: bool,
     /// `resume` pin of the last period (rising-edge detection).
     resume_pin: bool,
+    /// Which kind of record the current motion runs (set by its first record).
+    mode: Mode,
+    /// Servo period of the current update (s).
+    period: f64,
+    /// Path-block motion: the block being output.
+    player: BlockPlayer,
+}
+
+/// The record kind of a motion.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Mode {
+    Undecided = 0,
+    Segments = 1,
+    Blocks = 2,
+}
+
+/// Playback state of a path-block motion (plain data).
+#[derive(Clone, Copy, Debug)]
+struct BlockPlayer {
+    block: PathBlock,
+    /// A block has been taken (the motion started).
+    loaded: bool,
+    /// Samples of `block` output so far.
+    index: usize,
+    /// The last sample of the last block has been output: at rest at the path end.
+    finished: bool,
+    /// A sample of this motion has been output (the fields below describe it).
+    has_sample: bool,
+    /// The last output sample: curve, parameter, arc length, the one before's arc length, point.
+    curve: usize,
+    u: f64,
+    s: f64,
+    s_before: f64,
+    point: [f64; 3],
+    /// Running a stored stop sequence: its arena offset and length, and samples output.
+    stored: Option<(usize, usize)>,
+    stored_index: usize,
+}
+
+impl BlockPlayer {
+    const IDLE: BlockPlayer = BlockPlayer {
+        block: PathBlock {
+            seq: 0,
+            flags: 0,
+            count: 0,
+            stop_len: 0,
+            stop_offset: 0,
+            reserved: 0,
+            stop_accel: 0.0,
+            stop_jerk: 0.0,
+            s_before: [0.0; 2],
+            u: [0.0; nurbs_rtcore::BLOCK_SAMPLES],
+            s: [0.0; nurbs_rtcore::BLOCK_SAMPLES],
+        },
+        loaded: false,
+        index: 0,
+        finished: false,
+        has_sample: false,
+        curve: 0,
+        u: 0.0,
+        s: 0.0,
+        s_before: 0.0,
+        point: [0.0; 3],
+        stored: None,
+        stored_index: 0,
+    };
+
+    fn remaining(&self) -> usize {
+        self.block.len().saturating_sub(self.index)
+    }
 }
 
 /// Why the module stops (or stopped) on the path.
@@ -349,9 +429,90 @@ pub fn underrun_stop(curve: Option<ValidCurve>, last: &SegmentRecord, accel: f64
     stop_record(last, accel, jerk, k)
 }
 
+/// Largest ratio of a path-block step's arc length to its chord: a step turns less than a half
+/// circle (arc / chord of a semicircle = pi / 2). Only catches arc lengths that do not belong to
+/// the positions; the planner's own arc lengths are exact.
+const ARC_PER_CHORD: f64 = core::f64::consts::FRAC_PI_2;
+
+/// A step's chord fits its arc length: no longer (to rounding), and not shorter than 2/pi of it.
+fn step_fits(chord: f64, ds: f64) -> bool {
+    chord <= ds * (1.0 + 1e-9) + 1e-9 && ds <= ARC_PER_CHORD * chord + 1e-9
+}
+
+/// The state a stop after `block` starts from: arc length, feed and tangential acceleration at
+/// its last sample, from the quadratic through its last three arc lengths (backward
+/// differences of period `dt`, centred at the last sample).
+pub fn block_end_state(block: &PathBlock, dt: f64) -> (f64, f64, f64) {
+    let n = block.len() + 1; // index of the last sample in `s_history`
+    let (s0, s1, s2) = (
+        block.s_history(n),
+        block.s_history(n.saturating_sub(1)),
+        block.s_history(n.saturating_sub(2)),
+    );
+    let a = (s0 - 2.0 * s1 + s2) / (dt * dt);
+    let v = (3.0 * s0 - 4.0 * s1 + s2) / (2.0 * dt);
+    (s0, v, a)
+}
+
+/// The stop the module runs after `block` (an underrun, hold or abort at its end): from the
+/// block's end state ([`block_end_state`]) to rest along its curve with the block's checked
+/// deceleration and jerk, both raised (deceleration by `k`, jerk by `k^2`) just enough to pass
+/// every stop point of the curve no faster than its cap, as [`underrun_stop`] does. Returns the
+/// stop as a record (start, curve, profile) and its start acceleration (for
+/// [`SCurve::table_from`](nurbs_rtcore::SCurve::table_from)). Bounded work: for each stop point
+/// the stop reaches too fast, a 40-step bisection of `k` with a 60-step bisection inside.
+pub fn block_stop(curve: Option<ValidCurve>, block: &PathBlock, dt: f64) -> (SegmentRecord, f64) {
+    let (s0, v0, a0) = block_end_state(block, dt);
+    let (accel, jerk) = (block.stop_accel, block.stop_jerk);
+    let profile = |k: f64| stop_from(v0, a0, accel * k, jerk * k * k);
+    let reach = profile(1.0).table_from(a0).length();
+    let mut k = 1.0f64;
+    for pair in curve.map_or(&[][..], |c| c.stops).chunks_exact(2) {
+        if let [s, cap] = *pair {
+            let d = s - s0;
+            let fits = |k: f64| distance_at_feed(&profile(k).table_from(a0), cap) <= 0.999 * d;
+            if d > 1e-9 && d < reach && cap < v0 && !fits(k) {
+                let (mut lo, mut hi) = (k, k * 2.0);
+                for _ in 0..40 {
+                    if fits(hi) {
+                        break;
+                    }
+                    lo = hi;
+                    hi *= 2.0;
+                }
+                for _ in 0..40 {
+                    let mid = 0.5 * (lo + hi);
+                    if fits(mid) {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                k = hi;
+            }
+        }
+    }
+    let p = profile(k);
+    let last = block.len().saturating_sub(1);
+    let u = block.u.get(last).copied().unwrap_or(0.0);
+    let record = SegmentRecord {
+        seq: block.seq,
+        flags: block.flags & !FLAG_LAST,
+        u_start: u,
+        u_end: u,
+        s_start: s0,
+        length: p.table_from(a0).length().max(0.0),
+        feed_start: p.feed_start,
+        durations: p.durations,
+        jerks: p.jerks,
+    };
+    (record, if p.feed_start > 0.0 { a0 } else { 0.0 })
+}
+
 impl Instance {
     /// One servo period. `period_ns` is the thread's period.
     pub fn update(&mut self, period_ns: i64) {
+        self.period = period_ns as f64 / 1e9;
         // SAFETY: the channel block stays mapped until rtapi_app_exit, after the last period.
         let channel: &'static Channel = unsafe { &*self.channel };
         if self.fault == FaultCode::None && channel.check().is_err() {
@@ -383,7 +544,7 @@ impl Instance {
             channel.stop.clear();
         }
         let mut active = false;
-        let started = self.interp.record().is_some();
+        let started = self.started();
         if abort && !started && self.geometry.is_valid() && !self.aborted && self.fault == FaultCode::None {
             self.end_motion(channel); // nothing moved yet: the queue is discarded at once
         }
@@ -398,14 +559,14 @@ impl Instance {
             let dt = period_ns as f64 / 1e9;
             active = self.advance(channel, dt, hold, abort);
         }
-        if self.fault == FaultCode::None && (self.stopped || self.aborted || self.interp.is_finished()) {
+        if self.fault == FaultCode::None && (self.stopped || self.aborted || self.finished()) {
             // Over: what is still queued (or comes) belongs to a motion that will not run, and
             // an empty ring tells a new planner that it may publish.
             discard(channel, self.geometry.generation);
         }
         let pins = &self.pins;
         pins.active.set(active);
-        pins.done.set(self.interp.is_finished());
+        pins.done.set(self.finished());
         pins.fault.set(self.fault != FaultCode::None);
         pins.fault_code.set(self.fault as u32);
         pins.underrun.set(self.cause == StopCause::Underrun);
@@ -417,14 +578,32 @@ impl Instance {
         let buffered = if self.cause != StopCause::None {
             0.0
         } else {
-            (channel.planned_time() - self.taken_time).max(0.0) + self.interp.time_left_in_segment()
+            let left = if self.mode == Mode::Blocks {
+                self.player.remaining() as f64 * period_ns as f64 / 1e9
+            } else {
+                self.interp.time_left_in_segment()
+            };
+            (channel.planned_time() - self.taken_time).max(0.0) + left
         };
         pins.buffered.set(buffered);
     }
 
     /// A motion is loaded and may still move (not finished, aborted or stopped).
     fn in_motion(&self) -> bool {
-        self.interp.record().is_some() && !self.interp.is_finished() && !self.aborted && !self.stopped
+        self.started() && !self.finished() && !self.aborted && !self.stopped
+    }
+
+    /// The motion has taken its first record (of either kind).
+    fn started(&self) -> bool {
+        self.interp.record().is_some() || self.player.loaded
+    }
+
+    /// The motion has reached the path end.
+    fn finished(&self) -> bool {
+        match self.mode {
+            Mode::Blocks => self.player.finished,
+            _ => self.interp.is_finished(),
+        }
     }
 
     /// Take a newly published geometry (only while no motion runs), or fault.
@@ -444,6 +623,7 @@ impl Instance {
         match validate_geometry(&header, values, &mut self.geometry.views) {
             Ok(table) if channel.geometry.unchanged(generation) => {
                 self.geometry.stop_table = table;
+                self.geometry.values = values;
                 self.set_geometry(generation, &header);
             }
             Ok(_) => {} // rewritten while validating: again next period
@@ -471,6 +651,8 @@ impl Instance {
         self.resuming = false;
         // A new geometry starts a new motion.
         self.interp = Interpolator::new();
+        self.mode = Mode::Undecided;
+        self.player = BlockPlayer::IDLE;
         self.next_seq = 0;
         self.taken_time = 0.0;
         self.stopping = false;
@@ -490,6 +672,22 @@ impl Instance {
     /// Advance the interpolator by one period; true if it produced a sample. `hold`, `abort`:
     /// no further record is taken; the module stops at the next segment boundary instead.
     fn advance(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
+        if self.mode == Mode::Undecided {
+            // The first record of the motion decides its kind (an unknown kind is refused by
+            // the segment path).
+            match channel.segments.peek() {
+                Ok(Some(slot)) if slot.kind == KIND_BLOCK => self.mode = Mode::Blocks,
+                Ok(Some(_)) => self.mode = Mode::Segments,
+                Ok(None) => return false,
+                Err(_) => {
+                    self.fault = FaultCode::Channel;
+                    return false;
+                }
+            }
+        }
+        if self.mode == Mode::Blocks {
+            return self.advance_blocks(channel, dt, hold, abort);
+        }
         let mut pull = Pull::Fine;
         let step = {
             let ring = &channel.segments;
@@ -503,7 +701,18 @@ impl Instance {
                 if no_more || pull != Pull::Fine {
                     return None;
                 }
-                match ring.pop() {
+                let popped = match ring.pop() {
+                    Ok(Some(slot)) => match slot.decode() {
+                        Some(Record::Segment(r)) => Ok(Some(r)),
+                        _ => {
+                            pull = Pull::Fault(FaultCode::RecordKind);
+                            return None;
+                        }
+                    },
+                    Ok(None) => Ok(None),
+                    Err(e) => Err(e),
+                };
+                match popped {
                     Ok(Some(r)) if r.seq != *next_seq => {
                         pull = Pull::Fault(FaultCode::Sequence);
                         None
@@ -566,24 +775,11 @@ impl Instance {
                     return false; // not started yet: waiting for the first record
                 };
                 if self.stopping {
-                    // The stop is over: at rest.
-                    self.stopped = true;
-                    if self.cause == StopCause::Abort {
-                        self.end_motion(channel);
-                    } else {
-                        self.publish_stop(channel, last.seq);
-                    }
+                    let held = self.held_by_interp();
+                    self.stop_over(channel, last.seq, held);
                     return false;
                 }
-                self.stopping = true;
-                self.cause = if abort {
-                    StopCause::Abort
-                } else if hold {
-                    StopCause::Hold
-                } else {
-                    self.underruns = self.underruns.wrapping_add(1);
-                    StopCause::Underrun
-                };
+                self.begin_stop(hold, abort);
                 let curve = self.geometry.views.get(last.curve()).copied().flatten();
                 let (accel, jerk) = self.geometry.stop_limits(last.seq);
                 let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
@@ -602,6 +798,272 @@ impl Instance {
         }
     }
 
+    /// The stop is over: at rest on the path at `held`.
+    fn stop_over(&mut self, channel: &Channel, seq: u32, held: Held) {
+        self.stopped = true;
+        if self.cause == StopCause::Abort {
+            self.end_motion(channel);
+        } else {
+            self.publish_stop(channel, seq, held);
+        }
+    }
+
+    /// Where the interpolator stands (after a stop it ran).
+    fn held_by_interp(&self) -> Held {
+        let c = *self.interp.cursor();
+        let [x, y, z, ..] = c.point;
+        Held {
+            curve: self.interp.curve_index(),
+            u: c.u,
+            s: c.s,
+            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
+        }
+    }
+
+    /// No further record is taken: the module's own stop begins (why: `abort`, `hold`, or else
+    /// the record it needs is missing).
+    fn begin_stop(&mut self, hold: bool, abort: bool) {
+        self.stopping = true;
+        self.cause = if abort {
+            StopCause::Abort
+        } else if hold {
+            StopCause::Hold
+        } else {
+            self.underruns = self.underruns.wrapping_add(1);
+            StopCause::Underrun
+        };
+    }
+
+    /// One period of a path-block motion: the next planned position, exactly; at a block end
+    /// without a next block (underrun) or under hold/abort, the stop from the block's end state
+    /// along the curve, run by the interpolator.
+    fn advance_blocks(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
+        if let (true, Some((offset, len))) = (self.stopping, self.player.stored) {
+            return self.advance_stored_stop(channel, offset, len);
+        }
+        if self.stopping {
+            return match self.interp.step(&self.geometry, dt, &mut || None) {
+                Step::Sample(s) => {
+                    self.output(&s);
+                    true
+                }
+                Step::BadRecord => {
+                    self.fault = FaultCode::BadRecord;
+                    false
+                }
+                Step::Starved | Step::Finished => {
+                    let held = self.held_by_interp();
+                    self.stop_over(channel, self.player.block.seq, held);
+                    false
+                }
+            };
+        }
+        if self.player.finished {
+            return false;
+        }
+        if self.player.remaining() == 0 {
+            let block = if hold || abort {
+                None
+            } else {
+                match channel.segments.pop() {
+                    Ok(Some(slot)) => match slot.decode() {
+                        Some(Record::Block(b)) => Some(b),
+                        _ => {
+                            self.fault = FaultCode::RecordKind;
+                            return false;
+                        }
+                    },
+                    Ok(None) => None,
+                    Err(_) => {
+                        self.fault = FaultCode::Channel;
+                        return false;
+                    }
+                }
+            };
+            let Some(block) = block else {
+                if !self.player.loaded {
+                    return false; // waiting for the first block
+                }
+                // Underrun, hold or abort at the block end: the checked stop from here.
+                self.begin_stop(hold, abort);
+                let last = self.player.block;
+                if last.stop_len > 0 {
+                    // The planner's own deceleration sequence, stored with the geometry.
+                    self.player.stored = Some((last.stop_offset as usize, last.stop_len as usize));
+                    self.player.stored_index = 0;
+                    return self.advance_blocks(channel, dt, hold, abort);
+                }
+                let curve = self.geometry.views.get(last.curve()).copied().flatten();
+                let (stop, a0) = block_stop(curve, &last, dt);
+                let table = stop.profile().table_from(a0);
+                if !self.interp.start_profile(&self.geometry, stop, table) {
+                    self.fault = FaultCode::BadRecord;
+                    return false;
+                }
+                return self.advance_blocks(channel, dt, hold, abort);
+            };
+            if let Err(code) = self.take_block(&block) {
+                self.fault = code;
+                return false;
+            }
+        }
+        self.output_block_sample()
+    }
+
+    /// One period of a stored stop sequence: the next position (checked as a block sample);
+    /// after the last one, at rest there.
+    fn advance_stored_stop(&mut self, channel: &Channel, offset: usize, len: usize) -> bool {
+        let p = self.player;
+        let k = p.stored_index;
+        if k >= len {
+            let held = Held {
+                curve: p.curve,
+                u: p.u,
+                s: p.s,
+                point: p.point,
+            };
+            self.stop_over(channel, p.block.seq, held);
+            return false;
+        }
+        let at = offset.saturating_add(2 * k);
+        let values = self.geometry.values;
+        let (Some(&u), Some(&s), Some(view)) = (
+            values.get(at),
+            values.get(at.saturating_add(1)),
+            self.geometry.curve(p.block.curve()),
+        ) else {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        };
+        let point = view.point(u);
+        let sample = Sample {
+            curve: p.block.curve(),
+            u,
+            s,
+            point,
+            feed: 0.0,
+            accel: 0.0,
+        };
+        let here = self.point_of(&sample);
+        let ds = s - p.s;
+        let chord = distance(&p.point, &here);
+        let on_curve = u.is_finite() && s.is_finite() && u >= p.u && u <= view.u_max();
+        if !(on_curve && step_fits(chord, ds)) {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        }
+        self.output(&Sample {
+            feed: chord / self.period,
+            ..sample
+        });
+        let player = &mut self.player;
+        player.stored_index = k + 1;
+        player.s_before = p.s;
+        player.u = u;
+        player.s = s;
+        player.point = here;
+        true
+    }
+
+    /// Validates `block` against the sequence, the curve, the previous block and (on a
+    /// resume) the stop point, then makes it the current block.
+    fn take_block(&mut self, b: &PathBlock) -> Result<(), FaultCode> {
+        if b.seq != self.next_seq {
+            return Err(FaultCode::Sequence);
+        }
+        b.check().map_err(|_| FaultCode::Record)?;
+        let n = b.len();
+        let view = self.geometry.curve(b.curve()).ok_or(FaultCode::BadRecord)?;
+        let (lo, hi) = (view.u_min(), view.u_max());
+        if b.u.iter().take(n).any(|u| *u < lo || *u > hi) {
+            return Err(FaultCode::BlockPath);
+        }
+        let p = &self.player;
+        let continues = if self.resuming {
+            // The plan from the stop point starts there, at rest.
+            self.held
+                .is_some_and(|h| h.curve == b.curve() && h.u == b.u[0] && h.s == b.s[0] && b.s_before == [h.s, h.s])
+        } else if !p.loaded {
+            b.s_before == [b.s[0], b.s[0]] // the motion starts at rest
+        } else if b.curve() == p.curve {
+            b.u[0] >= p.u && b.s_before == [p.s_before, p.s]
+        } else {
+            b.curve() > p.curve // the next element; its own arc-length measure
+        };
+        if !continues {
+            return Err(if self.resuming {
+                FaultCode::ResumePoint
+            } else {
+                FaultCode::BlockPath
+            });
+        }
+        self.next_seq = b.seq.wrapping_add(1);
+        self.records = self.records.wrapping_add(1);
+        self.taken_time += n as f64 * self.period;
+        self.pins.seq.set(b.seq);
+        let player = &mut self.player;
+        player.block = *b;
+        player.index = 0;
+        player.loaded = true;
+        Ok(())
+    }
+
+    /// Outputs the current block's next sample: the curve point at its parameter, after
+    /// checking it against the arc lengths (and, on a resume, the held position).
+    fn output_block_sample(&mut self) -> bool {
+        let p = self.player;
+        let b = &p.block;
+        let k = p.index;
+        let (Some(&u), Some(&s), Some(view)) = (b.u.get(k), b.s.get(k), self.geometry.curve(b.curve())) else {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        };
+        let point = view.point(u);
+        let mut sample = Sample {
+            curve: b.curve(),
+            u,
+            s,
+            point,
+            feed: 0.0,
+            accel: 0.0,
+        };
+        let here = self.point_of(&sample);
+        // The feed pin: the setpoints' speed over the last period (as VPOp reports it).
+        let chord = distance(&p.point, &here);
+        if p.has_sample {
+            sample.feed = chord / self.period;
+        }
+        if self.resuming {
+            let held = self.held.map(|h| h.point);
+            if held.is_none_or(|h| distance(&h, &here) > RESUME_TOLERANCE) {
+                self.fault = FaultCode::ResumePoint;
+                return false;
+            }
+            self.resuming = false;
+            self.held = None;
+        } else if p.has_sample {
+            // Not the motion's first sample: the step's chord must fit its arc length.
+            let ds = s - b.s_history(k + 1);
+            if !step_fits(chord, ds) {
+                self.fault = FaultCode::BlockPath;
+                return false;
+            }
+        }
+        self.output(&sample);
+        let player = &mut self.player;
+        player.index = k + 1;
+        player.curve = b.curve();
+        player.s_before = b.s_history(k + 1);
+        player.u = u;
+        player.s = s;
+        player.point = here;
+        player.has_sample = true;
+        if b.is_last() && player.index >= b.len() {
+            player.finished = true;
+        }
+        true
+    }
+
     /// The axis positions the module outputs for `s`.
     fn point_of(&self, s: &Sample) -> [f64; 3] {
         let [x, y, z, ..] = s.point;
@@ -609,15 +1071,7 @@ impl Instance {
     }
 
     /// At rest after a hold or underrun stop: remember where, and tell the planner.
-    fn publish_stop(&mut self, channel: &Channel, seq: u32) {
-        let c = *self.interp.cursor();
-        let [x, y, z, ..] = c.point;
-        let held = Held {
-            curve: self.interp.curve_index(),
-            u: c.u,
-            s: c.s,
-            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
-        };
+    fn publish_stop(&mut self, channel: &Channel, seq: u32, held: Held) {
         self.held = Some(held);
         self.stops = self.stops.wrapping_add(1).max(1);
         channel.stop.publish(&StopPoint {
@@ -771,6 +1225,9 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).awaiting_resume).write(false);
     addr_of_mut!((*inst).resuming).write(false);
     addr_of_mut!((*inst).resume_pin).write(false);
+    addr_of_mut!((*inst).mode).write(Mode::Undecided);
+    addr_of_mut!((*inst).player).write(BlockPlayer::IDLE);
+    addr_of_mut!((*inst).period).write(0.0);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),

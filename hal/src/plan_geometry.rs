@@ -8,12 +8,15 @@
 //! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
 //! check). That choice goes to the module as the per-record stop table.
 
-use nurbs_hal::channel::{validate_geometry, CurveViews, StopPoint, MAX_CURVES};
-use nurbs_hal::module::underrun_stop;
+use nurbs_hal::channel::{validate_geometry, CurveViews, Slot, StopPoint, MAX_CURVES};
+use nurbs_hal::module::{block_stop, underrun_stop};
+use nurbs_hal::record::{PathBlock, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
+use nurbs_motion::planner::verify::SLACK;
+use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_rtcore::executor::{Interpolator, Step};
 
@@ -58,6 +61,9 @@ pub struct StopChoice {
     /// Worst ratio of an axial velocity, acceleration or jerk to its limit, from three samples
     /// before the stop to rest (<= 1: within the limits).
     pub ratio: f64,
+    /// Path blocks only: the stop is the planner's own deceleration sequence of this many
+    /// positions, stored with the geometry (0: the module's tangential stop).
+    pub stored: usize,
 }
 
 /// Runs the plan through the interpolator and, at every segment boundary, the module's stop
@@ -100,6 +106,7 @@ pub fn choose_stops(toolpath: &Toolpath, plan: &Plan, valid: &CurveViews, fracti
                 accel,
                 jerk,
                 ratio: f.worst_ratio(limits),
+                stored: 0,
             };
             if best.is_none_or(|b| choice.ratio < b.ratio) {
                 best = Some(choice);
@@ -127,16 +134,7 @@ pub fn geometry(
     if !(max_fraction > 0.0 && max_fraction <= 1.0) {
         return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
     }
-    let limits = &plan.limits;
-    let mut g = GeometryBuilder::new(
-        toolpath.tip_dim(),
-        max_fraction * limits.min_accel(),
-        max_fraction * limits.min_jerk(),
-    );
-    for (e, stops) in toolpath.elements.iter().zip(stop_points(toolpath, plan)) {
-        let c = &e.curve;
-        g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights(), &stops)?;
-    }
+    let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stop_points(toolpath, plan))?;
     let fractions = fractions(max_fraction);
     let choices = {
         let mut valid: CurveViews = [None; MAX_CURVES];
@@ -146,6 +144,442 @@ pub fn geometry(
     let table: Vec<(f64, f64)> = choices.iter().map(|c| (c.accel, c.jerk)).collect();
     g.set_stop_table(&table)?;
     Ok((g, choices))
+}
+
+/// The curves of `toolpath` with their stop points, and the default stop (`max_fraction` of the
+/// smallest axis limits): the part of the geometry both record kinds share.
+fn curves_geometry(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    max_fraction: f64,
+    stops: Vec<Vec<(f64, f64)>>,
+) -> Result<GeometryBuilder, String> {
+    if !(max_fraction > 0.0 && max_fraction <= 1.0) {
+        return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
+    }
+    let mut g = GeometryBuilder::new(
+        toolpath.tip_dim(),
+        max_fraction * limits.min_accel(),
+        max_fraction * limits.min_jerk(),
+    );
+    for (e, stops) in toolpath.elements.iter().zip(stops) {
+        let c = &e.curve;
+        g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights(), &stops)?;
+    }
+    Ok(g)
+}
+
+/// Refuses toolpaths the module cannot run as VPOp plans: it drives the tool tip only, so a
+/// path with a tool-axis (top) curve would need the machine's joint kinematics in the module.
+pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
+    if toolpath.elements.iter().any(|e| e.curve.dim() > e.curve.tip_dim()) {
+        return Err(
+            "this is a 5-axis toolpath (tool tip and tool axis): the realtime module drives the \
+                    tool tip only, so VPOp plans of 5-axis paths (joint positions of the machine) cannot \
+                    run through it; plan 2-/3-axis tool-tip paths"
+                .into(),
+        );
+    }
+    if toolpath.elements.len() > 1 << (32 - CURVE_SHIFT) {
+        return Err("too many path elements".into());
+    }
+    Ok(())
+}
+
+/// Arc length of VPOp points in the measure of the path blocks: per element from its curve
+/// start (Gauss-Legendre, the measure of the stop points), except on the element of `anchor`
+/// (a stop point), where it is shifted so that `anchor.u` has exactly `anchor.s`, the arc
+/// length the module holds there.
+struct ArcLengths<'a> {
+    toolpath: &'a Toolpath,
+    tables: Vec<ArcLengthTable>,
+    /// Path length before each element.
+    before: Vec<f64>,
+    /// The anchor's element, arc length, and Gauss-Legendre length to its parameter.
+    anchor: Option<(usize, f64, f64)>,
+}
+
+impl<'a> ArcLengths<'a> {
+    fn new(toolpath: &'a Toolpath, anchor: Option<&StopPoint>) -> Self {
+        let tables: Vec<ArcLengthTable> = toolpath
+            .elements
+            .iter()
+            .map(|e| ArcLengthTable::new(&e.curve))
+            .collect();
+        let mut before = vec![0.0];
+        for t in &tables {
+            before.push(before.last().copied().unwrap_or(0.0) + t.total());
+        }
+        let anchor = anchor.and_then(|a| {
+            let e = a.curve as usize;
+            let t = tables.get(e)?;
+            Some((e, a.s, t.length_to(&toolpath.elements[e].curve, a.u)))
+        });
+        ArcLengths {
+            toolpath,
+            tables,
+            before,
+            anchor,
+        }
+    }
+
+    /// Arc length of `p` in the measure of element `e` (negative before it).
+    fn s(&self, p: &PathPoint, e: usize) -> f64 {
+        let own = self.tables[p.element].length_to(&self.toolpath.elements[p.element].curve, p.u);
+        if p.element == e {
+            match self.anchor {
+                // Exactly the anchor's arc length at its parameter (the difference is 0 there).
+                Some((a, s, length)) if a == e => s + (own - length),
+                _ => own,
+            }
+        } else {
+            // An earlier element: minus the path length from `p` to the start of `e`.
+            (self.before[p.element] + own) - self.before[e]
+        }
+    }
+}
+
+/// Packs the points of a VPOp plan into path blocks: runs of at most [`BLOCK_SAMPLES`] points
+/// on one element (a new block at every element change), each with the arc lengths of its
+/// points and of the two points before it, the last flagged. `anchor`: the stop point a
+/// re-plan starts from (its arc length is kept exactly). Stop limits are left at zero
+/// ([`choose_block_stops`] sets them).
+fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
+    let mut blocks: Vec<PathBlock> = Vec::new();
+    let mut i = 0;
+    while i < points.len() {
+        let e = points[i].element;
+        let before = |k: usize| arcs.s(&points[i.saturating_sub(k)], e);
+        let mut b = PathBlock {
+            seq: blocks.len() as u32,
+            flags: (e as u32) << CURVE_SHIFT,
+            s_before: [before(2), before(1)],
+            ..PathBlock::default()
+        };
+        let mut n = 0;
+        while n < BLOCK_SAMPLES && i < points.len() && points[i].element == e {
+            b.u[n] = points[i].u;
+            b.s[n] = arcs.s(&points[i], e);
+            n += 1;
+            i += 1;
+        }
+        b.count = n as u32;
+        blocks.push(b);
+    }
+    if let Some(last) = blocks.last_mut() {
+        last.flags |= FLAG_LAST;
+    }
+    blocks
+}
+
+/// VPOp's deceleration sequence chosen as the stop after a block, and the tangential choice it
+/// replaces (kept if the sequence does not fit the channel).
+pub type StoredStop = (Vec<PathPoint>, StopChoice);
+
+/// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
+/// every block end, the module's stop ([`block_stop`]) with each jerk fraction of the
+/// tangential limits there (largest first) and deceleration shares 1, 1/2, 1/4, 1/10 of it,
+/// until one stays within the axis limits by finite differences, as [`choose_stops`] does for
+/// segment records, then bisects towards the next larger fraction (the tangential limits hold
+/// for the direction at the block end only, so the largest stop that passes is often just
+/// below them). Where none passes, VPOp's own deceleration sequence from the block end
+/// ([`brake_points`]) is checked the same way and taken if it does better (it is stored with
+/// the geometry; returned with the tangential choice it replaces). Stores the limits in each
+/// block (the least violating ones where none passes) and returns the choices.
+pub fn choose_block_stops(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    blocks: &mut [PathBlock],
+    valid: &CurveViews,
+    fractions: &[f64],
+    points: &[PathPoint],
+) -> (Vec<StopChoice>, Vec<Option<StoredStop>>) {
+    let curves = PathCurves::new(toolpath);
+    let path = JointPath::tip(toolpath);
+    let mut sequences = Vec::with_capacity(blocks.len());
+    let mut end = 0;
+    let tip = limits.velocity.len();
+    let dt = limits.period;
+    let mut fd = FiniteDifferences::new(tip, dt);
+    let mut choices = Vec::with_capacity(blocks.len());
+    for b in blocks.iter_mut() {
+        let view = curves.view(b.curve());
+        for &u in &b.u[..b.len()] {
+            fd.push(&view.point(u)[..tip], limits);
+        }
+        end += b.len();
+        let curve = valid.get(b.curve()).copied().flatten();
+        // Tangential limits at the block end: what the axes allow along the path direction
+        // there (each axis limit over its share of the unit tangent; at least the smallest axis
+        // limit). The fractions scale them down where the path turns during the stop.
+        let (a_max, j_max) = tangential_limits(&curves, limits, b);
+        // The module's stop with these limits, checked by finite differences; abandoned as soon
+        // as it is worse than `bound` (it cannot be the choice then).
+        let simulate = |fraction: f64, accel_share: f64, bound: f64| -> StopChoice {
+            let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
+            let mut trial = *b;
+            trial.stop_accel = accel;
+            trial.stop_jerk = jerk;
+            let (stop, a0) = block_stop(curve, &trial, dt);
+            let mut interp = Interpolator::new();
+            let mut f = fd;
+            f.reset_peaks();
+            let mut ratio = 0.0;
+            if interp.start_profile(&curves, stop, stop.profile().table_from(a0)) {
+                while let Step::Sample(s) = interp.step(&curves, dt, &mut || None) {
+                    f.push(&s.point[..tip], limits);
+                    ratio = f.worst_ratio(limits);
+                    if ratio > bound {
+                        break;
+                    }
+                }
+            }
+            if ratio <= bound {
+                f.finish(limits);
+                ratio = f.worst_ratio(limits);
+            }
+            StopChoice {
+                fraction,
+                accel_share,
+                accel,
+                jerk,
+                ratio,
+                stored: 0,
+            }
+        };
+        let mut best: Option<StopChoice> = None;
+        let mut previous = None;
+        'search: for &fraction in fractions {
+            for accel_share in [1.0, 0.5, 0.25, 0.1] {
+                let bound = best.map_or(f64::INFINITY, |c| c.ratio.max(1.0 + SLACK));
+                let choice = simulate(fraction, accel_share, bound);
+                if best.is_none_or(|c| choice.ratio < c.ratio) {
+                    best = Some(choice);
+                }
+                if choice.ratio <= 1.0 + SLACK {
+                    // Refine towards the larger fraction that failed (bisection, 5 steps).
+                    let mut good = choice;
+                    if let Some(mut bad) = previous {
+                        for _ in 0..5 {
+                            let mid = 0.5 * (good.fraction + bad);
+                            let c = simulate(mid, accel_share, 1.0 + SLACK);
+                            if c.ratio <= 1.0 + SLACK {
+                                good = c;
+                            } else {
+                                bad = mid;
+                            }
+                        }
+                    }
+                    best = Some(good);
+                    break 'search;
+                }
+            }
+            previous = Some(fraction);
+        }
+        // No tangential stop within the limits (near a tight turn, where VPOp balances the
+        // tangential jerk against the curvature terms): VPOp's own deceleration sequence from
+        // this state, run as the module runs it (each position the curve point at its u).
+        let mut sequence = None;
+        if best.is_some_and(|c| c.ratio > 1.0 + SLACK) && end >= 1 && !b.is_last() {
+            let at = |k: usize| points[end.saturating_sub(k + 1)];
+            let last = [at(2), at(1), at(0)];
+            if let Ok(Some(brake)) = brake_points(&path, limits, SearchOptions::default(), last) {
+                if !brake.is_empty() && brake.iter().all(|p| p.element == b.curve()) {
+                    let mut f = fd;
+                    f.reset_peaks();
+                    for p in &brake {
+                        f.push(&view.point(p.u)[..tip], limits);
+                    }
+                    f.finish(limits);
+                    let ratio = f.worst_ratio(limits);
+                    if let Some(tangential) = best.filter(|c| ratio < c.ratio) {
+                        best = Some(StopChoice {
+                            ratio,
+                            stored: brake.len(),
+                            ..tangential
+                        });
+                        sequence = Some((brake, tangential));
+                    }
+                }
+            }
+        }
+        sequences.push(sequence);
+        if let Some(c) = best {
+            b.stop_accel = c.accel;
+            b.stop_jerk = c.jerk;
+            choices.push(c);
+        }
+    }
+    (choices, sequences)
+}
+
+/// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the
+/// limit over the axis' share of the unit tangent.
+fn tangential_limits(curves: &PathCurves, limits: &Limits, b: &PathBlock) -> (f64, f64) {
+    let tip = limits.velocity.len();
+    let u = b.u[b.len().saturating_sub(1)];
+    let d = curves.view(b.curve()).derivatives(u, 1)[1];
+    let norm = d[..tip].iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (mut a, mut j) = (f64::INFINITY, f64::INFINITY);
+    for ((di, ai), ji) in d.iter().zip(&limits.acceleration).zip(&limits.jerk).take(tip) {
+        let share = if norm > 0.0 { (di / norm).abs() } else { 1.0 };
+        if share > 0.0 {
+            a = a.min(ai / share);
+            j = j.min(ji / share);
+        }
+    }
+    (a.max(limits.min_accel()), j.max(limits.min_jerk()))
+}
+
+/// Per curve, the points the module's stop after a path block must respect: where the VPOp plan
+/// itself passes slowest (every local minimum of its feed, as a cap of that feed: the path
+/// needs it there, e.g. at a sharp turn) and the curve end, at rest. The stop is compressed to
+/// pass them no faster; the simulation check decides whether that stays within the limits.
+pub fn block_stop_points(toolpath: &Toolpath, blocks: &[PathBlock], period: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut stops: Vec<Vec<(f64, f64)>> = toolpath
+        .elements
+        .iter()
+        .map(|e| vec![(ArcLengthTable::new(&e.curve).total(), 0.0)])
+        .collect();
+    // (curve, s, feed) of every sample, the feed over the step into it.
+    let samples: Vec<(usize, f64, f64)> = blocks
+        .iter()
+        .flat_map(|b| (0..b.len()).map(move |k| (b.curve(), b.s[k], (b.s[k] - b.s_history(k + 1)) / period)))
+        .collect();
+    for w in samples.windows(3) {
+        let (c, s, f) = w[1];
+        if f > 0.0 && f < w[0].2 && f <= w[2].2 {
+            if let Some(list) = stops.get_mut(c) {
+                list.push((s, f));
+            }
+        }
+    }
+    for list in &mut stops {
+        list.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    stops
+}
+
+/// What `nurbs-planner --planner vpop` publishes for a VPOp plan: the curves (with their ends
+/// as stop points) and the blocks with their checked stops.
+pub fn block_geometry(
+    toolpath: &Toolpath,
+    plan: &VpopPlan,
+    anchor: Option<&StopPoint>,
+    max_fraction: f64,
+) -> Result<(GeometryBuilder, Vec<PathBlock>, Vec<StopChoice>), String> {
+    check_tip_path(toolpath)?;
+    let arcs = ArcLengths::new(toolpath, anchor);
+    let mut blocks = pack_blocks(&arcs, &plan.points);
+    let stops = block_stop_points(toolpath, &blocks, plan.limits.period);
+    let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stops)?;
+    g.set_stop_table(&[])?;
+    let (mut choices, sequences) = {
+        let mut valid: CurveViews = [None; MAX_CURVES];
+        validate_geometry(g.header(), g.values(), &mut valid).map_err(|e| format!("geometry refused: {e:?}"))?;
+        let fractions = fractions(max_fraction);
+        choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions, &plan.points)
+    };
+    // The stored stop sequences, as (u, s) pairs in the blocks' arc-length measure. Where the
+    // arena is full, the tangential stop (and its check result) stays.
+    for ((b, c), sequence) in blocks.iter_mut().zip(&mut choices).zip(sequences) {
+        let Some((points, tangential)) = sequence else {
+            continue;
+        };
+        let values: Vec<f64> = points.iter().flat_map(|p| [p.u, arcs.s(p, b.curve())]).collect();
+        match g.add_values(&values) {
+            Ok(offset) => {
+                b.stop_offset = offset;
+                b.stop_len = points.len() as u32;
+            }
+            Err(_) => *c = tangential,
+        }
+    }
+    Ok((g, blocks, choices))
+}
+
+/// The VPOp plan of `toolpath` (tool tip), from its start or from rest at the stop point `from`.
+pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>) -> Result<VpopPlan, String> {
+    check_tip_path(toolpath)?;
+    let options = SearchOptions {
+        start: from.map(|p| (p.curve as usize, p.u)),
+        ..SearchOptions::default()
+    };
+    plan_tip(toolpath, limits, options).map_err(|e| match from {
+        None => e.to_string(),
+        Some(_) => format!("re-plan from the stop point: {e}"),
+    })
+}
+
+/// Which planner `nurbs-planner` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlannerKind {
+    Erwinski,
+    Vpop,
+}
+
+/// A planned motion ready for the channel: its geometry, its records as ring slots with the
+/// motion time of each, and the stop check's outcome.
+pub struct Motion {
+    pub geometry: GeometryBuilder,
+    pub slots: Vec<Slot>,
+    /// Motion time of each slot (s).
+    pub durations: Vec<f64>,
+    pub stops: Vec<StopChoice>,
+    /// One line for the log.
+    pub summary: String,
+}
+
+/// Plans `toolpath` (from its start, or from rest at the module's stop point `from`) with
+/// `planner`, checks the module's stops and prepares what goes into the channel. One way for
+/// both record kinds.
+pub fn motion(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    planner: PlannerKind,
+    from: Option<&StopPoint>,
+    max_fraction: f64,
+) -> Result<Motion, String> {
+    match planner {
+        PlannerKind::Erwinski => {
+            let plan = match from {
+                None => plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?,
+                Some(p) => plan_from_stop(toolpath, limits, p)?,
+            };
+            let summary = format!(
+                "{} segments, motion {:.6} s, planned in {:.3} s",
+                plan.records.len(),
+                plan.motion_time,
+                plan.plan_time
+            );
+            let (geometry, stops) = geometry(toolpath, &plan, max_fraction)?;
+            Ok(Motion {
+                geometry,
+                slots: plan.records.iter().map(Slot::segment).collect(),
+                durations: plan.records.iter().map(|r| r.profile().total_time()).collect(),
+                stops,
+                summary,
+            })
+        }
+        PlannerKind::Vpop => {
+            let plan = vpop_plan(toolpath, limits, from)?;
+            let (geometry, blocks, stops) = block_geometry(toolpath, &plan, from, max_fraction)?;
+            let summary = format!(
+                "VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s",
+                plan.points.len(),
+                blocks.len(),
+                plan.motion_time,
+                plan.plan_time
+            );
+            Ok(Motion {
+                geometry,
+                slots: blocks.iter().map(Slot::block).collect(),
+                durations: blocks.iter().map(|b| b.len() as f64 * plan.limits.period).collect(),
+                stops,
+                summary,
+            })
+        }
+    }
 }
 
 /// The plan of the rest of the path from where the module stopped after an underrun (at rest,

@@ -12,7 +12,7 @@ use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::Sample;
 
-use crate::channel::{Channel, SegmentRecord};
+use crate::channel::{Channel, SegmentRecord, Slot};
 use crate::mock::{self, Value};
 use crate::module::{rtapi_app_exit, rtapi_app_main, FaultCode};
 use crate::sys;
@@ -147,7 +147,7 @@ fn geometry(job: &Job) -> GeometryBuilder {
 /// Push records from `from` while the ring has room; returns the next index.
 fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize {
     while let Some(r) = records.get(from) {
-        if channel.segments.push(r).is_err() {
+        if channel.segments.push(&Slot::segment(r)).is_err() {
             break;
         }
         from += 1;
@@ -1039,5 +1039,530 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
         }
         assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"), "{what}");
         unsafe { rtapi_app_exit() };
+    }
+}
+
+/// VPOp plans through the module as path blocks (`nurbs-planner --planner vpop`).
+mod blocks {
+    use super::*;
+    use crate::channel::PathBlock;
+    use crate::plan_geometry::{block_geometry, vpop_plan};
+    use crate::record::BLOCK_SAMPLES;
+    use nurbs_motion::planner::verify::{verify, Row};
+    use nurbs_motion::planner::vpop::VpopPlan;
+
+    struct BlockJob {
+        toolpath: Toolpath,
+        plan: VpopPlan,
+        geometry: GeometryBuilder,
+        blocks: Vec<PathBlock>,
+        /// Worst ratio to a limit of the checked stop after each block.
+        ratios: Vec<f64>,
+    }
+
+    fn block_job(name: &str) -> BlockJob {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../examples")
+            .join(name);
+        let toolpath = read_toolpath(&path).unwrap();
+        let limits = Limits::uniform(toolpath.tip_dim(), 2500.0, 1e4, 6e4, 0.001, PERIOD);
+        let plan = vpop_plan(&toolpath, &limits, None).unwrap();
+        let (geometry, blocks, choices) = block_geometry(&toolpath, &plan, None, 1.0).unwrap();
+        let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
+        let failing = choices.iter().filter(|c| c.ratio > 1.0 + 1e-6).count();
+        let stored = choices.iter().filter(|c| c.stored > 0).count();
+        println!(
+            "{name}: {} blocks, {stored} with a stored stop, {failing} without a stop within the limits, worst ratio {worst:.9}, {} arena values",
+            blocks.len(),
+            geometry.values().len()
+        );
+        for (k, c) in choices
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| c.ratio > 1.0 + 1e-6)
+            .take(10)
+        {
+            let (s, v, a) = crate::module::block_end_state(&blocks[k], PERIOD);
+            println!(
+                "  block {k}: ratio {:.4}, stored {}, at s {s:.3} feed {v:.2} accel {a:.1}",
+                c.ratio, c.stored
+            );
+        }
+        assert_eq!(failing, 0, "a block-end stop exceeds the limits: worst ratio {worst}");
+        assert_eq!(choices.len(), blocks.len());
+        BlockJob {
+            toolpath,
+            plan,
+            geometry,
+            blocks,
+            ratios: choices.iter().map(|c| c.ratio).collect(),
+        }
+    }
+
+    fn push_blocks(channel: &Channel, blocks: &[PathBlock], mut from: usize) -> usize {
+        while let Some(b) = blocks.get(from) {
+            if channel.segments.push(&Slot::block(b)).is_err() {
+                break;
+            }
+            from += 1;
+        }
+        from
+    }
+
+    /// One period: (x, y, feed, u, curve) if active, and the allocations of the call.
+    fn period() -> (Option<[f64; 5]>, u64) {
+        let update = mock::funct("nurbs_interp.update").unwrap();
+        let before = allocations();
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        let allocated = allocations() - before;
+        let sample = bit("nurbs_interp.active").then(|| {
+            [
+                float("nurbs_interp.pos-cmd-x"),
+                float("nurbs_interp.pos-cmd-y"),
+                float("nurbs_interp.feed"),
+                float("nurbs_interp.u"),
+                u32_pin("nurbs_interp.curve") as f64,
+            ]
+        });
+        (sample, allocated)
+    }
+
+    fn rows(samples: &[[f64; 5]]) -> Vec<Row> {
+        super::rows_of(samples)
+    }
+
+    /// The project's checker on a sampled run: no violation (axial limits by finite
+    /// differences with the 1e-6 slack, feed, chord error, distance to the curve, end points).
+    fn assert_verifies(job: &BlockJob, samples: &[[f64; 5]]) {
+        let report = verify(&PathCurves::new(&job.toolpath), &job.plan.limits, &rows(samples));
+        assert!(report.violations.is_empty(), "violations: {:?}", report.violations);
+    }
+
+    #[test]
+    fn vpop_blocks_run_exactly_the_planned_positions_without_allocating() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        let (_planner, channel) = load();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        job.geometry.publish(channel).unwrap();
+        let (mut sent, mut got, mut allocated) = (0, Vec::new(), 0);
+        for _ in 0..job.plan.points.len() + 50 {
+            if channel.segments.len() < 4 {
+                sent = push_blocks(channel, &job.blocks[..(sent + 8).min(job.blocks.len())], sent);
+            }
+            let (s, a) = period();
+            allocated += a;
+            got.extend(s);
+        }
+        assert_eq!(allocated, 0, "the update path allocated");
+        assert!(allocations() > 0, "the counting allocator is not in use");
+        assert!(
+            !bit("nurbs_interp.fault"),
+            "fault {}",
+            u32_pin("nurbs_interp.fault-code")
+        );
+        assert_eq!(got.len(), job.plan.points.len(), "one sample per planned period");
+        let mut worst = 0.0f64;
+        for (k, (g, p)) in got.iter().zip(&job.plan.points).enumerate() {
+            assert_eq!((g[3], g[4] as usize), (p.u, p.element), "sample {k}: parameter");
+            let d = (g[0] - p.tip[0]).hypot(g[1] - p.tip[1]);
+            worst = worst.max(d);
+            assert!(d <= 1e-9, "sample {k}: {d:e} mm from the VPOp position");
+        }
+        println!("largest distance to VPOp's positions: {worst:e} mm");
+        assert_verifies(&job, &got);
+        assert!(bit("nurbs_interp.done"));
+        assert_eq!(u32_pin("nurbs_interp.records") as usize, job.blocks.len());
+        assert_eq!(float("nurbs_interp.buffered"), 0.0);
+        // Done: nothing more moves.
+        assert!(period().0.is_none());
+        unsafe { rtapi_app_exit() };
+    }
+
+    /// Only the blocks up to the one ending at the highest feed arrive: the module stops from
+    /// that block's end (non-zero acceleration) along the curve, within the limits by the
+    /// project's check, publishes the stop point; the VPOp plan from rest there runs on a
+    /// `resume` edge to the path end. The whole sampled run passes the check, every stop sample
+    /// lies on the curve, and nothing allocates. The same after the fastest block whose stop is
+    /// VPOp's stored deceleration sequence (where no tangential stop stays within the limits).
+    #[test]
+    fn an_underrun_at_high_speed_stops_within_the_limits_and_resumes() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        let end_feed = |b: &PathBlock| crate::module::block_end_state(b, PERIOD).1;
+        let fastest = |stored: bool| {
+            (2..job.blocks.len() - 1)
+                .filter(|&k| (job.blocks[k].stop_len > 0) == stored)
+                .max_by(|&a, &b| end_feed(&job.blocks[a]).total_cmp(&end_feed(&job.blocks[b])))
+                .unwrap()
+        };
+        let peak = job.blocks.iter().map(end_feed).fold(0.0, f64::max);
+        println!("peak block-end feed of the plan {peak:.1} mm/s");
+        let tangential = fastest(false);
+        let v = end_feed(&job.blocks[tangential]);
+        assert!(v > 100.0 && v > 0.25 * peak, "not at high speed: {v}");
+        underrun_and_resume(&job, tangential);
+        let stored = fastest(true);
+        assert!(end_feed(&job.blocks[stored]) > 50.0, "not at speed");
+        underrun_and_resume(&job, stored);
+    }
+
+    fn underrun_and_resume(job: &BlockJob, cut: usize) {
+        let (_planner, channel) = load();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        job.geometry.publish(channel).unwrap();
+        let dt = PERIOD;
+        let (_, v, a) = crate::module::block_end_state(&job.blocks[cut], dt);
+        println!(
+            "underrun after block {cut}: feed {v:.1} mm/s, acceleration {a:.1} mm/s^2, stored stop of {} periods",
+            job.blocks[cut].stop_len
+        );
+        push_blocks(channel, &job.blocks[..=cut], 0);
+        let (mut samples, mut allocated) = (Vec::new(), 0u64);
+        let mut stop = None;
+        for _ in 0..job.plan.points.len() {
+            let (s, a) = period();
+            allocated += a;
+            samples.extend(s);
+            stop = channel.stop.read();
+            if stop.is_some() {
+                break;
+            }
+        }
+        let stop = stop.expect("no stop point published");
+        assert!(bit("nurbs_interp.underrun") && !bit("nurbs_interp.fault"));
+        assert_eq!(u32_pin("nurbs_interp.underruns"), 1);
+        assert_eq!(stop.seq as usize, cut);
+        let planned: usize = job.blocks[..=cut].iter().map(PathBlock::len).sum();
+        assert!(samples.len() > planned + 3, "no stop ran: {} samples", samples.len());
+        if job.blocks[cut].stop_len > 0 {
+            assert_eq!(samples.len(), planned + job.blocks[cut].stop_len as usize);
+        }
+        for (k, (g, p)) in samples.iter().zip(&job.plan.points).take(planned).enumerate() {
+            assert!((g[0] - p.tip[0]).hypot(g[1] - p.tip[1]) <= 1e-9, "sample {k}");
+        }
+        // The stop: along the curve (every sample the curve point at its parameter, the
+        // parameter never going back) to rest.
+        let curve = &job.toolpath.elements[0].curve;
+        for w in samples[planned - 1..].windows(2) {
+            assert!(w[1][3] >= w[0][3], "parameter went back");
+            let c = curve.point(w[1][3]);
+            assert!((w[1][0] - c[0]).hypot(w[1][1] - c[1]) <= 1e-9, "off the curve");
+        }
+        assert_eq!(
+            [stop.point[0], stop.point[1]],
+            [samples.last().unwrap()[0], samples.last().unwrap()[1]]
+        );
+        let stopped = samples.len();
+        // The stop alone (the motion up to it, at rest after it) within the limits.
+        let mut fd = nurbs_motion::planner::axial::FiniteDifferences::new(2, dt);
+        for (k, s) in samples.iter().enumerate() {
+            if k == planned {
+                // From here the stop alone: what the planner checked for this block end.
+                fd.reset_peaks();
+            }
+            fd.push(&s[..2], &job.plan.limits);
+        }
+        fd.finish(&job.plan.limits);
+        let ratio = fd.worst_ratio(&job.plan.limits);
+        println!(
+            "stop from {v:.1} mm/s: {} periods, worst ratio {ratio:.4}",
+            stopped - planned
+        );
+        assert!(ratio <= 1.0 + 1e-6, "the stop exceeds the limits: {ratio}");
+        assert!(
+            (ratio - job.ratios[cut]).abs() < 1e-9,
+            "not the stop the planner checked"
+        );
+        // Re-plan from the stop point (VPOp from rest there), publish, resume on an edge.
+        let plan2 = vpop_plan(&job.toolpath, &job.plan.limits, Some(&stop)).unwrap();
+        let (g2, blocks2, _) = block_geometry(&job.toolpath, &plan2, Some(&stop), 1.0).unwrap();
+        assert_eq!((blocks2[0].u[0], blocks2[0].s[0]), (stop.u, stop.s));
+        for _ in 0..5 {
+            samples.push(*samples.last().unwrap()); // held periods: at rest
+            period();
+        }
+        g2.publish(channel).unwrap();
+        let mut sent = push_blocks(channel, &blocks2, 0);
+        for _ in 0..5 {
+            let (s, _) = period();
+            assert!(s.is_none(), "moved before the resume command");
+            samples.push(*samples.last().unwrap());
+        }
+        assert!(bit("nurbs_interp.resume-ready"));
+        mock::set_pin("nurbs_interp.resume", Value::Bit(true));
+        for _ in 0..plan2.points.len() + 20 {
+            sent = push_blocks(channel, &blocks2, sent);
+            let (s, a) = period();
+            allocated += a;
+            samples.extend(s);
+        }
+        assert_eq!(allocated, 0, "the update path allocated");
+        assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault") && !bit("nurbs_interp.underrun"));
+        // The resumed motion's first sample is the held one (a period at rest), then VPOp's.
+        assert_eq!(samples.len(), stopped + 10 + plan2.points.len());
+        assert_verifies(job, &samples);
+        unsafe { rtapi_app_exit() };
+    }
+
+    /// Runs `blocks` (as slots) until a fault; returns the fault code and whether the position
+    /// stayed where it was at the fault.
+    fn fault_of(job: &BlockJob, slots: &[Slot]) -> (u32, bool) {
+        let (_planner, channel) = load();
+        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+        job.geometry.publish(channel).unwrap();
+        let mut sent = 0;
+        let mut last = None;
+        let mut allocated = 0;
+        for _ in 0..job.plan.points.len() {
+            while let Some(s) = slots.get(sent) {
+                if channel.segments.push(s).is_err() {
+                    break;
+                }
+                sent += 1;
+            }
+            let (s, a) = period();
+            allocated += a;
+            if s.is_some() {
+                last = s;
+            }
+            if bit("nurbs_interp.fault") {
+                break;
+            }
+        }
+        assert_eq!(allocated, 0);
+        let code = u32_pin("nurbs_interp.fault-code");
+        let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+        for _ in 0..100 {
+            assert!(period().0.is_none(), "moved after a fault");
+        }
+        let still = held == [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
+        let at_last = last.is_some_and(|l| [l[0], l[1]] == held);
+        unsafe { rtapi_app_exit() };
+        (code, still && at_last)
+    }
+
+    /// Hold during a path-block motion: the module stops at the end of the current block with
+    /// the stop checked there, publishes the stop point (cause hold); the VPOp plan from there
+    /// runs when `hold` is released; the whole run (held periods included) passes `verify`.
+    /// Abort: the same stop, then the queue is discarded and the stop point withdrawn.
+    #[test]
+    fn hold_and_abort_stop_at_the_block_end_within_the_limits() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        for abort in [false, true] {
+            let (_planner, channel) = load();
+            mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+            job.geometry.publish(channel).unwrap();
+            let mut sent = 0;
+            let (mut samples, mut allocated) = (Vec::new(), 0u64);
+            let pin = if abort {
+                "nurbs_interp.abort"
+            } else {
+                "nurbs_interp.hold"
+            };
+            let mut stop = None;
+            for k in 0..job.plan.points.len() {
+                sent = push_blocks(channel, &job.blocks, sent);
+                if k == 1234 {
+                    mock::set_pin(pin, Value::Bit(true)); // mid-block (1234 = 77 * 16 + 2)
+                }
+                let (s, a) = period();
+                allocated += a;
+                samples.extend(s);
+                if bit("nurbs_interp.held") {
+                    stop = channel.stop.read();
+                    break;
+                }
+            }
+            assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.fault"));
+            // The stop began at the end of the block the request came in (block 77).
+            let planned: usize = job.blocks[..=77].iter().map(PathBlock::len).sum();
+            for (k, (g, p)) in samples.iter().zip(&job.plan.points).take(planned).enumerate() {
+                assert!((g[0] - p.tip[0]).hypot(g[1] - p.tip[1]) <= 1e-9, "sample {k}");
+            }
+            assert!(samples.len() > planned);
+            if abort {
+                assert!(stop.is_none(), "abort withdraws the stop point");
+                for _ in 0..20 {
+                    assert!(period().0.is_none());
+                }
+                assert!(channel.segments.is_empty(), "queue not discarded");
+                assert!(!bit("nurbs_interp.done"));
+                unsafe { rtapi_app_exit() };
+                continue;
+            }
+            let stop = stop.expect("no stop point");
+            assert_eq!((stop.cause, stop.seq), (2, 77));
+            let plan2 = vpop_plan(&job.toolpath, &job.plan.limits, Some(&stop)).unwrap();
+            let (g2, blocks2, _) = block_geometry(&job.toolpath, &plan2, Some(&stop), 1.0).unwrap();
+            for _ in 0..5 {
+                samples.push(*samples.last().unwrap());
+                assert!(period().0.is_none());
+            }
+            g2.publish(channel).unwrap();
+            let mut sent = push_blocks(channel, &blocks2, 0);
+            for _ in 0..5 {
+                samples.push(*samples.last().unwrap());
+                assert!(period().0.is_none(), "moved under hold");
+            }
+            mock::set_pin("nurbs_interp.hold", Value::Bit(false));
+            for _ in 0..plan2.points.len() + 20 {
+                sent = push_blocks(channel, &blocks2, sent);
+                let (s, a) = period();
+                allocated += a;
+                samples.extend(s);
+            }
+            assert_eq!(allocated, 0);
+            assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
+            assert_verifies(&job, &samples);
+            unsafe { rtapi_app_exit() };
+        }
+    }
+
+    /// Every block end of the butterfly's VPOp plan has a stop within the limits.
+    #[test]
+    fn butterfly_block_ends_all_have_a_checked_stop() {
+        block_job("butterfly.json");
+    }
+
+    /// What `nurbs-planner` streams: Erwinski plans as segment slots, VPOp plans as block
+    /// slots (one per block, their motion time one period per sample); a 5-axis toolpath is
+    /// refused for VPOp with a message saying why.
+    #[test]
+    fn nurbs_planner_motions_of_both_kinds_and_the_5_axis_refusal() {
+        use crate::plan_geometry::{motion, PlannerKind};
+        use crate::record::{KIND_BLOCK, KIND_SEGMENT};
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+        let trident = read_toolpath(&dir.join("trident.json")).unwrap();
+        let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+        let e = motion(&trident, &limits, PlannerKind::Erwinski, None, 1.0).unwrap();
+        assert!(e.slots.iter().all(|s| s.kind == KIND_SEGMENT));
+        let v = motion(&trident, &limits, PlannerKind::Vpop, None, 1.0).unwrap();
+        assert!(v.slots.iter().all(|s| s.kind == KIND_BLOCK));
+        assert_eq!(v.stops.len(), v.slots.len());
+        assert_eq!(v.geometry.header().curve_count, 1);
+        assert_eq!(v.geometry.header().stop_table_len, 0);
+        let samples: usize = v
+            .slots
+            .iter()
+            .map(|s| match s.decode() {
+                Some(crate::record::Record::Block(b)) => b.len(),
+                _ => 0,
+            })
+            .sum();
+        let time: f64 = v.durations.iter().sum();
+        assert!((time - samples as f64 * PERIOD).abs() < 1e-9);
+        println!("{}; {}", e.summary, v.summary);
+        let pocket = read_toolpath(&dir.join("open_pocket.json")).unwrap();
+        let five = Limits::uniform(3, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+        let err = motion(&pocket, &five, PlannerKind::Vpop, None, 1.0)
+            .err()
+            .expect("5-axis accepted");
+        assert!(err.contains("5-axis"), "{err}");
+    }
+
+    /// A stored stop sequence that does not fit its curve (a parameter beyond the curve, or
+    /// going back, or NaN) faults when the module reaches it, with the position held.
+    #[test]
+    fn a_bad_stored_stop_faults_with_the_position_held() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        let cut = (2..job.blocks.len() - 1)
+            .find(|&k| job.blocks[k].stop_len > 10)
+            .unwrap();
+        let b = job.blocks[cut];
+        type Tamper = fn(&mut [f64]);
+        let cases: [Tamper; 3] = [|v| v[10] = f64::NAN, |v| v[10] = 1.5, |v| v[10] = v[6]];
+        for tamper in cases {
+            let (_planner, channel) = load();
+            mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+            let mut values = job.geometry.values().to_vec();
+            let at = b.stop_offset as usize;
+            tamper(&mut values[at..at + 2 * b.stop_len as usize]);
+            channel.geometry.publish(job.geometry.header(), &values).unwrap();
+            push_blocks(channel, &job.blocks[..=cut], 0);
+            let mut last = None;
+            let mut n = 0;
+            for _ in 0..job.plan.points.len() {
+                let (s, a) = period();
+                assert_eq!(a, 0);
+                if s.is_some() {
+                    last = s;
+                    n += 1;
+                }
+                if bit("nurbs_interp.fault") {
+                    break;
+                }
+            }
+            assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::BlockPath as u32);
+            let planned: usize = job.blocks[..=cut].iter().map(PathBlock::len).sum();
+            assert_eq!(n, planned + 5, "the stop ran up to the bad position");
+            for _ in 0..50 {
+                assert!(period().0.is_none());
+            }
+            let l = last.unwrap();
+            assert_eq!(
+                [l[0], l[1]],
+                [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")]
+            );
+            unsafe { rtapi_app_exit() };
+        }
+    }
+
+    #[test]
+    fn bad_blocks_are_refused_with_the_position_held() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        let k = job.blocks.len() / 2;
+        const MID: usize = BLOCK_SAMPLES / 2;
+        type Tamper = fn(&mut PathBlock);
+        let cases: [(&str, Tamper, FaultCode); 9] = [
+            ("NaN parameter", |b| b.u[3] = f64::NAN, FaultCode::Record),
+            ("infinite arc length", |b| b.s[0] = f64::INFINITY, FaultCode::Record),
+            (
+                "parameter beyond the curve",
+                |b| b.u[b.len() - 1] = 1.5,
+                FaultCode::BlockPath,
+            ),
+            ("sequence gap", |b| b.seq += 1, FaultCode::Sequence),
+            ("parameter going back", |b| b.u[MID] = b.u[MID - 2], FaultCode::Record),
+            ("arc length going back", |b| b.s[MID] = b.s[MID - 2], FaultCode::Record),
+            (
+                "arc lengths that do not fit the positions",
+                |b| {
+                    for s in &mut b.s[MID..] {
+                        *s += 0.5;
+                    }
+                },
+                FaultCode::BlockPath,
+            ),
+            ("no samples", |b| b.count = 0, FaultCode::Record),
+            (
+                "not continuing the previous block",
+                |b| b.s_before[1] += 1e-6,
+                FaultCode::BlockPath,
+            ),
+        ];
+        for (what, tamper, code) in cases {
+            let mut blocks = job.blocks.clone();
+            tamper(&mut blocks[k]);
+            let slots: Vec<Slot> = blocks[..=k].iter().map(Slot::block).collect();
+            let (got, held) = fault_of(&job, &slots);
+            assert_eq!(got, code as u32, "{what}");
+            assert!(held, "{what}: position not held");
+        }
+        // Another kind within a block motion, and a slot of no known kind.
+        let mut slots: Vec<Slot> = job.blocks[..k].iter().map(Slot::block).collect();
+        slots.push(Slot::segment(&SegmentRecord {
+            seq: k as u32,
+            ..SegmentRecord::default()
+        }));
+        assert_eq!(fault_of(&job, &slots), (FaultCode::RecordKind as u32, true));
+        let mut slots: Vec<Slot> = job.blocks[..k].iter().map(Slot::block).collect();
+        let mut unknown = Slot::block(&job.blocks[k]);
+        unknown.kind = 77;
+        slots.push(unknown);
+        assert_eq!(fault_of(&job, &slots), (FaultCode::RecordKind as u32, true));
     }
 }

@@ -169,6 +169,16 @@ impl GeometryBuilder {
         Ok(())
     }
 
+    /// Appends plain values to the arena (e.g. stored stop sequences); returns their offset.
+    pub fn add_values(&mut self, values: &[f64]) -> Result<u32, String> {
+        if self.values.len() + values.len() > GEOMETRY_VALUES {
+            return Err(format!("{} more values do not fit the channel", values.len()));
+        }
+        let offset = self.values.len() as u32;
+        self.values.extend_from_slice(values);
+        Ok(offset)
+    }
+
     /// The per-record stop limits: `(accel, jerk)` of the stop after record k at index k.
     pub fn set_stop_table(&mut self, table: &[(f64, f64)]) -> Result<(), String> {
         let values: Vec<f64> = table.iter().flat_map(|&(a, j)| [a, j]).collect();

@@ -123,6 +123,30 @@ impl Interpolator {
         true
     }
 
+    /// Continues from where a planner's own positions left off: `record` (not the last) on its
+    /// curve from `record.u_start` at arc length `record.s_start`, with the feed profile `table`,
+    /// which may start with non-zero acceleration (the module's stop after a [`PathBlock`]).
+    /// The first sample falls one period after that point; [`Self::step`] continues it.
+    ///
+    /// [`PathBlock`]: crate::records::PathBlock
+    pub fn start_profile<C: CurveSet + ?Sized>(
+        &mut self,
+        curves: &C,
+        record: SegmentRecord,
+        table: SCurveTable,
+    ) -> bool {
+        let index = record.curve();
+        let Some(view) = curves.curve(index) else { return false };
+        self.cursor = PathCursor::at(&view, curves.tip_axes(), record.u_start, record.s_start);
+        self.curve = index;
+        self.record = record;
+        self.table = table;
+        self.t_local = 0.0;
+        self.loaded = true;
+        self.finished = false;
+        true
+    }
+
     /// Advances one period `dt`, pulling records from `next` as segments are used up.
     pub fn step<C: CurveSet + ?Sized>(
         &mut self,

@@ -90,3 +90,100 @@ impl SegmentRecord {
         Ok(())
     }
 }
+
+/// Samples one [`PathBlock`] holds at most (16 periods: 4 ms at a 250 µs period).
+pub const BLOCK_SAMPLES: usize = 16;
+
+/// A run of per-period path positions on one curve (`#[repr(C)]`, no pointers): what a planner
+/// that works period by period (VPOp) sends. The module sets the position of each period to
+/// the curve point at `u[k]`, with no integration, so it outputs exactly the planned positions.
+///
+/// `s` is the arc length from the curve start (mm, the measure of [`SegmentRecord::s_start`]);
+/// `s_before` are the arc lengths of the two samples before `u[0]` in this curve's measure
+/// (negative on the previous curve; equal to `s[0]` at the start of the motion, at rest). So the
+/// block alone gives the tangential feed and acceleration at every sample, and at its end the
+/// state the module's stop starts from. `stop_accel`, `stop_jerk`: the tangential limits of that
+/// stop (after an underrun, hold or abort at the block's end), chosen and checked by the planner.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PathBlock {
+    /// Consecutive number from 0, as for segment records.
+    pub seq: u32,
+    /// `FLAG_*` bits and the curve index (upper 16 bits), as for segment records.
+    pub flags: u32,
+    /// Samples used (1..=[`BLOCK_SAMPLES`]).
+    pub count: u32,
+    /// Non-zero: the stop after this block is not the tangential one but `stop_len` planned
+    /// positions (the planner's own deceleration sequence, to rest) stored in the geometry
+    /// arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+    pub stop_len: u32,
+    pub stop_offset: u32,
+    pub reserved: u32,
+    pub stop_accel: f64,
+    pub stop_jerk: f64,
+    pub s_before: [f64; 2],
+    pub u: [f64; BLOCK_SAMPLES],
+    pub s: [f64; BLOCK_SAMPLES],
+}
+
+impl PathBlock {
+    pub fn curve(&self) -> usize {
+        (self.flags >> CURVE_SHIFT) as usize
+    }
+
+    pub fn is_last(&self) -> bool {
+        self.flags & FLAG_LAST != 0
+    }
+
+    /// Number of samples, clamped to the arrays (a bad count is refused by [`Self::check`]).
+    pub fn len(&self) -> usize {
+        (self.count as usize).min(BLOCK_SAMPLES)
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+
+    /// Arc length of sample `k` counted from the block's first sample minus 2: index 0 and 1 are
+    /// `s_before`, 2.. the samples.
+    pub fn s_history(&self, k: usize) -> f64 {
+        match k {
+            0 | 1 => self.s_before.get(k).copied().unwrap_or(0.0),
+            _ => self.s.get(k - 2).copied().unwrap_or(0.0),
+        }
+    }
+
+    /// Structural checks that need no curve: count within the arrays, finite numbers, `u` and
+    /// `s` non-decreasing (with `s_before` before `s[0]`), positive finite stop limits.
+    pub fn check(&self) -> Result<(), RecordError> {
+        let n = self.count as usize;
+        if n == 0 || n > BLOCK_SAMPLES {
+            return Err(RecordError::Inconsistent);
+        }
+        let (u, s) = (&self.u[..n], &self.s[..n]);
+        let limits = [self.stop_accel, self.stop_jerk];
+        if u.iter()
+            .chain(s)
+            .chain(&self.s_before)
+            .chain(&limits)
+            .any(|v| !v.is_finite())
+        {
+            return Err(RecordError::NotFinite);
+        }
+        if limits.iter().any(|v| *v <= 0.0) {
+            return Err(RecordError::NegativeFeed);
+        }
+        if u.windows(2).any(|w| w[1] < w[0]) {
+            return Err(RecordError::ParameterOrder);
+        }
+        let mut previous = f64::NEG_INFINITY;
+        for k in 0..n + 2 {
+            let v = self.s_history(k);
+            if v < previous {
+                return Err(RecordError::NegativeFeed);
+            }
+            previous = v;
+        }
+        Ok(())
+    }
+}

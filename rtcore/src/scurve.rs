@@ -65,12 +65,18 @@ impl SCurve {
     }
 
     pub fn table(&self) -> SCurveTable {
+        self.table_from(0.0)
+    }
+
+    /// The table of this profile started with tangential acceleration `accel_start` instead of
+    /// zero (a stop from the middle of a motion whose acceleration is not zero).
+    pub fn table_from(&self, accel_start: f64) -> SCurveTable {
         let mut starts = [0.0; PHASES + 1];
         let mut states = [SCurveState::default(); PHASES + 1];
         states[0] = SCurveState {
             s: 0.0,
             v: self.feed_start,
-            a: 0.0,
+            a: accel_start,
             j: self.jerks[0],
         };
         for k in 0..PHASES {
@@ -114,9 +120,79 @@ impl SCurveTable {
     }
 }
 
+/// Jerk-limited stop from feed `v0` and tangential acceleration `a0` to rest: jerk `-jerk` until
+/// the deceleration reaches its peak (at most `accel`), constant deceleration, jerk `+jerk` back
+/// to zero acceleration as the feed reaches zero. Returns the profile (phases 0-2, run with
+/// [`SCurve::table_from`]`(a0)`). Where even releasing at once would cross zero feed (already
+/// braking harder than `jerk` can release), the release jerk is raised to `a0^2 / (2 v0)`:
+/// the only stop without reversing. No feed: a stop of zero length.
+pub fn stop_from(v0: f64, a0: f64, accel: f64, jerk: f64) -> SCurve {
+    let mut p = SCurve {
+        feed_start: v0.max(0.0),
+        ..SCurve::default()
+    };
+    let (v0, a0) = (v0.max(0.0), if v0 > 0.0 { a0 } else { 0.0 });
+    if !(v0 > 0.0 && accel > 0.0 && jerk > 0.0 && a0.is_finite() && v0.is_finite()) {
+        return p;
+    }
+    // Feed reached if the acceleration were released to zero from a0 with jerk `jerk` (a0 < 0).
+    let peak = libm::sqrt(jerk * v0 + 0.5 * a0 * a0);
+    if a0 < 0.0 && v0 - a0 * a0 / (2.0 * jerk) <= 0.0 {
+        let j = a0 * a0 / (2.0 * v0);
+        p.durations[2] = -a0 / j;
+        p.jerks[2] = j;
+        return p;
+    }
+    let x = peak.min(accel).max(-a0.min(0.0));
+    let t1 = (a0 + x) / jerk;
+    let t3 = x / jerk;
+    // Feed left after the two ramps; the rest is covered at constant deceleration x.
+    let rest = v0 + (a0 * a0 - x * x) / (2.0 * jerk) - x * x / (2.0 * jerk);
+    let t2 = if x > 0.0 { (rest / x).max(0.0) } else { 0.0 };
+    p.durations[0] = t1.max(0.0);
+    p.durations[1] = t2;
+    p.durations[2] = t3;
+    p.jerks[0] = -jerk;
+    p.jerks[2] = jerk;
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The stop from a non-zero acceleration ends at rest with zero acceleration, its feed never
+    /// negative, within the deceleration and jerk it was given.
+    #[test]
+    fn stop_from_any_acceleration_ends_at_rest() {
+        let (a, j) = (1.0e4, 6.0e4);
+        for v0 in [0.01, 1.0, 50.0, 400.0, 2500.0] {
+            for a0 in [-9.0e3, -3.0e3, -100.0, 0.0, 100.0, 3.0e3, 9.0e3] {
+                let p = stop_from(v0, a0, a, j);
+                let t = p.table_from(a0);
+                let end = t.end();
+                assert!(end.v.abs() < 1e-9 * (1.0 + v0), "v0 {v0} a0 {a0}: end feed {}", end.v);
+                assert!(
+                    end.a.abs() < 1e-6 * (1.0 + a0.abs()),
+                    "v0 {v0} a0 {a0}: end accel {}",
+                    end.a
+                );
+                let n = 2000;
+                for k in 0..=n {
+                    let st = t.state_at(t.total_time() * k as f64 / n as f64);
+                    assert!(st.v >= -1e-9 * (1.0 + v0), "v0 {v0} a0 {a0}: feed {}", st.v);
+                    assert!(
+                        st.a >= -a * (1.0 + 1e-12) || st.a >= a0 - 1e-9,
+                        "v0 {v0} a0 {a0}: accel {}",
+                        st.a
+                    );
+                }
+                assert!(p.jerks.iter().all(|x| x.abs() <= j * (1.0 + 1e-12)) || a0 * a0 / (2.0 * v0) > j);
+            }
+        }
+        // Zero feed: nothing to do.
+        assert_eq!(stop_from(0.0, 5.0, a, j).table().total_time(), 0.0);
+    }
 
     #[test]
     fn symmetric_profile_reaches_peak_and_returns() {

@@ -1,5 +1,6 @@
 #!/bin/bash
-# path_test.sh TOOLPATH: the product end to end in real LinuxCNC. nurbs-planner plans TOOLPATH
+# path_test.sh TOOLPATH [PLANNER]: the product end to end in real LinuxCNC. nurbs-planner plans TOOLPATH
+# (with PLANNER, erwinski or vpop; default erwinski)
 # and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
 # thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full
 # precision. Checks (check_path.py, nurbs-plan verify): the samples are the offline
@@ -9,14 +10,15 @@ here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
 toolpath=$(realpath "$1")
+planner=${2:-erwinski}
 PERIOD=0.00025
 LIMITS="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" --out "$work/offline.csv"
 SAMPLES=$(($(wc -l <"$work/offline.csv") - 1))
-sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD|g" \
+sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD --planner $planner|g" \
     -e "s|@SAMPLES@|$SAMPLES|g" -e "s|@WORK@|$work|g" \
     "$here/path.hal.in" >"$work/path.hal"
 

@@ -1,5 +1,8 @@
 #!/bin/bash
-# underrun_test.sh unload|freeze: a planner that falls behind, in real LinuxCNC. nurbs-planner
+# underrun_test.sh unload|freeze [PLANNER TOOLPATH KILL_AFTER]: a planner that falls behind, in
+# real LinuxCNC (PLANNER erwinski, the default, or vpop: then the module stops from the end of a
+# path block, where the acceleration is not zero, and the feed may rise before it falls;
+# TOOLPATH default examples/butterfly.json, cut after KILL_AFTER s, default 1). nurbs-planner
 # streams the butterfly with a 0.1 s margin (limits and period from halfiles/sim.ini, the same as
 # $LIMITS below); after 1 s it is either unloaded (SIGTERM; a second nurbs-planner is started
 # later) or frozen (SIGSTOP, by its pid; later continued with SIGCONT and it must notice the
@@ -14,27 +17,29 @@ here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
 mode=$1
+planner=${2:-erwinski}
+toolpath=$(realpath "${3:-$here/../../examples/butterfly.json}")
+kill_after=${4:-1}
 case $mode in
     unload)
         cut="unloadusr nurbs-planner"
-        replan="loadusr -W nurbs-planner @TOOLPATH@ --ini @INI@ --margin 2" ;;
+        replan="loadusr -W nurbs-planner @TOOLPATH@ --ini @INI@ --margin 2 --planner $planner" ;;
     freeze)
         cut="loadusr -w @WORK@/signal.sh STOP"
         replan="loadusr -w @WORK@/signal.sh CONT\nloadusr -w @WORK@/wait-ready.sh" ;;
     *) echo "usage: underrun_test.sh unload|freeze"; exit 2 ;;
 esac
 
-toolpath=$(realpath "$here/../../examples/butterfly.json")
 PERIOD=0.00025
 JERK=6e4
 LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" --out "$work/offline.csv"
 sed -e "s|@CUT@|$cut|" -e "s|@REPLAN@|$replan|" -e "s|@TOOLPATH@|$toolpath|g" \
     -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
-    -e "s|@MARGIN@|0.1|g" -e "s|@KILL_AFTER@|1|g" -e "s|@WORK@|$work|g" \
+    -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner|g" -e "s|@KILL_AFTER@|$kill_after|g" -e "s|@WORK@|$work|g" \
     "$here/underrun.hal.in" >"$work/underrun.hal"
 
 cat >"$work/signal.sh" <<'SH'
@@ -56,7 +61,8 @@ chmod 755 "$work/signal.sh" "$work/wait-ready.sh"
 hal_session "$work/underrun.hal" "$work/halrun.log"
 cat "$work/halrun.log"
 python3 "$here/check_underrun.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
-    --period $PERIOD --jerk $JERK --recorded-csv "$work/recorded.csv" --resumed "$work/resumed.txt"
+    --period $PERIOD --jerk $JERK --recorded-csv "$work/recorded.csv" --resumed "$work/resumed.txt" \
+    $([ "$planner" = vpop ] && echo --stop-from-acceleration)
 verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
 echo "$verify"
 if grep "^VIOLATION" <<<"$verify"; then

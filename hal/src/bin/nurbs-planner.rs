@@ -7,8 +7,11 @@
 //!
 //! ```text
 //! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
-//!               (--period S | --ini FILE) [--margin S]
+//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop]
 //! ```
+//! `--planner vpop` plans with VPOp (one tool-tip position per servo period, 2-/3-axis paths)
+//! and sends the positions as path blocks, which the module outputs exactly; the default
+//! `erwinski` sends S-curve segment records.
 //! With `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given on
 //! the command line win. The period must equal the servo thread's for the motion to be the one
@@ -31,15 +34,16 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
-use nurbs_hal::channel::{Channel, ChannelError, SegmentRecord, StopPoint};
+use nurbs_hal::channel::{Channel, ChannelError, Slot, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
 use nurbs_hal::user::{install_signal_handlers, stopped, Component};
 
 #[path = "../plan_geometry.rs"]
 mod plan_geometry;
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::{plan, Limits, PlanOptions};
+use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
+use plan_geometry::PlannerKind;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -78,6 +82,25 @@ struct Args {
     /// boundary and lowers it where the axis limits need it.
     #[arg(long, default_value_t = 1.0)]
     stop_fraction: f64,
+    /// Planner: `erwinski` (S-curve segments, streamed as records) or `vpop` (per-period
+    /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
+    #[arg(long, value_enum, default_value_t = Planner::Erwinski)]
+    planner: Planner,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum Planner {
+    Erwinski,
+    Vpop,
+}
+
+impl From<Planner> for PlannerKind {
+    fn from(p: Planner) -> PlannerKind {
+        match p {
+            Planner::Erwinski => PlannerKind::Erwinski,
+            Planner::Vpop => PlannerKind::Vpop,
+        }
+    }
 }
 
 /// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).
@@ -167,7 +190,7 @@ fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
 /// Streams planned records into the ring within the time margin.
 struct Streamer<'a> {
     channel: &'a Channel,
-    records: Vec<SegmentRecord>,
+    records: Vec<Slot>,
     /// `ends[k]`: motion time of records 0..k.
     ends: Vec<f64>,
     sent: usize,
@@ -211,9 +234,8 @@ fn start_motion<'a>(
     channel: &'a Channel,
     from: Option<&StopPoint>,
 ) -> Result<Streamer<'a>, String> {
-    let plan = match from {
-        None => plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?,
-        Some(p) => {
+    if let Some(p) = from {
+        {
             eprintln!(
                 "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
                 match p.cause {
@@ -225,21 +247,24 @@ fn start_motion<'a>(
                 p.u,
                 p.seq
             );
-            plan_geometry::plan_from_stop(toolpath, limits, p)?
         }
-    };
-    eprintln!(
-        "nurbs-planner: {} segments, motion {:.6} s, planned in {:.3} s",
-        plan.records.len(),
-        plan.motion_time,
-        plan.plan_time
-    );
-    let (geometry, stops) = plan_geometry::geometry(toolpath, &plan, args.stop_fraction)?;
+    }
+    let motion = plan_geometry::motion(toolpath, limits, args.planner.into(), from, args.stop_fraction)?;
+    eprintln!("nurbs-planner: {}", motion.summary);
+    let stops = &motion.stops;
     let worst = stops.iter().map(|c| c.ratio).fold(0.0, f64::max);
+    let stored = stops.iter().filter(|c| c.stored > 0).count();
     eprintln!(
-        "nurbs-planner: underrun stops checked after every segment: worst {:.4} x an axis limit{}",
+        "nurbs-planner: underrun stops checked after every record: worst {:.4} x an axis limit{}{}",
         worst,
-        if worst <= 1.0 {
+        if stored > 0 {
+            format!(" ({stored} of them VPOp's own deceleration, stored with the geometry)")
+        } else {
+            String::new()
+        },
+        // The verifier's rounding slack: stored VPOp positions are evaluated by the module's
+        // de Boor code, which rounds differently from VPOp's power basis.
+        if worst <= 1.0 + nurbs_motion::planner::verify::SLACK {
             ""
         } else {
             " (EXCEEDS the limits at some boundary)"
@@ -260,16 +285,16 @@ fn start_motion<'a>(
             return Err("the stop point was withdrawn (abort) while planning from it".into());
         }
     }
-    geometry.publish(channel)?;
+    motion.geometry.publish(channel)?;
     let mut ends = vec![0.0];
     let mut t = 0.0;
-    for r in &plan.records {
-        t += r.profile().total_time();
+    for d in &motion.durations {
+        t += d;
         ends.push(t);
     }
     let mut streamer = Streamer {
         channel,
-        records: plan.records,
+        records: motion.slots,
         ends,
         sent: 0,
         margin: args.margin,
@@ -282,6 +307,10 @@ fn start_motion<'a>(
 
 fn run(args: &Args) -> Result<(), String> {
     let toolpath = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
+    if args.planner == Planner::Vpop {
+        // Before touching HAL: a clear refusal, not a half-started component.
+        plan_geometry::check_tip_path(&toolpath)?;
+    }
     let limits = limits(args, toolpath.tip_dim())?;
 
     let comp = Component::new("nurbs-planner")?;

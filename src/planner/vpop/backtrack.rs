@@ -43,6 +43,9 @@ pub struct SearchOptions {
     /// Share of the chord-error step cap (estimate kappa l^2 / 8) used as a first cap; the
     /// committed steps are checked with the exact chord error.
     pub chord_scale: f64,
+    /// Start from rest at this element and curve parameter instead of the path start (the
+    /// rest of a path after a stop on it). The first point carries `u` exactly.
+    pub start: Option<(usize, f64)>,
 }
 
 impl Default for SearchOptions {
@@ -53,6 +56,7 @@ impl Default for SearchOptions {
             brake_fraction: 0.9,
             switch_fraction: 0.5,
             chord_scale: 0.9,
+            start: None,
         }
     }
 }
@@ -223,6 +227,30 @@ impl Search<'_, '_, '_> {
         (w, full)
     }
 
+    /// The positions of the deceleration sequence of [`Self::brakes`] from `h`, to rest (the
+    /// machine stays at the last one), or `None` where it does not reach rest.
+    pub fn brake_points(&mut self, mut h: History) -> Option<Vec<PathPoint>> {
+        let l = self.stepper.limits;
+        let vmax = l.feed.max(l.velocity.iter().copied().fold(0.0, f64::max));
+        let amin = l.min_accel();
+        let limit = (10.0 * (vmax / amin + amin / l.min_jerk()) / l.period) as usize + 100;
+        let mut points = Vec::new();
+        for _ in 0..limit.min(self.options.max_steps) {
+            if h.is_rest() {
+                return Some(points);
+            }
+            let (target, jw) = self.brake_target(&h);
+            if let Some(p) = self.finish_point(&h, jw) {
+                points.push(p);
+                return Some(points);
+            }
+            let p = self.brake_step_to(&h, target)?;
+            points.push(p);
+            h.push(p);
+        }
+        None
+    }
+
     fn brakes_after(&mut self, h: &History, p: PathPoint) -> bool {
         let mut n = *h;
         n.push(p);
@@ -327,7 +355,13 @@ impl Search<'_, '_, '_> {
     pub fn run(&mut self) -> Result<Vec<PathPoint>, String> {
         let path = self.stepper.path;
         let end = path.end();
-        let mut points = vec![path.eval(0.0)];
+        let first = match self.options.start {
+            None => path.eval(0.0),
+            Some((element, u)) => path
+                .eval_at(element, u)
+                .ok_or_else(|| format!("start point (element {element}, u = {u}) is not on the path"))?,
+        };
+        let mut points = vec![first];
         let mut safe = 0usize;
         let mut careful = false;
         let mut stalls = 0usize;

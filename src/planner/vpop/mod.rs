@@ -77,6 +77,27 @@ pub fn plan_five_axis(
     run(&path, limits, options)
 }
 
+/// VPOp's own deceleration sequence from the motion state given by its last three points
+/// (oldest first) to rest: the positions of the periods that follow, the machine staying at the
+/// last one. Every step passes the same constraints as a planned step. `None` where the
+/// sequence does not reach rest.
+pub fn brake_points(
+    path: &JointPath,
+    limits: &Limits,
+    options: SearchOptions,
+    last: [PathPoint; 3],
+) -> Result<Option<Vec<PathPoint>>, VpopError> {
+    let limits = limits.for_axes(path.axes()).map_err(VpopError::Limits)?;
+    let stepper = constraints::Stepper::new(path, &limits);
+    let mut search = backtrack::Search {
+        stepper: &stepper,
+        options,
+        stats: SearchStats::default(),
+        last_fraction: None,
+    };
+    Ok(search.brake_points(constraints::History { p: last }))
+}
+
 /// Plans along any [`JointPath`].
 pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<VpopPlan, VpopError> {
     let started = Instant::now();

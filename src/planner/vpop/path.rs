@@ -163,6 +163,18 @@ impl<'a> JointPath<'a> {
         PathPoint { w, element, u, q, tip }
     }
 
+    /// The point at element `element`, curve parameter `u` exactly (its `w` is where that
+    /// lies on the path); `None` off the path.
+    pub fn eval_at(&self, element: usize, u: f64) -> Option<PathPoint> {
+        let &(a, b) = self.spans.get(element)?;
+        if !(u >= a && u <= b) {
+            return None;
+        }
+        let w = element as f64 + if b > a { (u - a) / (b - a) } else { 0.0 };
+        let p = self.fast[element].eval(u, 0)[0];
+        Some(self.point_at(w, element, u, &p))
+    }
+
     /// Joint positions and tool tip at `w`.
     pub fn eval(&self, w: f64) -> PathPoint {
         let (element, u) = self.locate(w);

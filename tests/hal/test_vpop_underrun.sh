@@ -1,0 +1,8 @@
+#!/bin/bash
+# Underrun of a VPOp motion in real LinuxCNC: the planner (--planner vpop) streaming the trident
+# is unloaded 0.4 s into the motion; the module stops from the end of the last path block it has
+# (non-zero acceleration; the stop the planner checked there, tangential or VPOp's own stored
+# deceleration), a second planner re-plans with VPOp from the stop point and the resume command
+# runs it to the end (see underrun_test.sh).
+here=$(cd "$(dirname "$0")" && pwd)
+exec bash "$here/underrun_test.sh" unload vpop "$here/../../examples/trident.json" 0.4
