@@ -1202,6 +1202,7 @@ mod blocks {
         let rounded = nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001).unwrap();
         let elements = rounded.toolpath.elements.len();
         assert!(elements >= 9, "{elements} elements");
+        println!("{elements} elements");
         let job = block_job_for("rounded polyline", rounded.toolpath, false);
         let curves_of_blocks: std::collections::BTreeSet<usize> = job.blocks.iter().map(|b| b.curve()).collect();
         assert_eq!(curves_of_blocks.len(), elements, "every element has blocks of its own");
