@@ -1,8 +1,10 @@
 //! Per-period cost of `nurbs_interp.update`: `cargo bench -p nurbs-hal --features mock-hal`.
 //!
 //! The module runs on the in-process mock HAL (pins are plain memory there, as in HAL), fed with
-//! the butterfly's plan; every measured call is one servo period of the running motion (a
-//! finished motion is restarted outside the measurement).
+//! the Erwinski plans of the trident and the butterfly (segment records: RK2-PC every period)
+//! and the trident's VPOp plan (path blocks: a curve point every period); every measured call
+//! is one servo period of the running motion (a finished motion is restarted outside the
+//! measurement).
 
 use std::time::{Duration, Instant};
 
@@ -10,7 +12,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_hal::channel::Channel;
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
-use nurbs_hal::record::{SegmentRecord, Slot};
+use nurbs_hal::record::Slot;
 use nurbs_hal::user::Component;
 use nurbs_motion::planner::{plan, Limits, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
@@ -21,9 +23,9 @@ mod plan_geometry;
 
 const PERIOD_NS: i64 = 250_000;
 
-fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize {
-    while let Some(r) = records.get(from) {
-        if channel.segments.push(&Slot::segment(r)).is_err() {
+fn fill(channel: &Channel, slots: &[Slot], mut from: usize) -> usize {
+    while let Some(r) = slots.get(from) {
+        if channel.segments.push(r).is_err() {
             break;
         }
         from += 1;
@@ -36,14 +38,23 @@ fn done() -> bool {
 }
 
 fn bench_update(c: &mut Criterion) {
-    for name in ["trident", "butterfly"] {
+    for (name, blocks) in [("trident", false), ("butterfly", false), ("trident", true)] {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../examples")
             .join(format!("{name}.json"));
         let toolpath = read_toolpath(&path).unwrap();
         let limits = Limits::uniform(toolpath.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
-        let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
-        let (geometry, _) = plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+        let (geometry, slots, label) = if blocks {
+            let plan = plan_geometry::vpop_plan(&toolpath, &limits, None).unwrap();
+            let (geometry, blocks, _) = plan_geometry::block_geometry(&toolpath, &plan, None, 1.0).unwrap();
+            let slots: Vec<Slot> = blocks.iter().map(Slot::block).collect();
+            (geometry, slots, format!("update/{name} (VPOp blocks)"))
+        } else {
+            let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
+            let (geometry, _) = plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+            let slots: Vec<Slot> = plan.records.iter().map(Slot::segment).collect();
+            (geometry, slots, format!("update/{name}"))
+        };
 
         mock::reset();
         assert_eq!(unsafe { rtapi_app_main() }, 0);
@@ -60,7 +71,7 @@ fn bench_update(c: &mut Criterion) {
             *sent = 0;
         };
         restart(&mut sent);
-        c.bench_function(&format!("update/{name}"), |b| {
+        c.bench_function(&label, |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
                 for _ in 0..iters {
@@ -68,7 +79,7 @@ fn bench_update(c: &mut Criterion) {
                         restart(&mut sent);
                     }
                     if channel.segments.len() < 64 {
-                        sent = fill(channel, &plan.records, sent);
+                        sent = fill(channel, &slots, sent);
                     }
                     let t = Instant::now();
                     unsafe { mock::call(update, PERIOD_NS as _) };
