@@ -134,29 +134,19 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
             .slots
             .get((tail & Self::MASK) as usize)
             .ok_or(ChannelError::Corrupt)?;
-        // SAFETY: as in `pop`: the slot is inside [tail, head).
+        // SAFETY: the slot is inside [tail, head): the producer finished writing it.
         Ok(Some(unsafe { slot.get().read_volatile() }))
     }
 
     /// Consumer side: take the oldest record. Never allocates, locks or panics.
     pub fn pop(&self) -> Result<Option<T>, ChannelError> {
-        let tail = self.tail.0.load(Ordering::Relaxed);
-        let head = self.head.0.load(Ordering::Acquire);
-        let used = head.wrapping_sub(tail) as usize;
-        if used == 0 {
-            return Ok(None);
+        let record = self.peek()?;
+        if record.is_some() {
+            // Only the consumer stores `tail`: the value `peek` read is still current.
+            let tail = self.tail.0.load(Ordering::Relaxed);
+            self.tail.0.store(tail.wrapping_add(1), Ordering::Release);
         }
-        if used > N {
-            return Err(ChannelError::Corrupt);
-        }
-        let slot = self
-            .slots
-            .get((tail & Self::MASK) as usize)
-            .ok_or(ChannelError::Corrupt)?;
-        // SAFETY: the slot is inside [tail, head): the producer finished writing it.
-        let record = unsafe { slot.get().read_volatile() };
-        self.tail.0.store(tail.wrapping_add(1), Ordering::Release);
-        Ok(Some(record))
+        Ok(record)
     }
 }
 

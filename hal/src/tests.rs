@@ -1145,11 +1145,9 @@ mod blocks {
         assert!(report.violations.is_empty(), "violations: {:?}", report.violations);
     }
 
-    #[test]
-    fn vpop_blocks_run_exactly_the_planned_positions_without_allocating() {
-        let _guard = lock_module();
-        let job = block_job("trident.json");
-        let (_planner, channel) = load();
+    /// Publishes `job` and plays it to the end, queueing blocks as a planner would; returns the
+    /// samples, after checking that no period allocated.
+    fn play_all(job: &BlockJob, channel: &Channel) -> Vec<[f64; 5]> {
         mock::set_pin("nurbs_interp.enable", Value::Bit(true));
         job.geometry.publish(channel).unwrap();
         let (mut sent, mut got, mut allocated) = (0, Vec::new(), 0);
@@ -1162,12 +1160,12 @@ mod blocks {
             got.extend(s);
         }
         assert_eq!(allocated, 0, "the update path allocated");
-        assert!(allocations() > 0, "the counting allocator is not in use");
-        assert!(
-            !bit("nurbs_interp.fault"),
-            "fault {}",
-            u32_pin("nurbs_interp.fault-code")
-        );
+        got
+    }
+
+    /// One sample per planned period, each VPOp's parameter and (to 1e-9 mm) position; returns
+    /// the largest distance.
+    fn assert_exact(job: &BlockJob, got: &[[f64; 5]]) -> f64 {
         assert_eq!(got.len(), job.plan.points.len(), "one sample per planned period");
         let mut worst = 0.0f64;
         for (k, (g, p)) in got.iter().zip(&job.plan.points).enumerate() {
@@ -1176,6 +1174,22 @@ mod blocks {
             worst = worst.max(d);
             assert!(d <= 1e-9, "sample {k}: {d:e} mm from the VPOp position");
         }
+        worst
+    }
+
+    #[test]
+    fn vpop_blocks_run_exactly_the_planned_positions_without_allocating() {
+        let _guard = lock_module();
+        let job = block_job("trident.json");
+        let (_planner, channel) = load();
+        let got = play_all(&job, channel);
+        assert!(allocations() > 0, "the counting allocator is not in use");
+        assert!(
+            !bit("nurbs_interp.fault"),
+            "fault {}",
+            u32_pin("nurbs_interp.fault-code")
+        );
+        let worst = assert_exact(&job, &got);
         println!("largest distance to VPOp's positions: {worst:e} mm");
         assert_verifies(&job, &got);
         assert!(bit("nurbs_interp.done"));
@@ -1207,29 +1221,13 @@ mod blocks {
         let curves_of_blocks: std::collections::BTreeSet<usize> = job.blocks.iter().map(|b| b.curve()).collect();
         assert_eq!(curves_of_blocks.len(), elements, "every element has blocks of its own");
         let (_planner, channel) = load();
-        mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-        job.geometry.publish(channel).unwrap();
-        let (mut sent, mut got, mut allocated) = (0, Vec::new(), 0);
-        for _ in 0..job.plan.points.len() + 50 {
-            if channel.segments.len() < 4 {
-                sent = push_blocks(channel, &job.blocks[..(sent + 8).min(job.blocks.len())], sent);
-            }
-            let (s, a) = period();
-            allocated += a;
-            got.extend(s);
-        }
-        assert_eq!(allocated, 0, "the update path allocated");
+        let got = play_all(&job, channel);
         assert!(
             !bit("nurbs_interp.fault"),
             "fault {}",
             u32_pin("nurbs_interp.fault-code")
         );
-        assert_eq!(got.len(), job.plan.points.len(), "one sample per planned period");
-        for (k, (g, p)) in got.iter().zip(&job.plan.points).enumerate() {
-            assert_eq!((g[3], g[4] as usize), (p.u, p.element), "sample {k}: parameter");
-            let d = (g[0] - p.tip[0]).hypot(g[1] - p.tip[1]);
-            assert!(d <= 1e-9, "sample {k}: {d:e} mm from the VPOp position");
-        }
+        assert_exact(&job, &got);
         assert_verifies(&job, &got);
         assert!(bit("nurbs_interp.done"));
         // Known limitation: the module's stop runs on one curve and ends at rest by its end at

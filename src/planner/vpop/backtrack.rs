@@ -69,6 +69,18 @@ pub struct Search<'s, 'p, 'a> {
     pub last_fraction: Option<f64>,
 }
 
+impl<'s, 'p, 'a> Search<'s, 'p, 'a> {
+    /// A search on `stepper` with no statistics yet.
+    pub fn new(stepper: &'s Stepper<'p, 'a>, options: SearchOptions) -> Self {
+        Search {
+            stepper,
+            options,
+            stats: SearchStats::default(),
+            last_fraction: None,
+        }
+    }
+}
+
 impl Search<'_, '_, '_> {
     fn history(points: &[PathPoint], k: usize) -> History {
         let at = |i: isize| points[i.max(0) as usize];

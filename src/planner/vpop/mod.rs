@@ -89,12 +89,7 @@ pub fn brake_points(
 ) -> Result<Option<Vec<PathPoint>>, VpopError> {
     let limits = limits.for_axes(path.axes()).map_err(VpopError::Limits)?;
     let stepper = constraints::Stepper::new(path, &limits);
-    let mut search = backtrack::Search {
-        stepper: &stepper,
-        options,
-        stats: SearchStats::default(),
-        last_fraction: None,
-    };
+    let mut search = backtrack::Search::new(&stepper, options);
     Ok(search.brake_points(constraints::History { p: last }))
 }
 
@@ -103,12 +98,7 @@ pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<
     let started = Instant::now();
     let limits = limits.for_axes(path.axes()).map_err(VpopError::Limits)?;
     let stepper = constraints::Stepper::new(path, &limits);
-    let mut search = backtrack::Search {
-        stepper: &stepper,
-        options,
-        stats: SearchStats::default(),
-        last_fraction: None,
-    };
+    let mut search = backtrack::Search::new(&stepper, options);
     let points = search.run().map_err(VpopError::Search)?;
     let stats = search.stats;
     Ok(VpopPlan {
