@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 5
+#define CHANNEL_VERSION 6
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -36,12 +36,14 @@
 
 /**
  * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
- * together, and the stop sequences of path blocks): 8 MiB. The curves need little (e.g. 64
- * cubic 3-D curves of 250 control points each: 64,000 values; the butterfly: 208); the stored
- * VPOp deceleration sequences need two values per period of each (the butterfly at lab set 1:
- * 693,416 values in all).
+ * together, the per-record stop table and the stored stop sequences): 8 MiB. The curves need
+ * little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
+ * 208); a stored stop sequence needs two values per period and three per element it runs on
+ * (the butterfly's VPOp blocks at lab set 1: 695,225 values in all).
  */
 #define GEOMETRY_VALUES (1 << 20)
+
+#define RecordStop_VALUES 4
 
 /**
  * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
@@ -70,6 +72,11 @@
  * [`Slot::kind`] of a [`PathBlock`].
  */
 #define KIND_BLOCK 2
+
+/**
+ * Arena values of the header.
+ */
+#define StopRun_VALUES 3
 
 /**
  * One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
@@ -135,7 +142,7 @@ typedef struct PathBlock {
   /**
    * Non-zero: the stop after this block is not the tangential one but `stop_len` planned
    * positions (the planner's own deceleration sequence, to rest) stored in the geometry
-   * arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+   * arena as [`StopRun`]s from value `stop_offset`; it may go on across element joins.
    */
   uint32_t stop_len;
   uint32_t stop_offset;
@@ -202,8 +209,8 @@ typedef struct GeometryHeader {
    */
   uint32_t tip_axes;
   /**
-   * Per-record stop limits in the arena: `(accel, jerk)` of the stop after record `seq` at
-   * values `2 seq`, `2 seq + 1` (chosen by the planner, which checked that stop); records
+   * Per-record stop table in the arena: the [`RecordStop`] after record `seq` at values
+   * `RecordStop::VALUES * seq ..` (chosen by the planner, which checked that stop); records
    * beyond the table use `stop_accel`, `stop_jerk`.
    */
   uint32_t stop_table_offset;

@@ -32,17 +32,17 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 5;
+pub const CHANNEL_VERSION: u32 = 6;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
 /// Most curves (path elements) one geometry can hold.
 pub const MAX_CURVES: usize = 64;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together, and the stop sequences of path blocks): 8 MiB. The curves need little (e.g. 64
-/// cubic 3-D curves of 250 control points each: 64,000 values; the butterfly: 208); the stored
-/// VPOp deceleration sequences need two values per period of each (the butterfly at lab set 1:
-/// 693,416 values in all).
+/// together, the per-record stop table and the stored stop sequences): 8 MiB. The curves need
+/// little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
+/// 208); a stored stop sequence needs two values per period and three per element it runs on
+/// (the butterfly's VPOp blocks at lab set 1: 695,225 values in all).
 pub const GEOMETRY_VALUES: usize = 1 << 20;
 
 /// Why a channel cannot be used.
@@ -341,8 +341,8 @@ pub struct GeometryHeader {
     pub curve_count: u32,
     /// Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
     pub tip_axes: u32,
-    /// Per-record stop limits in the arena: `(accel, jerk)` of the stop after record `seq` at
-    /// values `2 seq`, `2 seq + 1` (chosen by the planner, which checked that stop); records
+    /// Per-record stop table in the arena: the [`RecordStop`] after record `seq` at values
+    /// `RecordStop::VALUES * seq ..` (chosen by the planner, which checked that stop); records
     /// beyond the table use `stop_accel`, `stop_jerk`.
     pub stop_table_offset: u32,
     pub stop_table_len: u32,
@@ -395,6 +395,46 @@ pub struct ValidCurve<'a> {
     pub stops: &'a [f64],
 }
 
+/// The stop after one segment record, as the planner chose and checked it: an entry of the
+/// per-record stop table, [`RecordStop::VALUES`] values.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RecordStop {
+    /// Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
+    pub accel: f64,
+    pub jerk: f64,
+    /// Non-zero: instead, the planner's stop sequence of this many positions, stored as
+    /// [`StopRun`](nurbs_rtcore::StopRun)s from arena value `stored_offset`.
+    pub stored_len: u32,
+    pub stored_offset: u32,
+}
+
+impl RecordStop {
+    pub const VALUES: usize = 4;
+
+    pub fn to_values(&self) -> [f64; Self::VALUES] {
+        [self.accel, self.jerk, self.stored_offset as f64, self.stored_len as f64]
+    }
+
+    /// The entry stored in `values`; `None` unless the limits are positive and finite and the
+    /// offset and length whole numbers below 2^32.
+    pub fn from_values(values: &[f64]) -> Option<Self> {
+        let &[accel, jerk, offset, len] = values.get(..Self::VALUES)? else {
+            return None;
+        };
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        let whole = |x: f64| (0.0..=u32::MAX as f64).contains(&x) && x == (x as u32) as f64;
+        if !(positive(accel) && positive(jerk) && whole(offset) && whole(len)) {
+            return None;
+        }
+        Some(RecordStop {
+            accel,
+            jerk,
+            stored_len: len as u32,
+            stored_offset: offset as u32,
+        })
+    }
+}
+
 /// Validated curves of a geometry, indexed like the records' curve numbers.
 pub type CurveViews<'a> = [Option<ValidCurve<'a>>; MAX_CURVES];
 
@@ -426,7 +466,11 @@ pub fn validate_geometry<'a>(
         return Err(GeometryFault::StopLimits);
     }
     let table = slice_of(values, header.stop_table_offset, header.stop_table_len)
-        .filter(|t| t.len() % 2 == 0 && t.iter().all(|v| positive(*v)))
+        .filter(|t| {
+            t.len() % RecordStop::VALUES == 0
+                && t.chunks_exact(RecordStop::VALUES)
+                    .all(|e| RecordStop::from_values(e).is_some())
+        })
         .ok_or(GeometryFault::StopLimits)?;
     for (curve, (desc, slot)) in header.curves.iter().zip(out.iter_mut()).take(count).enumerate() {
         let (Some(knots), Some(points), Some(weights), Some(stops)) = (

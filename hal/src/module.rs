@@ -69,12 +69,12 @@ use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
 
 use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
-use nurbs_rtcore::CurveView;
+use nurbs_rtcore::{CurveView, StopRun};
 
 use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
-    validate_geometry, Channel, CurveViews, GeometryHeader, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
+    validate_geometry, Channel, CurveViews, GeometryHeader, RecordStop, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
 };
 use crate::pins::Pin;
 use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
@@ -153,9 +153,9 @@ pub struct RtGeometry {
     tip: usize,
     stop_accel: f64,
     stop_jerk: f64,
-    /// `(accel, jerk)` of the stop after each record, by sequence number.
+    /// The stop after each record, by sequence number ([`RecordStop`] entries).
     stop_table: &'static [f64],
-    /// The geometry arena (stored stop sequences of path blocks).
+    /// The geometry arena (stored stop sequences).
     values: &'static [f64],
     views: CurveViews<'static>,
 }
@@ -176,13 +176,18 @@ impl RtGeometry {
         self.generation != 0
     }
 
-    /// Deceleration and jerk of the stop after record `seq`.
-    fn stop_limits(&self, seq: u32) -> (f64, f64) {
-        let i = (seq as usize).saturating_mul(2);
-        match (self.stop_table.get(i), self.stop_table.get(i.saturating_add(1))) {
-            (Some(&a), Some(&j)) => (a, j),
-            _ => (self.stop_accel, self.stop_jerk),
-        }
+    /// The stop after record `seq` (the default stop beyond the table).
+    fn record_stop(&self, seq: u32) -> RecordStop {
+        let i = (seq as usize).saturating_mul(RecordStop::VALUES);
+        self.stop_table
+            .get(i..)
+            .and_then(RecordStop::from_values)
+            .unwrap_or(RecordStop {
+                accel: self.stop_accel,
+                jerk: self.stop_jerk,
+                stored_len: 0,
+                stored_offset: 0,
+            })
     }
 }
 
@@ -263,7 +268,8 @@ enum Mode {
     Blocks = 2,
 }
 
-/// Playback state of a path-block motion (plain data).
+/// Playback state of a path-block motion, and of a stored stop sequence (after a block or a
+/// segment record; plain data).
 #[derive(Clone, Copy, Debug)]
 struct BlockPlayer {
     block: PathBlock,
@@ -281,9 +287,8 @@ struct BlockPlayer {
     s: f64,
     s_before: f64,
     point: [f64; 3],
-    /// Running a stored stop sequence: its arena offset and length, and samples output.
-    stored: Option<(usize, usize)>,
-    stored_index: usize,
+    /// Running a stored stop sequence: where it is read.
+    stored: Option<StoredCursor>,
 }
 
 impl BlockPlayer {
@@ -311,11 +316,37 @@ impl BlockPlayer {
         s_before: 0.0,
         point: [0.0; 3],
         stored: None,
-        stored_index: 0,
     };
 
     fn remaining(&self) -> usize {
         self.block.len().saturating_sub(self.index)
+    }
+}
+
+/// Where a stored stop sequence ([`StopRun`]s in the arena) is being read.
+#[derive(Clone, Copy, Debug)]
+struct StoredCursor {
+    /// The record or block it follows.
+    seq: u32,
+    /// Arena index of the next value to read (a run header when `run_left` is 0).
+    next: usize,
+    /// Positions of the sequence still to output.
+    left: usize,
+    /// Positions of the current run still to read.
+    run_left: usize,
+    /// The arc length before the run's first position, until that position is read.
+    run_s_before: Option<f64>,
+}
+
+impl StoredCursor {
+    fn new(seq: u32, offset: u32, len: u32) -> Self {
+        StoredCursor {
+            seq,
+            next: offset as usize,
+            left: len as usize,
+            run_left: 0,
+            run_s_before: None,
+        }
     }
 }
 
@@ -685,6 +716,9 @@ impl Instance {
                 }
             }
         }
+        if let (true, Some(cursor)) = (self.stopping, self.player.stored) {
+            return self.advance_stored_stop(channel, cursor);
+        }
         if self.mode == Mode::Blocks {
             return self.advance_blocks(channel, dt, hold, abort);
         }
@@ -780,9 +814,18 @@ impl Instance {
                     return false;
                 }
                 self.begin_stop(hold, abort);
+                let planned = self.geometry.record_stop(last.seq);
+                if planned.stored_len > 0 {
+                    // The planner's stop sequence from the last sample (which may cross a join).
+                    let held = self.held_by_interp();
+                    let player = &mut self.player;
+                    (player.curve, player.u, player.s, player.point) = (held.curve, held.u, held.s, held.point);
+                    let cursor = StoredCursor::new(last.seq, planned.stored_offset, planned.stored_len);
+                    player.stored = Some(cursor);
+                    return self.advance_stored_stop(channel, cursor);
+                }
                 let curve = self.geometry.views.get(last.curve()).copied().flatten();
-                let (accel, jerk) = self.geometry.stop_limits(last.seq);
-                let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
+                let mut stop = Some(underrun_stop(curve, &last, planned.accel, planned.jerk));
                 match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
                     Step::Sample(s) => {
                         self.output(&s);
@@ -838,9 +881,6 @@ impl Instance {
     /// without a next block (underrun) or under hold/abort, the stop from the block's end state
     /// along the curve, run by the interpolator.
     fn advance_blocks(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
-        if let (true, Some((offset, len))) = (self.stopping, self.player.stored) {
-            return self.advance_stored_stop(channel, offset, len);
-        }
         if self.stopping {
             return match self.interp.step(&self.geometry, dt, &mut || None) {
                 Step::Sample(s) => {
@@ -889,9 +929,9 @@ impl Instance {
                 let last = self.player.block;
                 if last.stop_len > 0 {
                     // The planner's own deceleration sequence, stored with the geometry.
-                    self.player.stored = Some((last.stop_offset as usize, last.stop_len as usize));
-                    self.player.stored_index = 0;
-                    return self.advance_blocks(channel, dt, hold, abort);
+                    let cursor = StoredCursor::new(last.seq, last.stop_offset, last.stop_len);
+                    self.player.stored = Some(cursor);
+                    return self.advance_stored_stop(channel, cursor);
                 }
                 let curve = self.geometry.views.get(last.curve()).copied().flatten();
                 let (stop, a0) = block_stop(curve, &last, dt);
@@ -912,43 +952,58 @@ impl Instance {
 
     /// One period of a stored stop sequence: the next position (checked as a block sample);
     /// after the last one, at rest there.
-    fn advance_stored_stop(&mut self, channel: &Channel, offset: usize, len: usize) -> bool {
+    fn advance_stored_stop(&mut self, channel: &Channel, mut c: StoredCursor) -> bool {
         let p = self.player;
-        let k = p.stored_index;
-        if k >= len {
+        if c.left == 0 {
             let held = Held {
                 curve: p.curve,
                 u: p.u,
                 s: p.s,
                 point: p.point,
             };
-            self.stop_over(channel, p.block.seq, held);
+            self.stop_over(channel, c.seq, held);
             return false;
         }
-        let at = offset.saturating_add(2 * k);
         let values = self.geometry.values;
+        let mut curve = p.curve;
+        if c.run_left == 0 {
+            let Some(run) = values.get(c.next..).and_then(StopRun::from_values) else {
+                self.fault = FaultCode::BlockPath;
+                return false;
+            };
+            c.next = c.next.saturating_add(StopRun::VALUES);
+            c.run_left = run.count;
+            c.run_s_before = Some(run.s_before);
+            curve = run.curve;
+        }
         let (Some(&u), Some(&s), Some(view)) = (
-            values.get(at),
-            values.get(at.saturating_add(1)),
-            self.geometry.curve(p.block.curve()),
+            values.get(c.next),
+            values.get(c.next.saturating_add(1)),
+            self.geometry.curve(curve),
         ) else {
             self.fault = FaultCode::BlockPath;
             return false;
         };
-        let point = view.point(u);
+        // On the same curve onwards from the last position, or at the start of a run on the
+        // next curve (across the join), where the run gives the step's start in its measure.
+        let s_before = c.run_s_before.take().unwrap_or(p.s);
+        let follows = if curve == p.curve {
+            u >= p.u && s_before == p.s
+        } else {
+            curve == p.curve.wrapping_add(1) && u >= view.u_min()
+        };
         let sample = Sample {
-            curve: p.block.curve(),
+            curve,
             u,
             s,
-            point,
+            point: view.point(u),
             feed: 0.0,
             accel: 0.0,
         };
         let here = self.point_of(&sample);
-        let ds = s - p.s;
         let chord = distance(&p.point, &here);
-        let on_curve = u.is_finite() && s.is_finite() && u >= p.u && u <= view.u_max();
-        if !(on_curve && step_fits(chord, ds)) {
+        let finite = u.is_finite() && s.is_finite();
+        if !(finite && follows && u <= view.u_max() && step_fits(chord, s - s_before)) {
             self.fault = FaultCode::BlockPath;
             return false;
         }
@@ -956,9 +1011,13 @@ impl Instance {
             feed: chord / self.period,
             ..sample
         });
+        c.next = c.next.saturating_add(2);
+        c.run_left = c.run_left.saturating_sub(1);
+        c.left = c.left.saturating_sub(1);
         let player = &mut self.player;
-        player.stored_index = k + 1;
-        player.s_before = p.s;
+        player.stored = Some(c);
+        player.curve = curve;
+        player.s_before = s_before;
         player.u = u;
         player.s = s;
         player.point = here;

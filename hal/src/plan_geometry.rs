@@ -8,7 +8,7 @@
 //! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
 //! check). That choice goes to the module as the per-record stop table.
 
-use nurbs_hal::channel::{validate_geometry, CurveViews, Slot, StopPoint, MAX_CURVES};
+use nurbs_hal::channel::{validate_geometry, CurveViews, RecordStop, Slot, StopPoint, MAX_CURVES};
 use nurbs_hal::module::{block_stop, underrun_stop};
 use nurbs_hal::record::{PathBlock, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
@@ -19,6 +19,7 @@ use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_rtcore::executor::{Interpolator, Step};
+use nurbs_rtcore::StopRun;
 
 /// Stop deceleration and jerk tried at each boundary, as fractions of the smallest axis
 /// acceleration and jerk, largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
@@ -69,8 +70,16 @@ pub struct StopChoice {
 /// Runs the plan through the interpolator and, at every segment boundary, the module's stop
 /// with each jerk fraction in `fractions` (largest first) and deceleration shares 1, 1/2, 1/4,
 /// 1/10 of it, until one stays within the limits; returns the choice per record (the least
-/// violating one where none does).
-pub fn choose_stops(toolpath: &Toolpath, plan: &Plan, valid: &CurveViews, fractions: &[f64]) -> Vec<StopChoice> {
+/// violating one where none does). Where none does (e.g. a boundary at an element join, where
+/// the module's stop would have to end on its curve at once), a stop sequence that goes on
+/// along the path ([`planned_then_brake`]) is checked the same way and returned with the
+/// arc length of the last sample it follows, if it does better.
+pub fn choose_stops(
+    toolpath: &Toolpath,
+    plan: &Plan,
+    valid: &CurveViews,
+    fractions: &[f64],
+) -> (Vec<StopChoice>, Vec<Option<(StoredStop, f64)>>) {
     let curves = PathCurves::new(toolpath);
     let limits = &plan.limits;
     let tip = limits.velocity.len();
@@ -78,10 +87,14 @@ pub fn choose_stops(toolpath: &Toolpath, plan: &Plan, valid: &CurveViews, fracti
     let mut interp = Interpolator::new();
     let mut fd = FiniteDifferences::new(tip, limits.period);
     let mut choices = Vec::with_capacity(plan.records.len());
+    // Every sample (curve, u, s), and the boundaries no tangential stop passes.
+    let mut samples: Vec<(usize, f64, f64)> = Vec::new();
+    let mut failing = Vec::new();
     for record in &plan.records {
         let mut pending = Some(*record);
         while let Step::Sample(s) = interp.step(&curves, limits.period, &mut || pending.take()) {
             fd.push(&s.point[..tip], limits);
+            samples.push((s.curve, s.u, s.s));
         }
         let Some(last) = interp.record().copied() else {
             break;
@@ -117,10 +130,25 @@ pub fn choose_stops(toolpath: &Toolpath, plan: &Plan, valid: &CurveViews, fracti
             }
         }
         if let Some(b) = best {
+            if b.ratio > 1.0 && !last.is_last() {
+                failing.push((choices.len(), samples.len(), fd));
+            }
             choices.push(b);
         }
     }
-    choices
+    let mut sequences: Vec<Option<(StoredStop, f64)>> = vec![None; choices.len()];
+    let path = JointPath::tip(toolpath);
+    let point = |i: usize| samples.get(i).and_then(|&(e, u, _)| path.eval_at(e, u));
+    for (k, end, fd) in failing {
+        let Some(from) = end.checked_sub(1).and_then(point) else {
+            continue;
+        };
+        if let Some(stored) = stored_stop(&path, &curves, limits, fd, &point, samples.len(), end, from, choices[k]) {
+            choices[k] = stored.choice;
+            sequences[k] = Some((stored, samples[end - 1].2));
+        }
+    }
+    (choices, sequences)
 }
 
 /// The geometry `nurbs-planner` publishes for `plan`: the curves with their stop points, the
@@ -136,12 +164,33 @@ pub fn geometry(
     }
     let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stop_points(toolpath, plan))?;
     let fractions = fractions(max_fraction);
-    let choices = {
+    let (mut choices, sequences) = {
         let mut valid: CurveViews = [None; MAX_CURVES];
         validate_geometry(g.header(), g.values(), &mut valid).map_err(|e| format!("geometry refused: {e:?}"))?;
         choose_stops(toolpath, plan, &valid, &fractions)
     };
-    let table: Vec<(f64, f64)> = choices.iter().map(|c| (c.accel, c.jerk)).collect();
+    // The stored sequences, in the measure of the interpolator's samples (the records').
+    let mut arcs = ArcLengths::new(toolpath);
+    let mut table = Vec::with_capacity(choices.len());
+    for (c, sequence) in choices.iter_mut().zip(sequences) {
+        let mut entry = RecordStop {
+            accel: c.accel,
+            jerk: c.jerk,
+            stored_len: 0,
+            stored_offset: 0,
+        };
+        if let Some((stored, s)) = sequence {
+            arcs.set_anchor(stored.from.element, stored.from.u, s);
+            match g.add_values(&stop_runs(&arcs, stored.from, &stored.points)) {
+                Ok(offset) => {
+                    entry.stored_offset = offset;
+                    entry.stored_len = stored.points.len() as u32;
+                }
+                Err(_) => *c = stored.tangential,
+            }
+        }
+        table.push(entry);
+    }
     g.set_stop_table(&table)?;
     Ok((g, choices))
 }
@@ -186,10 +235,10 @@ pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
     Ok(())
 }
 
-/// Arc length of VPOp points in the measure of the path blocks: per element from its curve
-/// start (Gauss-Legendre, the measure of the stop points), except on the element of `anchor`
-/// (a stop point), where it is shifted so that `anchor.u` has exactly `anchor.s`, the arc
-/// length the module holds there.
+/// Arc length of path points in the module's measure: per element from its curve start
+/// (Gauss-Legendre, the measure of the stop points), except on the element of the anchor (a
+/// stop point, or the last sample before a stored stop), where it is shifted so that the
+/// anchor's `u` has exactly its `s`, the arc length the module holds there.
 struct ArcLengths<'a> {
     toolpath: &'a Toolpath,
     tables: Vec<ArcLengthTable>,
@@ -200,7 +249,7 @@ struct ArcLengths<'a> {
 }
 
 impl<'a> ArcLengths<'a> {
-    fn new(toolpath: &'a Toolpath, anchor: Option<&StopPoint>) -> Self {
+    fn new(toolpath: &'a Toolpath) -> Self {
         let tables: Vec<ArcLengthTable> = toolpath
             .elements
             .iter()
@@ -210,17 +259,20 @@ impl<'a> ArcLengths<'a> {
         for t in &tables {
             before.push(before.last().copied().unwrap_or(0.0) + t.total());
         }
-        let anchor = anchor.and_then(|a| {
-            let e = a.curve as usize;
-            let t = tables.get(e)?;
-            Some((e, a.s, t.length_to(&toolpath.elements[e].curve, a.u)))
-        });
         ArcLengths {
             toolpath,
             tables,
             before,
-            anchor,
+            anchor: None,
         }
+    }
+
+    /// From now on, element `e` is measured so that `u` has arc length `s`.
+    fn set_anchor(&mut self, e: usize, u: f64, s: f64) {
+        self.anchor = self
+            .tables
+            .get(e)
+            .map(|t| (e, s, t.length_to(&self.toolpath.elements[e].curve, u)));
     }
 
     /// Arc length of `p` in the measure of element `e` (negative before it).
@@ -272,9 +324,16 @@ fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
     blocks
 }
 
-/// VPOp's deceleration sequence chosen as the stop after a block, and the tangential choice it
-/// replaces (kept if the sequence does not fit the channel).
-pub type StoredStop = (Vec<PathPoint>, StopChoice);
+/// A stop sequence chosen after a record or block: its positions (path points, from the period
+/// after `from`), the choice it makes, and the tangential choice it replaces (kept if the
+/// sequence does not fit the channel).
+#[derive(Clone, Debug)]
+pub struct StoredStop {
+    pub from: PathPoint,
+    pub points: Vec<PathPoint>,
+    pub choice: StopChoice,
+    pub tangential: StopChoice,
+}
 
 /// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
 /// every block end, the module's stop ([`block_stop`]) with each jerk fraction of the
@@ -377,30 +436,23 @@ pub fn choose_block_stops(
             previous = Some(fraction);
         }
         // No tangential stop within the limits (near a tight turn, where VPOp balances the
-        // tangential jerk against the curvature terms): VPOp's own deceleration sequence from
-        // this state, run as the module runs it (each position the curve point at its u).
+        // tangential jerk against the curvature terms): VPOp's own deceleration sequence.
         let mut sequence = None;
-        if best.is_some_and(|c| c.ratio > 1.0 + SLACK) && end >= 1 && !b.is_last() {
-            let at = |k: usize| points[end.saturating_sub(k + 1)];
-            let last = [at(2), at(1), at(0)];
-            if let Ok(Some(brake)) = brake_points(&path, limits, SearchOptions::default(), last) {
-                if !brake.is_empty() && brake.iter().all(|p| p.element == b.curve()) {
-                    let mut f = fd;
-                    f.reset_peaks();
-                    for p in &brake {
-                        f.push(&view.point(p.u)[..tip], limits);
-                    }
-                    f.finish(limits);
-                    let ratio = f.worst_ratio(limits);
-                    if let Some(tangential) = best.filter(|c| ratio < c.ratio) {
-                        best = Some(StopChoice {
-                            ratio,
-                            stored: brake.len(),
-                            ..tangential
-                        });
-                        sequence = Some((brake, tangential));
-                    }
-                }
+        if let (Some(tangential), false, true) = (best, b.is_last(), end >= 1) {
+            if tangential.ratio > 1.0 + SLACK {
+                let point = |i: usize| points.get(i).copied();
+                sequence = stored_stop(
+                    &path,
+                    &curves,
+                    limits,
+                    fd,
+                    &point,
+                    points.len(),
+                    end,
+                    points[end - 1],
+                    tangential,
+                );
+                best = sequence.as_ref().map(|s| s.choice).or(best);
             }
         }
         sequences.push(sequence);
@@ -411,6 +463,93 @@ pub fn choose_block_stops(
         }
     }
     (choices, sequences)
+}
+
+/// The stop after the first `end` of the planned positions `point(0..count)` (VPOp's, or the
+/// interpolator's samples of segment records): VPOp's deceleration sequence from there, or,
+/// where that does not reach rest (VPOp checks its deceleration only where it has to, so not
+/// every planned state has one), the plan's own next positions up to the first state whose
+/// deceleration sequence does. Every step is a planned or a braking step, so all pass VPOp's
+/// constraints; the sequence may cross element joins (only onwards). `None` if the plan reaches
+/// its end first.
+fn planned_then_brake(
+    path: &JointPath,
+    limits: &Limits,
+    point: &dyn Fn(usize) -> Option<PathPoint>,
+    count: usize,
+    end: usize,
+) -> Option<Vec<PathPoint>> {
+    for i in end.max(1) - 1..count.saturating_sub(1) {
+        let last = [point(i.saturating_sub(2))?, point(i.saturating_sub(1))?, point(i)?];
+        if let Ok(Some(brake)) = brake_points(path, limits, SearchOptions::default(), last) {
+            let planned: Option<Vec<PathPoint>> = (end..=i).map(point).collect();
+            return Some(planned?.into_iter().chain(brake).collect());
+        }
+    }
+    None
+}
+
+/// [`planned_then_brake`] after the first `end` planned positions, checked as the module runs
+/// it (each position the curve point at its `u`) by finite differences continuing `fd` (the
+/// motion up to `from`, the last position before the stop): returned if it does better than
+/// `tangential`, the best tangential stop there.
+#[allow(clippy::too_many_arguments)]
+fn stored_stop(
+    path: &JointPath,
+    curves: &PathCurves,
+    limits: &Limits,
+    fd: FiniteDifferences,
+    point: &dyn Fn(usize) -> Option<PathPoint>,
+    count: usize,
+    end: usize,
+    from: PathPoint,
+    tangential: StopChoice,
+) -> Option<StoredStop> {
+    let points = planned_then_brake(path, limits, point, count, end)?;
+    // Elements only onwards, one at a time (the module checks each step).
+    let onwards = points.iter().try_fold(from.element, |e, p| {
+        (p.element == e || p.element == e + 1).then_some(p.element)
+    });
+    if points.is_empty() || onwards.is_none() {
+        return None;
+    }
+    let tip = limits.velocity.len();
+    let mut f = fd;
+    f.reset_peaks();
+    for p in &points {
+        f.push(&curves.view(p.element).point(p.u)[..tip], limits);
+    }
+    f.finish(limits);
+    let ratio = f.worst_ratio(limits);
+    (ratio < tangential.ratio).then_some(StoredStop {
+        from,
+        choice: StopChoice {
+            ratio,
+            stored: points.len(),
+            ..tangential
+        },
+        points,
+        tangential,
+    })
+}
+
+/// The arena values of the stored stop `points` that follow `from`: a [`StopRun`] per element,
+/// each position as `(u, s)` in its element's measure.
+fn stop_runs(arcs: &ArcLengths, from: PathPoint, points: &[PathPoint]) -> Vec<f64> {
+    let mut values = Vec::with_capacity(2 * points.len() + StopRun::VALUES);
+    let mut before = from;
+    for run in points.chunk_by(|a, b| a.element == b.element) {
+        let e = run[0].element;
+        let header = StopRun {
+            curve: e,
+            count: run.len(),
+            s_before: arcs.s(&before, e),
+        };
+        values.extend(header.to_values());
+        values.extend(run.iter().flat_map(|p| [p.u, arcs.s(p, e)]));
+        before = run[run.len() - 1];
+    }
+    values
 }
 
 /// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the
@@ -469,7 +608,10 @@ pub fn block_geometry(
     max_fraction: f64,
 ) -> Result<(GeometryBuilder, Vec<PathBlock>, Vec<StopChoice>), String> {
     check_tip_path(toolpath)?;
-    let arcs = ArcLengths::new(toolpath, anchor);
+    let mut arcs = ArcLengths::new(toolpath);
+    if let Some(a) = anchor {
+        arcs.set_anchor(a.curve as usize, a.u, a.s);
+    }
     let mut blocks = pack_blocks(&arcs, &plan.points);
     let stops = block_stop_points(toolpath, &blocks, plan.limits.period);
     let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stops)?;
@@ -480,19 +622,19 @@ pub fn block_geometry(
         let fractions = fractions(max_fraction);
         choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions, &plan.points)
     };
-    // The stored stop sequences, as (u, s) pairs in the blocks' arc-length measure. Where the
-    // arena is full, the tangential stop (and its check result) stays.
+    // The stored stop sequences as runs per element ([`StopRun`]), in the blocks' arc-length
+    // measure. Where the arena is full, the tangential stop (and its check result) stays.
     for ((b, c), sequence) in blocks.iter_mut().zip(&mut choices).zip(sequences) {
-        let Some((points, tangential)) = sequence else {
+        let Some(stored) = sequence else {
             continue;
         };
-        let values: Vec<f64> = points.iter().flat_map(|p| [p.u, arcs.s(p, b.curve())]).collect();
+        let values = stop_runs(&arcs, stored.from, &stored.points);
         match g.add_values(&values) {
             Ok(offset) => {
                 b.stop_offset = offset;
-                b.stop_len = points.len() as u32;
+                b.stop_len = stored.points.len() as u32;
             }
-            Err(_) => *c = tangential,
+            Err(_) => *c = stored.tangential,
         }
     }
     Ok((g, blocks, choices))

@@ -9,7 +9,9 @@ use std::ffi::CString;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::channel::{Channel, CurveDesc, GeometryHeader, PublishError, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES};
+use crate::channel::{
+    Channel, CurveDesc, GeometryHeader, PublishError, RecordStop, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
+};
 use crate::pins::{Pin, PinType};
 use crate::sys;
 
@@ -179,9 +181,9 @@ impl GeometryBuilder {
         Ok(offset)
     }
 
-    /// The per-record stop limits: `(accel, jerk)` of the stop after record k at index k.
-    pub fn set_stop_table(&mut self, table: &[(f64, f64)]) -> Result<(), String> {
-        let values: Vec<f64> = table.iter().flat_map(|&(a, j)| [a, j]).collect();
+    /// The per-record stop table: the stop after record k at index k.
+    pub fn set_stop_table(&mut self, table: &[RecordStop]) -> Result<(), String> {
+        let values: Vec<f64> = table.iter().flat_map(RecordStop::to_values).collect();
         if self.values.len() + values.len() > GEOMETRY_VALUES {
             return Err(format!(
                 "stop table of {} records does not fit the channel",

@@ -190,12 +190,14 @@ impl Interpolator {
         let Some(view) = curves.curve(self.curve) else {
             return Step::BadRecord;
         };
-        let state = self.table.state_at(t);
+        let mut state = self.table.state_at(t);
         let s_target = self.record.s_start + state.s;
         if self.record.is_last() && t >= self.table.total_time() {
-            // End of the path: land exactly on the end parameter, at rest.
+            // End of the path: land exactly on the end parameter, at rest (the profile's end
+            // feed is zero up to rounding).
             self.cursor = PathCursor::at(&view, curves.tip_axes(), self.record.u_end, s_target);
             self.finished = true;
+            (state.v, state.a) = (0.0, 0.0);
         } else {
             self.cursor = rk2pc_step(&view, curves.tip_axes(), &self.cursor, s_target);
         }

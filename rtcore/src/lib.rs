@@ -17,5 +17,5 @@ pub mod scurve;
 
 pub use math::Vector;
 pub use nurbs::{CurveView, GeometryError, MAX_DEGREE, MAX_DERIV, MAX_DIM};
-pub use records::{PathBlock, RecordError, SegmentRecord, BLOCK_SAMPLES};
+pub use records::{PathBlock, RecordError, SegmentRecord, StopRun, BLOCK_SAMPLES};
 pub use scurve::{SCurve, SCurveState};

@@ -115,7 +115,7 @@ pub struct PathBlock {
     pub count: u32,
     /// Non-zero: the stop after this block is not the tangential one but `stop_len` planned
     /// positions (the planner's own deceleration sequence, to rest) stored in the geometry
-    /// arena as `(u, s)` pairs from value `stop_offset`, on this block's curve.
+    /// arena as [`StopRun`]s from value `stop_offset`; it may go on across element joins.
     pub stop_len: u32,
     pub stop_offset: u32,
     pub reserved: u32,
@@ -185,5 +185,44 @@ impl PathBlock {
             previous = v;
         }
         Ok(())
+    }
+}
+
+/// The header of one run of a stored stop sequence in the geometry arena: the positions of a
+/// sequence are stored as runs, each a header of [`StopRun::VALUES`] values (curve index,
+/// number of positions, arc length of the position before the run in the run curve's measure)
+/// followed by that many `(u, s)` pairs on that curve (`s` in its measure). A sequence that
+/// crosses an element join has a run per element; within a run, each position's step starts
+/// at the one before, so the arc length of every step is known, as in a [`PathBlock`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StopRun {
+    pub curve: usize,
+    pub count: usize,
+    pub s_before: f64,
+}
+
+impl StopRun {
+    /// Arena values of the header.
+    pub const VALUES: usize = 3;
+
+    pub fn to_values(&self) -> [f64; Self::VALUES] {
+        [self.curve as f64, self.count as f64, self.s_before]
+    }
+
+    /// The header stored in `values`; `None` unless the curve index is a whole number below
+    /// 2^16, the count a whole number from 1 to 2^32 - 1 and the arc length finite.
+    pub fn from_values(values: &[f64]) -> Option<Self> {
+        let &[curve, count, s_before] = values.get(..Self::VALUES)? else {
+            return None;
+        };
+        let whole = |x: f64, max: f64| x >= 0.0 && x <= max && x == (x as u64) as f64;
+        if !(whole(curve, u16::MAX as f64) && whole(count, u32::MAX as f64) && count >= 1.0 && s_before.is_finite()) {
+            return None;
+        }
+        Some(StopRun {
+            curve: curve as usize,
+            count: count as usize,
+            s_before,
+        })
     }
 }

@@ -258,7 +258,7 @@ fn start_motion<'a>(
         "nurbs-planner: underrun stops checked after every record: worst {:.4} x an axis limit{}{}",
         worst,
         if stored > 0 {
-            format!(" ({stored} of them VPOp's own deceleration, stored with the geometry)")
+            format!(" ({stored} of them stored stop sequences, VPOp's deceleration at the end)")
         } else {
             String::new()
         },
