@@ -1751,3 +1751,65 @@ mod blocks {
         assert_eq!(fault_of(&job, &slots), (FaultCode::RecordKind as u32, true));
     }
 }
+
+/// Random G1 polylines (3-10 vertices, 3-300 mm), their corners rounded within a random
+/// tolerance, under random limits at 0.25 and 1 ms: both planners' plans, as `nurbs-planner`
+/// publishes them, have a stop within the limits at every record and block boundary (by the
+/// finite-difference check, relative slack 1e-6). `STOP_CASES` (default 6) sets the number of
+/// cases; the cases are the same in every run.
+#[test]
+fn random_polylines_have_a_stop_within_the_limits_at_every_boundary() {
+    use nurbs_motion::geometry::{ElementKind, Nurbs};
+    use nurbs_motion::planner::verify::SLACK;
+    let mut rng = 0x2026_1122_u64;
+    let mut next = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let cases: usize = std::env::var("STOP_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(6);
+    let (mut records, mut blocks, mut stored) = (0, 0, 0);
+    for case in 0..cases {
+        let n = 3 + (next() * 8.0) as usize;
+        let size = 10f64.powf(0.5 + 2.0 * next());
+        let vertices: Vec<Vec<f64>> = (0..n).map(|_| vec![size * next(), size * next()]).collect();
+        let mut knots = vec![0.0, 0.0];
+        knots.extend((1..n - 1).map(|k| k as f64));
+        knots.extend([(n - 1) as f64; 2]);
+        let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &vertices, None).unwrap());
+        let eps = 10f64.powf(-3.0 + 2.0 * next());
+        let toolpath = nurbs_motion::planner::corner::round_toolpath(&polyline, eps)
+            .unwrap()
+            .toolpath;
+        let feed = 10f64.powf(1.0 + 2.4 * next());
+        let accel = 10f64.powf(3.0 + 2.0 * next());
+        let jerk = accel * 10f64.powf(0.5 + 1.5 * next());
+        let dt = if next() < 0.5 { 0.00025 } else { 0.001 };
+        let limits = Limits::uniform(2, feed, accel, jerk, eps, dt);
+        let what = format!(
+            "case {case}: {} elements, {size:.1} mm, eps {eps:.4}, F {feed:.0} A {accel:.0} J {jerk:.0} dt {dt}",
+            toolpath.elements.len()
+        );
+        let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
+        let (_, choices) = crate::plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+        let vpop = crate::plan_geometry::vpop_plan(&toolpath, &limits, None).unwrap();
+        let (_, b, block_choices) = crate::plan_geometry::block_geometry(&toolpath, &vpop, None, 1.0).unwrap();
+        let worst = |c: &[crate::plan_geometry::StopChoice]| c.iter().map(|c| c.ratio).fold(0.0, f64::max);
+        let count = |c: &[crate::plan_geometry::StopChoice]| c.iter().filter(|c| c.stored > 0).count();
+        println!(
+            "{what}: {} records ({} stored stops, worst {:.7}), {} blocks ({} stored, worst {:.7})",
+            plan.records.len(),
+            count(&choices),
+            worst(&choices),
+            b.len(),
+            count(&block_choices),
+            worst(&block_choices)
+        );
+        assert!(worst(&choices) <= 1.0 + SLACK, "{what}: records {choices:?}");
+        assert!(worst(&block_choices) <= 1.0 + SLACK, "{what}: blocks");
+        (records, blocks) = (records + plan.records.len(), blocks + b.len());
+        stored += count(&choices) + count(&block_choices);
+    }
+    println!("{cases} cases: {records} record and {blocks} block boundaries, {stored} stored stops, all within the limits");
+}
