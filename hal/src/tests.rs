@@ -1768,7 +1768,10 @@ fn random_polylines_have_a_stop_within_the_limits_at_every_boundary() {
         rng ^= rng << 17;
         (rng >> 11) as f64 / (1u64 << 53) as f64
     };
-    let cases: usize = std::env::var("STOP_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(6);
+    let cases: usize = std::env::var("STOP_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(6);
     let (mut records, mut blocks, mut stored) = (0, 0, 0);
     for case in 0..cases {
         let n = 3 + (next() * 8.0) as usize;
@@ -1811,5 +1814,7 @@ fn random_polylines_have_a_stop_within_the_limits_at_every_boundary() {
         (records, blocks) = (records + plan.records.len(), blocks + b.len());
         stored += count(&choices) + count(&block_choices);
     }
-    println!("{cases} cases: {records} record and {blocks} block boundaries, {stored} stored stops, all within the limits");
+    println!(
+        "{cases} cases: {records} record and {blocks} block boundaries, {stored} stored stops, all within the limits"
+    );
 }
