@@ -1,6 +1,6 @@
 //! The `nurbs-plan` command line: `inspect` (geometry report), `plan` and `verify`.
 
-mod corners;
+pub mod corners;
 mod inspect;
 mod machine;
 mod plan;

@@ -40,6 +40,7 @@ use nurbs_hal::user::{install_signal_handlers, stopped, Component};
 
 #[path = "../plan_geometry.rs"]
 mod plan_geometry;
+use nurbs_motion::cli::corners::{prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
@@ -86,6 +87,11 @@ struct Args {
     /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
     #[arg(long, value_enum, default_value_t = Planner::Erwinski)]
     planner: Planner,
+    /// G1 corners: `auto` rounds them within the chord tolerance when the whole path is a
+    /// straight-line program (as `nurbs-plan plan` does), `on` requires that, `off` stops at
+    /// every corner.
+    #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
+    round_corners: RoundCorners,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -306,12 +312,21 @@ fn start_motion<'a>(
 }
 
 fn run(args: &Args) -> Result<(), String> {
-    let toolpath = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
+    let programmed = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
+    let limits = limits(args, programmed.tip_dim())?;
+    // The same path `nurbs-plan plan` plans with the same chord tolerance (and `verify` checks).
+    let prepared = prepare(&args.toolpath, args.round_corners, limits.chord_tolerance).map_err(|e| e.to_string())?;
+    if let Some(r) = &prepared.rounding {
+        eprintln!(
+            "nurbs-planner: {} G1 corners rounded within {} mm (deviation {:.6} mm)",
+            r.corners, limits.chord_tolerance, r.max_deviation
+        );
+    }
+    let toolpath = prepared.toolpath;
     if args.planner == Planner::Vpop {
         // Before touching HAL: a clear refusal, not a half-started component.
         plan_geometry::check_tip_path(&toolpath)?;
     }
-    let limits = limits(args, toolpath.tip_dim())?;
 
     let comp = Component::new("nurbs-planner")?;
     let ready = comp.pin::<bool>("ready", HAL_OUT)?;
