@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 6
+#define CHANNEL_VERSION 7
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -30,9 +30,10 @@
 #define SEGMENT_SLOTS 1024
 
 /**
- * Most curves (path elements) one geometry can hold.
+ * Most curves (path elements) one geometry can hold: every curve index a record can carry (16
+ * bits). A G1 program with its corners rounded is two elements per line.
  */
-#define MAX_CURVES 64
+#define MAX_CURVES (1 << 16)
 
 /**
  * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
@@ -221,7 +222,6 @@ typedef struct GeometryHeader {
    */
   double stop_accel;
   double stop_jerk;
-  struct CurveDesc curves[MAX_CURVES];
 } GeometryHeader;
 
 /**

@@ -32,12 +32,13 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 6;
+pub const CHANNEL_VERSION: u32 = 7;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
-/// Most curves (path elements) one geometry can hold.
-pub const MAX_CURVES: usize = 64;
+/// Most curves (path elements) one geometry can hold: every curve index a record can carry (16
+/// bits). A G1 program with its corners rounded is two elements per line.
+pub const MAX_CURVES: usize = 1 << 16;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
 /// together, the per-record stop table and the stored stop sequences): 8 MiB. The curves need
 /// little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
@@ -336,7 +337,7 @@ pub struct CurveDesc {
 
 /// The fixed-size part of a geometry.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GeometryHeader {
     pub curve_count: u32,
     /// Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
@@ -350,21 +351,15 @@ pub struct GeometryHeader {
     /// planner falls behind.
     pub stop_accel: f64,
     pub stop_jerk: f64,
-    pub curves: [CurveDesc; MAX_CURVES],
 }
 
-impl Default for GeometryHeader {
-    fn default() -> Self {
-        GeometryHeader {
-            curve_count: 0,
-            tip_axes: 0,
-            stop_table_offset: 0,
-            stop_table_len: 0,
-            stop_accel: 0.0,
-            stop_jerk: 0.0,
-            curves: [CurveDesc::default(); MAX_CURVES],
-        }
-    }
+/// A geometry as the channel holds it: the header, the descriptors of its curves (in their own
+/// array of the channel, indexed like the records' curve numbers) and the arena values.
+#[derive(Clone, Copy, Debug)]
+pub struct GeometryRef<'a> {
+    pub header: GeometryHeader,
+    pub curves: &'a [CurveDesc],
+    pub values: &'a [f64],
 }
 
 /// Why a published geometry is refused.
@@ -435,8 +430,8 @@ impl RecordStop {
     }
 }
 
-/// Validated curves of a geometry, indexed like the records' curve numbers.
-pub type CurveViews<'a> = [Option<ValidCurve<'a>>; MAX_CURVES];
+/// Validated curves of a geometry, indexed like the records' curve numbers (planner side).
+pub type CurveViews<'a> = Vec<Option<ValidCurve<'a>>>;
 
 fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     let start = offset as usize;
@@ -444,58 +439,73 @@ fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     values.get(start..end)
 }
 
-/// Checks `header` against `values` and builds one validated [`CurveView`] per curve into `out`
-/// (the rest set to `None`); returns the per-record stop table. Allocation-free and panic-free:
-/// the realtime module runs it once per published geometry; the planner runs it before
-/// publishing.
-pub fn validate_geometry<'a>(
-    header: &GeometryHeader,
-    values: &'a [f64],
-    out: &mut CurveViews<'a>,
-) -> Result<&'a [f64], GeometryFault> {
-    for v in out.iter_mut() {
-        *v = None;
-    }
+/// Checks the header and every curve of `g` (see [`valid_curve`]); returns the per-record stop
+/// table. Allocation-free and panic-free: the realtime module runs it once per published
+/// geometry; the planner runs it before publishing.
+pub fn validate_geometry<'a>(g: &GeometryRef<'a>) -> Result<&'a [f64], GeometryFault> {
+    let header = &g.header;
     let count = header.curve_count as usize;
     let tip = header.tip_axes as usize;
-    if count == 0 || count > MAX_CURVES || !(2..=3).contains(&tip) {
+    if count == 0 || count > MAX_CURVES || count > g.curves.len() || !(2..=3).contains(&tip) {
         return Err(GeometryFault::Header);
     }
     let positive = |x: f64| x.is_finite() && x > 0.0;
     if !positive(header.stop_accel) || !positive(header.stop_jerk) {
         return Err(GeometryFault::StopLimits);
     }
-    let table = slice_of(values, header.stop_table_offset, header.stop_table_len)
+    let table = slice_of(g.values, header.stop_table_offset, header.stop_table_len)
         .filter(|t| {
             t.len() % RecordStop::VALUES == 0
                 && t.chunks_exact(RecordStop::VALUES)
                     .all(|e| RecordStop::from_values(e).is_some())
         })
         .ok_or(GeometryFault::StopLimits)?;
-    for (curve, (desc, slot)) in header.curves.iter().zip(out.iter_mut()).take(count).enumerate() {
-        let (Some(knots), Some(points), Some(weights), Some(stops)) = (
-            slice_of(values, desc.knots_offset, desc.knots_len),
-            slice_of(values, desc.points_offset, desc.points_len),
-            slice_of(values, desc.weights_offset, desc.weights_len),
-            slice_of(values, desc.stops_offset, desc.stops_len),
-        ) else {
-            return Err(GeometryFault::OutOfBounds { curve });
-        };
-        let pairs_ok = stops.len() % 2 == 0
-            && stops
-                .chunks_exact(2)
-                .all(|p| p.iter().all(|v| v.is_finite()) && p.get(1).is_some_and(|f| *f >= 0.0));
-        if !pairs_ok {
-            return Err(GeometryFault::Stops { curve });
-        }
-        if (desc.dim as usize) < tip {
-            return Err(GeometryFault::Dimension { curve });
-        }
-        let view = CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
-            .map_err(|error| GeometryFault::Curve { curve, error })?;
-        *slot = Some(ValidCurve { view, stops });
+    for curve in 0..count {
+        valid_curve(g, curve)?;
     }
     Ok(table)
+}
+
+/// Curve `curve` of `g`, checked: its data within the arena, its stop points finite `(s, feed >=
+/// 0)` pairs, at least the tip axes, and a NURBS `CurveView::new` accepts (O(size of the
+/// curve)). Allocation-free and panic-free.
+pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<ValidCurve<'a>, GeometryFault> {
+    let header = &g.header;
+    let desc = g
+        .curves
+        .get(curve)
+        .filter(|_| curve < header.curve_count as usize)
+        .ok_or(GeometryFault::Header)?;
+    let values = g.values;
+    let (Some(knots), Some(points), Some(weights), Some(stops)) = (
+        slice_of(values, desc.knots_offset, desc.knots_len),
+        slice_of(values, desc.points_offset, desc.points_len),
+        slice_of(values, desc.weights_offset, desc.weights_len),
+        slice_of(values, desc.stops_offset, desc.stops_len),
+    ) else {
+        return Err(GeometryFault::OutOfBounds { curve });
+    };
+    let pairs_ok = stops.len() % 2 == 0
+        && stops
+            .chunks_exact(2)
+            .all(|p| p.iter().all(|v| v.is_finite()) && p.get(1).is_some_and(|f| *f >= 0.0));
+    if !pairs_ok {
+        return Err(GeometryFault::Stops { curve });
+    }
+    if (desc.dim as usize) < header.tip_axes as usize {
+        return Err(GeometryFault::Dimension { curve });
+    }
+    let view = CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
+        .map_err(|error| GeometryFault::Curve { curve, error })?;
+    Ok(ValidCurve { view, stops })
+}
+
+/// Every curve of `g`, validated (planner side).
+pub fn curve_views<'a>(g: &GeometryRef<'a>) -> Result<CurveViews<'a>, GeometryFault> {
+    validate_geometry(g)?;
+    (0..g.header.curve_count as usize)
+        .map(|c| valid_curve(g, c).map(Some))
+        .collect()
 }
 
 /// The curve geometry in shared memory, written by the planner, read by the module.
@@ -507,6 +517,7 @@ pub fn validate_geometry<'a>(
 pub struct GeometryArea {
     generation: AtomicU32,
     header: UnsafeCell<GeometryHeader>,
+    curves: UnsafeCell<[CurveDesc; MAX_CURVES]>,
     values: UnsafeCell<[f64; GEOMETRY_VALUES]>,
 }
 
@@ -529,61 +540,72 @@ impl GeometryArea {
         self.generation.load(Ordering::Acquire)
     }
 
-    /// Producer side: validate and publish `header` + `values`; returns the new generation.
-    /// The module must be idle (it refuses a geometry that changes during motion).
-    pub fn publish(&self, header: &GeometryHeader, values: &[f64]) -> Result<u32, PublishError> {
-        if values.len() > GEOMETRY_VALUES {
+    /// Producer side: validate and publish `g`; returns the new generation. The module must be
+    /// idle (it refuses a geometry that changes during motion).
+    pub fn publish(&self, g: &GeometryRef) -> Result<u32, PublishError> {
+        if g.values.len() > GEOMETRY_VALUES || g.curves.len() > MAX_CURVES {
             return Err(PublishError::TooLarge);
         }
-        let mut views: CurveViews = [None; MAX_CURVES];
-        validate_geometry(header, values, &mut views).map_err(PublishError::Invalid)?;
+        validate_geometry(g).map_err(PublishError::Invalid)?;
+        Ok(self.write(g))
+    }
+
+    /// Writes `g` under the seqlock protocol (odd generation while writing).
+    fn write(&self, g: &GeometryRef) -> u32 {
         let old = self.generation.load(Ordering::Relaxed);
         let writing = (old | 1).wrapping_add(if old & 1 == 1 { 2 } else { 0 });
         self.generation.store(writing, Ordering::Relaxed);
         fence(Ordering::Release);
-        // SAFETY: the generation is odd: a reader will discard what it sees now.
+        // SAFETY: the generation is odd: a reader will discard what it sees now; the lengths
+        // are within the arrays (checked by the callers, `take` for the test helper).
         unsafe {
-            self.header.get().write_volatile(*header);
+            self.header.get().write_volatile(g.header);
+            let curves = self.curves.get() as *mut CurveDesc;
+            for (i, c) in g.curves.iter().take(MAX_CURVES).enumerate() {
+                curves.add(i).write_volatile(*c);
+            }
             let base = self.values.get() as *mut f64;
-            for (i, v) in values.iter().enumerate() {
+            for (i, v) in g.values.iter().take(GEOMETRY_VALUES).enumerate() {
                 base.add(i).write_volatile(*v);
             }
         }
         let published = writing.wrapping_add(1).max(2);
         self.generation.store(published, Ordering::Release);
-        Ok(published)
+        published
     }
 
     /// Test helper: publish without validating (to prove the module refuses bad geometry).
     #[cfg(test)]
-    pub(crate) fn publish_unchecked(&self, header: &GeometryHeader, values: &[f64]) -> u32 {
-        let old = self.generation.load(Ordering::Relaxed);
-        self.generation.store(old | 1, Ordering::Relaxed);
-        // SAFETY: odd generation; test only, one thread.
-        unsafe {
-            self.header.get().write_volatile(*header);
-            let base = self.values.get() as *mut f64;
-            for (i, v) in values.iter().take(GEOMETRY_VALUES).enumerate() {
-                base.add(i).write_volatile(*v);
-            }
-        }
-        let published = (old | 1).wrapping_add(1).max(2);
-        self.generation.store(published, Ordering::Release);
-        published
+    pub(crate) fn publish_unchecked(&self, g: &GeometryRef) -> u32 {
+        self.write(g)
     }
 
-    /// Consumer side: a copy of the header and the arena, if a geometry is published (generation
-    /// even and non-zero). Confirm with [`GeometryArea::unchanged`] after using the data.
-    pub fn snapshot(&self) -> Option<(u32, GeometryHeader, &[f64; GEOMETRY_VALUES])> {
+    /// Consumer side: the published geometry (a copy of the header, the curve descriptors and
+    /// the whole arena in place), if there is one (generation even and non-zero). Confirm with
+    /// [`GeometryArea::unchanged`] after using the data.
+    pub fn snapshot(&self) -> Option<(u32, GeometryRef<'_>)> {
         let generation = self.generation.load(Ordering::Acquire);
         if generation == 0 || generation & 1 == 1 {
             return None;
         }
-        // SAFETY: read of plain data; a concurrent writer is detected by `unchanged`.
-        let header = unsafe { self.header.get().read_volatile() };
-        // SAFETY: as above; the arena stays mapped as long as the channel.
-        let values = unsafe { &*self.values.get() };
-        Some((generation, header, values))
+        // SAFETY: read of plain data; a concurrent writer is detected by `unchanged`. The arrays
+        // stay mapped as long as the channel.
+        let (header, curves, values) = unsafe {
+            (
+                self.header.get().read_volatile(),
+                &*self.curves.get(),
+                &*self.values.get(),
+            )
+        };
+        let count = (header.curve_count as usize).min(MAX_CURVES);
+        Some((
+            generation,
+            GeometryRef {
+                header,
+                curves: &curves[..count],
+                values,
+            },
+        ))
     }
 
     /// True if the geometry of `generation` is still the published one.
@@ -688,7 +710,7 @@ mod tests {
     }
 
     /// A clamped cubic: the trident's control polygon.
-    fn trident() -> (GeometryHeader, Vec<f64>) {
+    fn trident() -> (GeometryHeader, Vec<CurveDesc>, Vec<f64>) {
         let knots = [0.0, 0.0, 0.0, 0.0, 0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 1.0];
         let points = [
             10.0, 0.0, 20.0, 27.0, 12.0, 8.0, 10.0, 20.0, 8.0, 8.0, 0.0, 27.0, 10.0, 0.0,
@@ -709,15 +731,18 @@ mod tests {
         desc.weights_offset = values.len() as u32;
         desc.weights_len = weights.len() as u32;
         values.extend_from_slice(&weights);
-        let mut header = GeometryHeader {
+        let header = GeometryHeader {
             curve_count: 1,
             tip_axes: 2,
             stop_accel: 1e4,
             stop_jerk: 6e4,
             ..GeometryHeader::default()
         };
-        header.curves[0] = desc;
-        (header, values)
+        (header, vec![desc], values)
+    }
+
+    fn geometry<'a>(header: GeometryHeader, curves: &'a [CurveDesc], values: &'a [f64]) -> GeometryRef<'a> {
+        GeometryRef { header, curves, values }
     }
 
     #[test]
@@ -725,57 +750,53 @@ mod tests {
         let mut b = block();
         let c = unsafe { Channel::init(aligned(&mut b)) };
         assert!(c.geometry.snapshot().is_none());
-        let (header, values) = trident();
-        let generation = c.geometry.publish(&header, &values).unwrap();
+        let (header, curves, values) = trident();
+        let g = geometry(header, &curves, &values);
+        let generation = c.geometry.publish(&g).unwrap();
         assert_eq!(generation, 2);
-        let (g, h, arena) = c.geometry.snapshot().unwrap();
-        assert_eq!((g, h), (generation, header));
-        let mut views: CurveViews = [None; MAX_CURVES];
-        validate_geometry(&h, arena, &mut views).unwrap();
-        let p = views[0].unwrap().view.point(1.0);
+        let (gen, snap) = c.geometry.snapshot().unwrap();
+        assert_eq!((gen, snap.header, snap.curves), (generation, header, &curves[..]));
+        validate_geometry(&snap).unwrap();
+        let p = valid_curve(&snap, 0).unwrap().view.point(1.0);
         assert_eq!((p[0], p[1]), (10.0, 0.0));
-        assert!(c.geometry.unchanged(g));
-        assert_eq!(c.geometry.publish(&header, &values), Ok(4));
-        assert!(!c.geometry.unchanged(g));
+        assert_eq!(valid_curve(&snap, 1).unwrap_err(), GeometryFault::Header);
+        assert!(c.geometry.unchanged(gen));
+        assert_eq!(c.geometry.publish(&g), Ok(4));
+        assert!(!c.geometry.unchanged(gen));
     }
 
     #[test]
     fn malformed_geometry_is_refused() {
-        let (header, values) = trident();
-        let mut views: CurveViews = [None; MAX_CURVES];
-        fn check<'a>(h: &GeometryHeader, v: &'a [f64], views: &mut CurveViews<'a>) -> Result<(), GeometryFault> {
-            validate_geometry(h, v, views).map(|_| ())
-        }
-        let mut h = header;
-        h.curves[0].weights_len = 8; // past the end of the values
-        assert_eq!(
-            check(&h, &values, &mut views),
-            Err(GeometryFault::OutOfBounds { curve: 0 })
-        );
-        let mut h = header;
-        h.curves[0].knots_offset = u32::MAX; // offset + len overflows
-        assert_eq!(
-            check(&h, &values, &mut views),
-            Err(GeometryFault::OutOfBounds { curve: 0 })
-        );
+        let (header, curves, values) = trident();
+        let check = |h: GeometryHeader, c: &[CurveDesc], v: &[f64]| validate_geometry(&geometry(h, c, v)).map(|_| ());
+        let mut c = curves.clone();
+        c[0].weights_len = 8; // past the end of the values
+        assert_eq!(check(header, &c, &values), Err(GeometryFault::OutOfBounds { curve: 0 }));
+        let mut c = curves.clone();
+        c[0].knots_offset = u32::MAX; // offset + len overflows
+        assert_eq!(check(header, &c, &values), Err(GeometryFault::OutOfBounds { curve: 0 }));
         let mut h = header;
         h.curve_count = MAX_CURVES as u32 + 1;
-        assert_eq!(check(&h, &values, &mut views), Err(GeometryFault::Header));
+        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
+        let mut h = header;
+        h.curve_count = 2; // more than the descriptors
+        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
         let mut h = header;
         h.stop_jerk = f64::NAN;
-        assert_eq!(check(&h, &values, &mut views), Err(GeometryFault::StopLimits));
+        assert_eq!(check(h, &curves, &values), Err(GeometryFault::StopLimits));
         let mut v = values.clone();
         v[5] = 0.1; // knots decrease
-        let mut views2: CurveViews = [None; MAX_CURVES];
         assert!(matches!(
-            check(&header, &v, &mut views2),
+            check(header, &curves, &v),
             Err(GeometryFault::Curve { curve: 0, .. })
         ));
-        assert!(views2.iter().all(Option::is_none));
         let mut b = block();
-        let c = unsafe { Channel::init(aligned(&mut b)) };
-        assert!(matches!(c.geometry.publish(&header, &v), Err(PublishError::Invalid(_))));
-        assert_eq!(c.geometry.generation(), 0);
+        let ch = unsafe { Channel::init(aligned(&mut b)) };
+        assert!(matches!(
+            ch.geometry.publish(&geometry(header, &curves, &v)),
+            Err(PublishError::Invalid(_))
+        ));
+        assert_eq!(ch.geometry.generation(), 0);
     }
 
     #[test]

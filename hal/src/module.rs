@@ -64,6 +64,7 @@
 //! faults ([`FaultCode::ResumePoint`]). `abort` while stopped ends the stopped motion (and
 //! withdraws the stop point): the next geometry is a new motion from its own first record.
 
+use core::cell::Cell;
 use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
@@ -74,7 +75,8 @@ use nurbs_rtcore::{CurveView, StopRun};
 use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
-    validate_geometry, Channel, CurveViews, GeometryHeader, RecordStop, StopPoint, ValidCurve, CHANNEL_KEY, MAX_CURVES,
+    valid_curve, validate_geometry, Channel, CurveDesc, GeometryHeader, GeometryRef, RecordStop, StopPoint, ValidCurve,
+    CHANNEL_KEY,
 };
 use crate::pins::Pin;
 use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
@@ -144,33 +146,56 @@ pub struct Pins {
     pub held: Pin<bool>,
 }
 
-/// The accepted curve geometry: views into the channel's arena, validated once.
-#[derive(Clone, Copy)]
+/// The accepted curve geometry: the channel's header, curve descriptors and arena, validated
+/// once when published; each curve's view is made when it is needed (validated again: O(size
+/// of the curve), once per change of curve thanks to a one-entry cache).
 pub struct RtGeometry {
-    /// Generation of the channel geometry these views were made from (0: none).
+    /// Generation of the channel geometry (0: none).
     generation: u32,
-    count: usize,
+    header: GeometryHeader,
+    curves: &'static [CurveDesc],
     tip: usize,
     stop_accel: f64,
     stop_jerk: f64,
     /// The stop after each record, by sequence number ([`RecordStop`] entries).
     stop_table: &'static [f64],
-    /// The geometry arena (stored stop sequences).
+    /// The geometry arena (curve data, stored stop sequences).
     values: &'static [f64],
-    views: CurveViews<'static>,
+    /// The last curve asked for.
+    cache: Cell<Option<(usize, ValidCurve<'static>)>>,
 }
 
 impl RtGeometry {
-    const EMPTY: RtGeometry = RtGeometry {
-        generation: 0,
-        count: 0,
-        tip: 2,
-        stop_accel: 0.0,
-        stop_jerk: 0.0,
-        stop_table: &[],
-        values: &[],
-        views: [None; MAX_CURVES],
-    };
+    fn empty() -> RtGeometry {
+        RtGeometry {
+            generation: 0,
+            header: GeometryHeader::default(),
+            curves: &[],
+            tip: 2,
+            stop_accel: 0.0,
+            stop_jerk: 0.0,
+            stop_table: &[],
+            values: &[],
+            cache: Cell::new(None),
+        }
+    }
+
+    /// Curve `index` with its stop points, if the geometry has it.
+    fn valid(&self, index: usize) -> Option<ValidCurve<'static>> {
+        if let Some((i, c)) = self.cache.get() {
+            if i == index {
+                return Some(c);
+            }
+        }
+        let g = GeometryRef {
+            header: self.header,
+            curves: self.curves,
+            values: self.values,
+        };
+        let c = valid_curve(&g, index).ok()?;
+        self.cache.set(Some((index, c)));
+        Some(c)
+    }
 
     fn is_valid(&self) -> bool {
         self.generation != 0
@@ -193,11 +218,7 @@ impl RtGeometry {
 
 impl CurveSet for RtGeometry {
     fn curve(&self, index: usize) -> Option<CurveView<'_>> {
-        if index < self.count {
-            self.views.get(index).copied().flatten().map(|c| c.view)
-        } else {
-            None
-        }
+        self.valid(index).map(|c| c.view)
     }
     fn tip_axes(&self) -> usize {
         self.tip
@@ -647,15 +668,17 @@ impl Instance {
             self.fault = FaultCode::GeometryChanged;
             return;
         }
-        let Some((generation, header, values)) = channel.geometry.snapshot() else {
+        let Some((generation, g)) = channel.geometry.snapshot() else {
             return;
         };
         self.geometry.generation = 0;
-        match validate_geometry(&header, values, &mut self.geometry.views) {
+        match validate_geometry(&g) {
             Ok(table) if channel.geometry.unchanged(generation) => {
                 self.geometry.stop_table = table;
-                self.geometry.values = values;
-                self.set_geometry(generation, &header);
+                self.geometry.values = g.values;
+                self.geometry.curves = g.curves;
+                self.geometry.cache.set(None);
+                self.set_geometry(generation, &g.header);
             }
             Ok(_) => {} // rewritten while validating: again next period
             Err(_) if !channel.geometry.unchanged(generation) => {}
@@ -665,7 +688,7 @@ impl Instance {
 
     fn set_geometry(&mut self, generation: u32, header: &GeometryHeader) {
         let g = &mut self.geometry;
-        g.count = header.curve_count as usize;
+        g.header = *header;
         g.tip = header.tip_axes as usize;
         g.stop_accel = header.stop_accel;
         g.stop_jerk = header.stop_jerk;
@@ -824,7 +847,7 @@ impl Instance {
                     player.stored = Some(cursor);
                     return self.advance_stored_stop(channel, cursor);
                 }
-                let curve = self.geometry.views.get(last.curve()).copied().flatten();
+                let curve = self.geometry.valid(last.curve());
                 let mut stop = Some(underrun_stop(curve, &last, planned.accel, planned.jerk));
                 match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
                     Step::Sample(s) => {
@@ -933,7 +956,7 @@ impl Instance {
                     self.player.stored = Some(cursor);
                     return self.advance_stored_stop(channel, cursor);
                 }
-                let curve = self.geometry.views.get(last.curve()).copied().flatten();
+                let curve = self.geometry.valid(last.curve());
                 let (stop, a0) = block_stop(curve, &last, dt);
                 let table = stop.profile().table_from(a0);
                 if !self.interp.start_profile(&self.geometry, stop, table) {
@@ -1267,7 +1290,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     let channel = Channel::init(block as *mut u8);
 
     addr_of_mut!((*inst).channel).write(channel);
-    addr_of_mut!((*inst).geometry).write(RtGeometry::EMPTY);
+    addr_of_mut!((*inst).geometry).write(RtGeometry::empty());
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
     addr_of_mut!((*inst).records).write(0);

@@ -8,7 +8,7 @@
 //! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
 //! check). That choice goes to the module as the per-record stop table.
 
-use nurbs_hal::channel::{validate_geometry, CurveViews, RecordStop, Slot, StopPoint, MAX_CURVES};
+use nurbs_hal::channel::{curve_views, CurveViews, RecordStop, Slot, StopPoint};
 use nurbs_hal::module::{block_stop, underrun_stop};
 use nurbs_hal::record::{PathBlock, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
@@ -100,25 +100,41 @@ pub fn choose_stops(
             break;
         };
         let mut best: Option<StopChoice> = None;
+        let curve = valid.get(last.curve()).copied().flatten();
+        // A record that ends at its curve's end at speed leaves the tangential stop no room
+        // (it runs on its own curve): one trial for the table, then the stored sequence.
+        let no_room = !last.is_last()
+            && curve.is_some_and(|c| last.u_end >= c.view.u_max())
+            && last.profile().table().end().v > 0.0;
         for (fraction, accel_share) in fractions
             .iter()
             .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
+            .take(if no_room { 1 } else { usize::MAX })
         {
             let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
-            let curve = valid.get(last.curve()).copied().flatten();
             let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
             let (mut i, mut f) = (interp, fd);
             f.reset_peaks();
+            // Abandoned as soon as it is worse than the best so far (it cannot be the choice).
+            let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
+            let mut ratio = 0.0;
             while let Step::Sample(s) = i.step(&curves, limits.period, &mut || stop.take()) {
                 f.push(&s.point[..tip], limits);
+                ratio = f.worst_ratio(limits);
+                if ratio > bound {
+                    break;
+                }
             }
-            f.finish(limits);
+            if ratio <= bound {
+                f.finish(limits);
+                ratio = f.worst_ratio(limits);
+            }
             let choice = StopChoice {
                 fraction,
                 accel_share,
                 accel,
                 jerk,
-                ratio: f.worst_ratio(limits),
+                ratio,
                 stored: 0,
             };
             if best.is_none_or(|b| choice.ratio < b.ratio) {
@@ -165,8 +181,7 @@ pub fn geometry(
     let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stop_points(toolpath, plan))?;
     let fractions = fractions(max_fraction);
     let (mut choices, sequences) = {
-        let mut valid: CurveViews = [None; MAX_CURVES];
-        validate_geometry(g.header(), g.values(), &mut valid).map_err(|e| format!("geometry refused: {e:?}"))?;
+        let valid = curve_views(&g.layout()).map_err(|e| format!("geometry refused: {e:?}"))?;
         choose_stops(toolpath, plan, &valid, &fractions)
     };
     // The stored sequences, in the measure of the interpolator's samples (the records').
@@ -617,8 +632,7 @@ pub fn block_geometry(
     let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stops)?;
     g.set_stop_table(&[])?;
     let (mut choices, sequences) = {
-        let mut valid: CurveViews = [None; MAX_CURVES];
-        validate_geometry(g.header(), g.values(), &mut valid).map_err(|e| format!("geometry refused: {e:?}"))?;
+        let valid = curve_views(&g.layout()).map_err(|e| format!("geometry refused: {e:?}"))?;
         let fractions = fractions(max_fraction);
         choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions, &plan.points)
     };

@@ -273,9 +273,10 @@ fn trident_runs_exactly_the_offline_setpoints_without_allocating() {
     unsafe { rtapi_app_exit() };
 }
 
-/// A path of several elements (line, NURBS, line: the curve index changes between records) and a
-/// 5-axis path (3 tip axes, 6-D curve): the module's x, y, z, feed, u and curve equal the offline
-/// setpoints bit for bit.
+/// A path of several elements (line, NURBS, line: the curve index changes between records), a
+/// 5-axis path (3 tip axes, 6-D curve) and a G1 program of 150 lines with its corners rounded
+/// (299 elements; the channel held 64 before): the module's x, y, z, feed, u and curve equal the offline setpoints bit for
+/// bit.
 #[test]
 fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
     let _guard = lock_module();
@@ -289,8 +290,14 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
     )
     .unwrap();
     let pocket = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/open_pocket.json");
-    for path in [ngc, pocket] {
-        let job = job_at(&path);
+    let zigzag = g1_zigzag(150);
+    assert_eq!(zigzag.elements.len(), 299);
+    let jobs = [
+        ("line-trident-line", job_at(&ngc)),
+        ("open_pocket", job_at(&pocket)),
+        ("G1 zigzag", job_of(zigzag)),
+    ];
+    for (name, job) in jobs {
         let tip = job.toolpath.tip_dim();
         let (_planner, channel) = load_enabled(&job);
         let update = mock::funct("nurbs_interp.update").unwrap();
@@ -314,16 +321,16 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
         }
         assert_eq!(allocated, 0);
         let curves: std::collections::BTreeSet<u64> = got.iter().map(|g| g[5] as u64).collect();
-        println!(
-            "{}: {} samples, curves {curves:?}, {tip} tip axes",
-            path.display(),
-            got.len()
+        println!("{name}: {} samples, {} curves, {tip} tip axes", got.len(), curves.len());
+        assert_eq!(
+            curves.len(),
+            job.toolpath.elements.len(),
+            "{name}: every element is run"
         );
         assert_eq!(
             got.len(),
             job.samples.len(),
-            "{}: fault {} underrun {} records {}/{} done {}",
-            path.display(),
+            "{name}: fault {} underrun {} records {}/{} done {}",
             u32_pin("nurbs_interp.fault-code"),
             u32_pin("nurbs_interp.underruns"),
             u32_pin("nurbs_interp.records"),
@@ -333,12 +340,7 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
         for (k, (g, e)) in got.iter().zip(&job.samples).enumerate() {
             let z = if tip >= 3 { e.point[2] } else { 0.0 };
             let expected = [e.point[0], e.point[1], z, e.feed, e.u, e.curve as f64];
-            assert_eq!(
-                g.map(f64::to_bits),
-                expected.map(f64::to_bits),
-                "{}: sample {k}",
-                path.display()
-            );
+            assert_eq!(g.map(f64::to_bits), expected.map(f64::to_bits), "{name}: sample {k}");
         }
         assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
         unsafe { rtapi_app_exit() };
@@ -613,10 +615,13 @@ fn invalid_geometry_is_refused() {
     let job = job("trident.json");
     let g = geometry(&job);
     let mut values = g.values().to_vec();
-    values[g.header().curves[0].weights_offset as usize] = -1.0;
+    values[g.curves()[0].weights_offset as usize] = -1.0;
     let (_planner, channel) = load();
     mock::set_pin("nurbs_interp.enable", Value::Bit(true));
-    channel.geometry.publish_unchecked(g.header(), &values);
+    channel.geometry.publish_unchecked(&crate::channel::GeometryRef {
+        values: &values,
+        ..g.layout()
+    });
     assert_eq!(fault_after(channel, &job.records), FaultCode::Geometry as u32);
     assert_eq!(u32_pin("nurbs_interp.records"), 0);
     assert_eq!(float("nurbs_interp.pos-cmd-x"), 0.0);
@@ -746,6 +751,22 @@ fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
         );
     }
     curve
+}
+
+/// A G1 program of `lines` 2 mm lines zigzagging up to 5 mm sideways, its corners rounded
+/// within 0.001 mm: `2 lines - 1` elements.
+fn g1_zigzag(lines: usize) -> Toolpath {
+    use nurbs_motion::geometry::{ElementKind, Nurbs};
+    let vertices: Vec<Vec<f64>> = (0..=lines)
+        .map(|k| vec![2.0 * k as f64, 5.0 * (0.7 * k as f64).sin()])
+        .collect();
+    let mut knots = vec![0.0, 0.0];
+    knots.extend((1..lines).map(|k| k as f64));
+    knots.extend([lines as f64; 2]);
+    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &vertices, None).unwrap());
+    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
+        .unwrap()
+        .toolpath
 }
 
 /// A G1 polyline of five segments (up to 90 mm) with its corners rounded within 0.001 mm:
@@ -1665,7 +1686,13 @@ mod blocks {
             let mut values = job.geometry.values().to_vec();
             let at = b.stop_offset as usize;
             tamper(&mut values[at..at + StopRun::VALUES + 2 * b.stop_len as usize]);
-            channel.geometry.publish(job.geometry.header(), &values).unwrap();
+            channel
+                .geometry
+                .publish(&crate::channel::GeometryRef {
+                    values: &values,
+                    ..job.geometry.layout()
+                })
+                .unwrap();
             push_blocks(channel, &job.blocks[..=cut], 0);
             let mut last = None;
             let mut n = 0;

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::channel::{
-    Channel, CurveDesc, GeometryHeader, PublishError, RecordStop, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
+    Channel, CurveDesc, GeometryHeader, GeometryRef, PublishError, RecordStop, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
 };
 use crate::pins::{Pin, PinType};
 use crate::sys;
@@ -106,6 +106,7 @@ impl Drop for Component {
 /// Collects curves into the channel's geometry layout, then publishes them.
 pub struct GeometryBuilder {
     header: GeometryHeader,
+    curves: Vec<CurveDesc>,
     values: Vec<f64>,
 }
 
@@ -120,6 +121,7 @@ impl GeometryBuilder {
                 stop_jerk,
                 ..GeometryHeader::default()
             },
+            curves: Vec::new(),
             values: Vec::new(),
         }
     }
@@ -135,10 +137,9 @@ impl GeometryBuilder {
         weights: &[f64],
         stops: &[(f64, f64)],
     ) -> Result<(), String> {
-        let index = self.header.curve_count as usize;
-        let Some(desc) = self.header.curves.get_mut(index) else {
-            return Err(format!("more than {MAX_CURVES} curves"));
-        };
+        if self.curves.len() >= MAX_CURVES {
+            return Err(format!("more than {MAX_CURVES} curves (path elements)"));
+        }
         let stops: Vec<f64> = stops.iter().flat_map(|&(s, f)| [s, f]).collect();
         let total = self.values.len() + knots.len() + points.len() + weights.len() + stops.len();
         if total > GEOMETRY_VALUES {
@@ -155,7 +156,7 @@ impl GeometryBuilder {
         let (points_offset, points_len) = put(points);
         let (weights_offset, weights_len) = put(weights);
         let (stops_offset, stops_len) = put(&stops);
-        *desc = CurveDesc {
+        self.curves.push(CurveDesc {
             degree: degree as u32,
             dim: dim as u32,
             knots_offset,
@@ -166,7 +167,7 @@ impl GeometryBuilder {
             weights_len,
             stops_offset,
             stops_len,
-        };
+        });
         self.header.curve_count += 1;
         Ok(())
     }
@@ -200,19 +201,29 @@ impl GeometryBuilder {
         &self.header
     }
 
+    pub fn curves(&self) -> &[CurveDesc] {
+        &self.curves
+    }
+
     pub fn values(&self) -> &[f64] {
         &self.values
     }
 
+    /// The geometry as the channel will hold it.
+    pub fn layout(&self) -> GeometryRef<'_> {
+        GeometryRef {
+            header: self.header,
+            curves: &self.curves,
+            values: &self.values,
+        }
+    }
+
     /// Validate and publish; the module takes it at its next period (if idle).
     pub fn publish(&self, channel: &Channel) -> Result<u32, String> {
-        channel
-            .geometry
-            .publish(&self.header, &self.values)
-            .map_err(|e| match e {
-                PublishError::TooLarge => "geometry too large for the channel".to_owned(),
-                PublishError::Invalid(f) => format!("geometry refused: {f:?}"),
-            })
+        channel.geometry.publish(&self.layout()).map_err(|e| match e {
+            PublishError::TooLarge => "geometry too large for the channel".to_owned(),
+            PublishError::Invalid(f) => format!("geometry refused: {f:?}"),
+        })
     }
 }
 
