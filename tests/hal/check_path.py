@@ -15,7 +15,7 @@ from samples import load_run, parse_args, write_recorded_csv
 
 
 def main():
-    a = parse_args(("--toolpath", dict(required=True, help="JSON toolpath (for C(1))")))
+    a = parse_args(("--toolpath", dict(required=True, help="toolpath (a JSON one gives C(1))")))
     rows, axes, samples, errors = load_run(a)
     if len(samples) != len(rows):
         errors.append(f"{len(samples)} samples, offline plan has {len(rows)}")
@@ -40,8 +40,12 @@ def main():
         if worst[c] > 1e-9:
             errors.append(f"{c} differs from the offline plan by {worst[c]:.3e}")
 
-    with open(a.toolpath) as f:
-        end = json.load(f)["control_points"][-1]
+    if a.toolpath.endswith(".json"):
+        with open(a.toolpath) as f:
+            end = json.load(f)["control_points"][-1]
+    else:
+        # A G-code program: C(1) as the offline plan (checked by `verify`) ends there.
+        end = [float(rows[-1][c]) for c in axes] if rows else []
     if samples:
         last = samples[-1]
         dist = max(abs(last[c] - end[i]) for i, c in enumerate(axes))
