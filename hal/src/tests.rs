@@ -739,6 +739,37 @@ fn underrun_stops_cross_element_joins() {
     );
 }
 
+/// Holds on a G1 program (the rounded polyline) at nine points of its motion: about half its
+/// boundaries stop with a stored sequence across a join. Each hold comes to rest, the plan from
+/// the stop point resumes on release to the path end, and the whole run verifies.
+#[test]
+fn holds_on_a_g1_program_stop_and_resume_within_the_limits() {
+    let _guard = lock_module();
+    let job = job_of(rounded_polyline());
+    let n = job.samples.len();
+    let goal = job.samples.last().unwrap().point;
+    let mut crossed = 0;
+    for hold_at in (1..10).map(|k| k * n / 10) {
+        let (samples, rest_at, _) = hold_run(&job, hold_at, 200);
+        let last = samples.last().unwrap();
+        assert_eq!([last[0], last[1]], [goal[0], goal[1]], "hold at {hold_at}");
+        let report =
+            nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&samples));
+        assert!(
+            report.violations.is_empty(),
+            "hold at {hold_at}: {:?}",
+            report.violations
+        );
+        let curves = rest_at.map(|r| (samples[hold_at][4], samples[r - 1][4]));
+        println!("hold at period {hold_at}: at rest at period {rest_at:?}; curve at the hold, at rest: {curves:?}");
+        crossed += usize::from(curves.is_some_and(|(held, rest)| rest > held));
+    }
+    assert!(
+        crossed > 0,
+        "no hold came to rest beyond a join: the test lost its subject"
+    );
+}
+
 /// The curve of the last run of the stored stop sequence of `len` positions at `offset`.
 fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
     let (mut at, mut left, mut curve) = (offset as usize, len as usize, usize::MAX);
