@@ -1,5 +1,6 @@
 #!/bin/bash
-# Feed hold in real LinuxCNC: the butterfly runs, `setp nurbs_interp.hold 1` after 1.5 s,
+# test_hold.sh [PLANNER TOOLPATH HOLD_AFTER]: feed hold in real LinuxCNC. By default the
+# butterfly runs with the Erwinski planner, `setp nurbs_interp.hold 1` after 1.5 s (HOLD_AFTER),
 # released 2.8 s later. The module stops at the next segment boundary with the stop the planner
 # checked from there, publishes its stop point; the running nurbs-planner re-plans the rest of the
 # path from rest at that point; the release runs it. Checks (check_hold.py, nurbs-plan verify):
@@ -9,20 +10,23 @@
 here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
-toolpath=$(realpath "$here/../../examples/butterfly.json")
+planner=${1:-erwinski}
+toolpath=$(realpath "${2:-$here/../../examples/butterfly.json}")
+hold_after=${3:-1.5}
 PERIOD=0.00025
 LIMITS="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --out "$work/offline.csv"
-sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD|g" \
-    -e "s|@WORK@|$work|g" "$here/hold.hal.in" >"$work/hold.hal"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" --out "$work/offline.csv"
+sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD --planner $planner|g" \
+    -e "s|@HOLD_AFTER@|$hold_after|g" -e "s|@WORK@|$work|g" "$here/hold.hal.in" >"$work/hold.hal"
 
 hal_session "$work/hold.hal" "$work/halrun.log"
 cat "$work/halrun.log"
 python3 "$here/check_hold.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
-    --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv"
+    --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv" \
+    $([ "$planner" = vpop ] && echo --jerk 6e4)
 verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
 echo "$verify"
 if grep "^VIOLATION" <<<"$verify"; then
