@@ -780,10 +780,10 @@ fn solve_segment(
     let ctx = &mut local;
     let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
     for attempt in 0..40 {
-        if attempt == 1 && v1 > 0.0 && v0 < CRAWL_FEED * ctx.limits.feed {
-            // The first end feed failed from a crawling start: if even a stop at the end fails,
+        if attempt == CRAWL_CHECK_AT && v1 > 0.0 && v0 < CRAWL_FEED * ctx.limits.feed {
+            // The first end feeds failed from a crawling start: if even a stop at the end fails,
             // the start is the problem (a lower end feed cannot help), so say so now rather
-            // than after 38 more end feeds, each with two golden-section searches of exact
+            // than after 36 more end feeds, each with two golden-section searches of exact
             // trials that crawl (a tiny segment in a sharp G1 corner entered at 0.1 mm/s: 400
             // ms). Not at higher start feeds: there a stop at the end can fail where a lower end
             // feed passes, and the plans would be slower.
@@ -877,6 +877,8 @@ fn solve_segment(
 
 /// Start feeds below this fraction of the programmed feed crawl: see [`solve_segment`].
 const CRAWL_FEED: f64 = 1e-3;
+/// The end-feed attempt before which a crawling segment tries a stop at its end.
+const CRAWL_CHECK_AT: usize = 3;
 
 /// A speed excess inside a segment is split off as a node when the profile there is below this
 /// fraction of the peak (at the peak, lowering the peak is the cure).
