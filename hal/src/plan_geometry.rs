@@ -494,15 +494,28 @@ fn planned_then_brake(
     count: usize,
     end: usize,
 ) -> Option<Vec<PathPoint>> {
+    // VPOp's constraints use its own (power-basis) evaluation of the curve; the module plays the
+    // positions from its own (de Boor): the deceleration aims a hair inside the limits so that
+    // the finite differences of the played positions stay within them.
+    let scale = |v: &[f64]| v.iter().map(|x| x * (1.0 - BRAKE_MARGIN)).collect::<Vec<f64>>();
+    let inside = Limits {
+        velocity: scale(&limits.velocity),
+        acceleration: scale(&limits.acceleration),
+        jerk: scale(&limits.jerk),
+        ..limits.clone()
+    };
     for i in end.max(1) - 1..count.saturating_sub(1) {
         let last = [point(i.saturating_sub(2))?, point(i.saturating_sub(1))?, point(i)?];
-        if let Ok(Some(brake)) = brake_points(path, limits, SearchOptions::default(), last) {
+        if let Ok(Some(brake)) = brake_points(path, &inside, SearchOptions::default(), last) {
             let planned: Option<Vec<PathPoint>> = (end..=i).map(point).collect();
             return Some(planned?.into_iter().chain(brake).collect());
         }
     }
     None
 }
+
+/// Relative margin of the stored decelerations to the axis limits.
+const BRAKE_MARGIN: f64 = 1e-5;
 
 /// [`planned_then_brake`] after the first `end` planned positions, checked as the module runs
 /// it (each position the curve point at its `u`) by finite differences continuing `fd` (the
