@@ -10,7 +10,7 @@
 
 use nurbs_hal::channel::{curve_views, CurveViews, RecordStop, Slot, StopPoint};
 use nurbs_hal::module::{block_stop, underrun_stop};
-use nurbs_hal::record::{PathBlock, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
+use nurbs_hal::record::{PathBlock, SegmentRecord, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
@@ -84,6 +84,40 @@ pub fn choose_stops(
     let limits = &plan.limits;
     let tip = limits.velocity.len();
     let (a_max, j_max) = (limits.min_accel(), limits.min_jerk());
+    // The module's stop after `last` with these limits, run by the interpolator from `interp`
+    // and checked by finite differences continuing `fd`; abandoned as soon as it is worse than
+    // `bound` (it cannot be the choice then).
+    let tangential = |interp: Interpolator,
+                      fd: FiniteDifferences,
+                      last: &SegmentRecord,
+                      (fraction, accel_share): (f64, f64),
+                      bound: f64| {
+        let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
+        let curve = valid.get(last.curve()).copied().flatten();
+        let mut stop = Some(underrun_stop(curve, last, accel, jerk));
+        let (mut i, mut f) = (interp, fd);
+        f.reset_peaks();
+        let mut ratio = 0.0;
+        while let Step::Sample(s) = i.step(&curves, limits.period, &mut || stop.take()) {
+            f.push(&s.point[..tip], limits);
+            ratio = f.worst_ratio(limits);
+            if ratio > bound {
+                break;
+            }
+        }
+        if ratio <= bound {
+            f.finish(limits);
+            ratio = f.worst_ratio(limits);
+        }
+        StopChoice {
+            fraction,
+            accel_share,
+            accel,
+            jerk,
+            ratio,
+            stored: 0,
+        }
+    };
     let mut interp = Interpolator::new();
     let mut fd = FiniteDifferences::new(tip, limits.period);
     let mut choices = Vec::with_capacity(plan.records.len());
@@ -99,55 +133,42 @@ pub fn choose_stops(
         let Some(last) = interp.record().copied() else {
             break;
         };
-        let mut best: Option<StopChoice> = None;
+        // A record that ends at its curve's end at speed leaves the tangential stop no room (it
+        // runs on its own curve): the stored sequence, and one tangential trial for the table
+        // only if there is none (such a trial grinds at the curve end).
         let curve = valid.get(last.curve()).copied().flatten();
-        // A record that ends at its curve's end at speed leaves the tangential stop no room
-        // (it runs on its own curve): one trial for the table, then the stored sequence.
         let no_room = !last.is_last()
             && curve.is_some_and(|c| last.u_end >= c.view.u_max())
             && last.profile().table().end().v > 0.0;
-        for (fraction, accel_share) in fractions
-            .iter()
-            .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
-            .take(if no_room { 1 } else { usize::MAX })
-        {
-            let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
-            let mut stop = Some(underrun_stop(curve, &last, accel, jerk));
-            let (mut i, mut f) = (interp, fd);
-            f.reset_peaks();
-            // Abandoned as soon as it is worse than the best so far (it cannot be the choice).
-            let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
-            let mut ratio = 0.0;
-            while let Step::Sample(s) = i.step(&curves, limits.period, &mut || stop.take()) {
-                f.push(&s.point[..tip], limits);
-                ratio = f.worst_ratio(limits);
-                if ratio > bound {
+        let mut best: Option<StopChoice> = None;
+        if no_room {
+            best = Some(StopChoice {
+                fraction: 1.0,
+                accel_share: 1.0,
+                accel: a_max,
+                jerk: j_max,
+                ratio: f64::INFINITY,
+                stored: 0,
+            });
+        } else {
+            for trial in fractions
+                .iter()
+                .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
+            {
+                let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
+                let choice = tangential(interp, fd, &last, trial, bound);
+                if best.is_none_or(|b| choice.ratio < b.ratio) {
+                    best = Some(choice);
+                }
+                if choice.ratio <= 1.0 {
+                    best = Some(choice);
                     break;
                 }
-            }
-            if ratio <= bound {
-                f.finish(limits);
-                ratio = f.worst_ratio(limits);
-            }
-            let choice = StopChoice {
-                fraction,
-                accel_share,
-                accel,
-                jerk,
-                ratio,
-                stored: 0,
-            };
-            if best.is_none_or(|b| choice.ratio < b.ratio) {
-                best = Some(choice);
-            }
-            if choice.ratio <= 1.0 {
-                best = Some(choice);
-                break;
             }
         }
         if let Some(b) = best {
             if b.ratio > 1.0 && !last.is_last() {
-                failing.push((choices.len(), samples.len(), fd));
+                failing.push((choices.len(), samples.len(), fd, interp, last, no_room));
             }
             choices.push(b);
         }
@@ -155,13 +176,17 @@ pub fn choose_stops(
     let mut sequences: Vec<Option<(StoredStop, f64)>> = vec![None; choices.len()];
     let path = JointPath::tip(toolpath);
     let point = |i: usize| samples.get(i).and_then(|&(e, u, _)| path.eval_at(e, u));
-    for (k, end, fd) in failing {
-        let Some(from) = end.checked_sub(1).and_then(point) else {
-            continue;
-        };
-        if let Some(stored) = stored_stop(&path, &curves, limits, fd, &point, samples.len(), end, from, choices[k]) {
-            choices[k] = stored.choice;
-            sequences[k] = Some((stored, samples[end - 1].2));
+    for (k, end, fd, interp, last, no_room) in failing {
+        let from = end.checked_sub(1).and_then(point);
+        let stored =
+            from.and_then(|from| stored_stop(&path, &curves, limits, fd, &point, samples.len(), end, from, choices[k]));
+        match stored {
+            Some(stored) => {
+                choices[k] = stored.choice;
+                sequences[k] = Some((stored, samples[end - 1].2));
+            }
+            None if no_room => choices[k] = tangential(interp, fd, &last, (1.0, 1.0), f64::INFINITY),
+            None => {}
         }
     }
     (choices, sequences)
