@@ -95,20 +95,10 @@ pub fn choose_stops(
         let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
         let curve = valid.get(last.curve()).copied().flatten();
         let mut stop = Some(underrun_stop(curve, last, accel, jerk));
-        let (mut i, mut f) = (interp, fd);
-        f.reset_peaks();
-        let mut ratio = 0.0;
-        while let Step::Sample(s) = i.step(&curves, limits.period, &mut || stop.take()) {
-            f.push(&s.point[..tip], limits);
-            ratio = f.worst_ratio(limits);
-            if ratio > bound {
-                break;
-            }
-        }
-        if ratio <= bound {
-            f.finish(limits);
-            ratio = f.worst_ratio(limits);
-        }
+        let mut i = interp;
+        let ratio = stop_ratio(limits, fd, bound, &mut || {
+            i.step(&curves, limits.period, &mut || stop.take())
+        });
         StopChoice {
             fraction,
             accel_share,
@@ -421,22 +411,15 @@ pub fn choose_block_stops(
             trial.stop_jerk = jerk;
             let (stop, a0) = block_stop(curve, &trial, dt);
             let mut interp = Interpolator::new();
-            let mut f = fd;
-            f.reset_peaks();
-            let mut ratio = 0.0;
-            if interp.start_profile(&curves, stop, stop.profile().table_from(a0)) {
-                while let Step::Sample(s) = interp.step(&curves, dt, &mut || None) {
-                    f.push(&s.point[..tip], limits);
-                    ratio = f.worst_ratio(limits);
-                    if ratio > bound {
-                        break;
-                    }
+            let started = interp.start_profile(&curves, stop, stop.profile().table_from(a0));
+            let mut step = || {
+                if started {
+                    interp.step(&curves, dt, &mut || None)
+                } else {
+                    Step::Finished
                 }
-            }
-            if ratio <= bound {
-                f.finish(limits);
-                ratio = f.worst_ratio(limits);
-            }
+            };
+            let ratio = stop_ratio(limits, fd, bound, &mut step);
             StopChoice {
                 fraction,
                 accel_share,
@@ -603,6 +586,24 @@ fn stop_runs(arcs: &ArcLengths, from: PathPoint, points: &[PathPoint]) -> Vec<f6
         before = run[run.len() - 1];
     }
     values
+}
+
+/// Worst ratio to an axis limit of a stop whose samples `step` yields, by finite differences
+/// continuing `fd` (the motion before it) and at rest after it; abandoned (a value above
+/// `bound`) as soon as it is worse than `bound`, as it cannot be the choice then.
+fn stop_ratio(limits: &Limits, fd: FiniteDifferences, bound: f64, step: &mut dyn FnMut() -> Step) -> f64 {
+    let tip = limits.velocity.len();
+    let mut f = fd;
+    f.reset_peaks();
+    while let Step::Sample(s) = step() {
+        f.push(&s.point[..tip], limits);
+        let ratio = f.worst_ratio(limits);
+        if ratio > bound {
+            return ratio;
+        }
+    }
+    f.finish(limits);
+    f.worst_ratio(limits)
 }
 
 /// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the

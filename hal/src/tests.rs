@@ -103,6 +103,17 @@ fn load_enabled(job: &Job) -> (Component, &'static Channel) {
 }
 
 /// The module statics for this test alone (see `MODULE`), also after another test panicked.
+/// The module's output of this period: x, y, feed, u, curve.
+fn sample_pins() -> [f64; 5] {
+    [
+        float("nurbs_interp.pos-cmd-x"),
+        float("nurbs_interp.pos-cmd-y"),
+        float("nurbs_interp.feed"),
+        float("nurbs_interp.u"),
+        u32_pin("nurbs_interp.curve") as f64,
+    ]
+}
+
 fn lock_module() -> MutexGuard<'static, ()> {
     MODULE.lock().unwrap_or_else(|e| e.into_inner())
 }
@@ -216,13 +227,7 @@ fn run_module(channel: &Channel, job: &Job, batch: usize, periods: usize) -> (Ve
         unsafe { mock::call(update, PERIOD_NS as _) };
         update_allocations += allocations() - before;
         if bit("nurbs_interp.active") {
-            out.push([
-                float("nurbs_interp.pos-cmd-x"),
-                float("nurbs_interp.pos-cmd-y"),
-                float("nurbs_interp.feed"),
-                float("nurbs_interp.u"),
-                u32_pin("nurbs_interp.curve") as f64,
-            ]);
+            out.push(sample_pins());
         }
     }
     (out, update_allocations)
@@ -342,6 +347,19 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
             let expected = [e.point[0], e.point[1], z, e.feed, e.u, e.curve as f64];
             assert_eq!(g.map(f64::to_bits), expected.map(f64::to_bits), "{name}: sample {k}");
         }
+        // And what ran is within the limits (the project's check on the sampled positions).
+        let rows: Vec<nurbs_motion::planner::verify::Row> = got
+            .iter()
+            .enumerate()
+            .map(|(k, g)| nurbs_motion::planner::verify::Row {
+                t: k as f64 * PERIOD,
+                curve: g[5] as usize,
+                u: g[4],
+                q: g[..tip].to_vec(),
+            })
+            .collect();
+        let report = nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows);
+        assert!(report.violations.is_empty(), "{name}: {:?}", report.violations);
         assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
         unsafe { rtapi_app_exit() };
     }
@@ -453,13 +471,7 @@ fn underrun_and_resume(name: &str, job: &Job, cut: usize) -> (Vec<[f64; 5]>, usi
         unsafe { mock::call(update, PERIOD_NS as _) };
         allocated += allocations() - before;
         if bit("nurbs_interp.active") {
-            samples.push([
-                float("nurbs_interp.pos-cmd-x"),
-                float("nurbs_interp.pos-cmd-y"),
-                float("nurbs_interp.feed"),
-                float("nurbs_interp.u"),
-                u32_pin("nurbs_interp.curve") as f64,
-            ]);
+            samples.push(sample_pins());
         }
     };
     let mut stop = None;
@@ -784,6 +796,34 @@ fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
     curve
 }
 
+/// What a long G1 program costs `nurbs-planner` before the motion starts (`G1_LINES` lines,
+/// default 1,000; ignored in CI, a measurement): the plan, and the stop check at every boundary.
+/// Every stop stays within the limits and the geometry fits the channel.
+/// `cargo test --release -p nurbs-hal --features mock-hal long_g1 -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn long_g1_program_cost() {
+    let lines: usize = std::env::var("G1_LINES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(1000);
+    let t = std::time::Instant::now();
+    let job = job_of(g1_zigzag(lines));
+    let planned = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let (g, choices) = crate::plan_geometry::geometry(&job.toolpath, &job.plan, 1.0).unwrap();
+    let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
+    println!(
+        "{lines} lines: motion {:.1} s; plan {planned:.2} s; stops of {} records {:.2} s ({} stored, worst ratio {worst:.7}); {} arena values",
+        job.plan.motion_time,
+        job.records.len(),
+        t.elapsed().as_secs_f64(),
+        choices.iter().filter(|c| c.stored > 0).count(),
+        g.values().len()
+    );
+    assert!(worst <= 1.0 + nurbs_motion::planner::verify::SLACK);
+}
+
 /// A G1 program of `lines` 2 mm lines zigzagging up to 5 mm sideways, its corners rounded
 /// within 0.001 mm: `2 lines - 1` elements.
 fn g1_zigzag(lines: usize) -> Toolpath {
@@ -844,13 +884,7 @@ fn run_with(channel: &Channel, job: &Job, periods: usize, control: &mut dyn FnMu
         unsafe { mock::call(update, PERIOD_NS as _) };
         allocated += allocations() - before;
         if bit("nurbs_interp.active") || !out.is_empty() {
-            out.push([
-                float("nurbs_interp.pos-cmd-x"),
-                float("nurbs_interp.pos-cmd-y"),
-                float("nurbs_interp.feed"),
-                float("nurbs_interp.u"),
-                u32_pin("nurbs_interp.curve") as f64,
-            ]);
+            out.push(sample_pins());
         }
     }
     assert_eq!(allocated, 0, "the update path allocated");
@@ -927,13 +961,7 @@ fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Optio
         unsafe { mock::call(update, PERIOD_NS as _) };
         allocated += allocations() - before;
         if bit("nurbs_interp.active") || !out.is_empty() {
-            out.push([
-                float("nurbs_interp.pos-cmd-x"),
-                float("nurbs_interp.pos-cmd-y"),
-                float("nurbs_interp.feed"),
-                float("nurbs_interp.u"),
-                u32_pin("nurbs_interp.curve") as f64,
-            ]);
+            out.push(sample_pins());
         }
         if bit("nurbs_interp.done") {
             end = p;
@@ -1269,15 +1297,7 @@ mod blocks {
         let before = allocations();
         unsafe { mock::call(update, PERIOD_NS as _) };
         let allocated = allocations() - before;
-        let sample = bit("nurbs_interp.active").then(|| {
-            [
-                float("nurbs_interp.pos-cmd-x"),
-                float("nurbs_interp.pos-cmd-y"),
-                float("nurbs_interp.feed"),
-                float("nurbs_interp.u"),
-                u32_pin("nurbs_interp.curve") as f64,
-            ]
-        });
+        let sample = bit("nurbs_interp.active").then(sample_pins);
         (sample, allocated)
     }
 

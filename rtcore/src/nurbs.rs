@@ -404,26 +404,9 @@ impl<'a> CurveView<'a> {
         aw
     }
 
-    /// The non-zero basis functions on `span` at `u` (A2.2), with the arithmetic of the upper
-    /// triangle of [`Self::basis_derivatives`] step for step.
+    /// The non-zero basis functions on `span` at `u` (A2.2).
     fn basis_functions(&self, span: usize, u: f64) -> [f64; MAX_ORDER] {
-        let knots = self.knots;
-        let mut n = [0.0f64; MAX_ORDER];
-        let mut left = [0.0f64; MAX_ORDER];
-        let mut right = [0.0f64; MAX_ORDER];
-        n[0] = 1.0;
-        for j in 1..=self.degree {
-            left[j] = u - knots[span + 1 - j];
-            right[j] = knots[span + j] - u;
-            let mut saved = 0.0;
-            for r in 0..j {
-                let temp = n[r] / (right[r + 1] + left[j - r]);
-                n[r] = saved + right[r + 1] * temp;
-                saved = left[j - r] * temp;
-            }
-            n[j] = saved;
-        }
-        n
+        basis_functions(self.knots, span, self.degree, u)
     }
 
     /// Parametric speed |C'(u)| of the first `axes` coordinates (the tool-tip curve of a
@@ -431,6 +414,29 @@ impl<'a> CurveView<'a> {
     pub fn speed(&self, u: f64, axes: usize) -> f64 {
         norm(&self.derivatives(u, 1)[1], axes)
     }
+}
+
+/// The non-zero basis functions of degree `degree` on knot span `span` at `u` (P&T A2.2), with
+/// the arithmetic of the upper triangle of [`CurveView::basis_derivatives`] step for step (so
+/// that [`CurveView::point`] equals the zeroth derivative bit for bit). `span` must be a valid
+/// span of `knots` for `degree` (`degree <= span < knots.len() - degree - 1`).
+pub fn basis_functions(knots: &[f64], span: usize, degree: usize, u: f64) -> [f64; MAX_ORDER] {
+    let mut n = [0.0f64; MAX_ORDER];
+    let mut left = [0.0f64; MAX_ORDER];
+    let mut right = [0.0f64; MAX_ORDER];
+    n[0] = 1.0;
+    for j in 1..=degree.min(MAX_DEGREE) {
+        left[j] = u - knots[span + 1 - j];
+        right[j] = knots[span + j] - u;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let temp = n[r] / (right[r + 1] + left[j - r]);
+            n[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        n[j] = saved;
+    }
+    n
 }
 
 #[cfg(test)]

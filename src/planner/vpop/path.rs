@@ -356,7 +356,7 @@ impl PowerCurve {
             for k in 0..m {
                 let t = if p == 0 { 0.5 } else { k as f64 / p as f64 };
                 let u = u0 + (u1 - u0) * t;
-                let nb = basis(knots, i, p, u);
+                let nb = nurbs_rtcore::basis_functions(knots, i, p, u);
                 for j in 0..=p {
                     let c = i - p + j;
                     let wn = nb[j] * ws[c];
@@ -454,26 +454,6 @@ impl PowerCurve {
         }
         out
     }
-}
-
-/// Non-zero B-spline basis functions of degree `p` at `u` in span `i` (A2.2).
-fn basis(knots: &[f64], i: usize, p: usize, u: f64) -> [f64; MAX_ORDER] {
-    let mut n = [0.0; MAX_ORDER];
-    let mut left = [0.0; MAX_ORDER];
-    let mut right = [0.0; MAX_ORDER];
-    n[0] = 1.0;
-    for j in 1..=p {
-        left[j] = u - knots[i + 1 - j];
-        right[j] = knots[i + j] - u;
-        let mut saved = 0.0;
-        for r in 0..j {
-            let temp = n[r] / (right[r + 1] + left[j - r]);
-            n[r] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        n[j] = saved;
-    }
-    n
 }
 
 /// Cells of `w` per element of the curvature table (at least; more on curves with many spans).
