@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 7
+#define CHANNEL_VERSION 8
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -37,7 +37,7 @@
 
 /**
  * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
- * together, the per-record stop table and the stored stop sequences): 32 MiB. The curves need
+ * together, and the stored stop sequences): 32 MiB. The curves need
  * little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
  * 208); a stored stop sequence needs two values per period and three per element it runs on.
  * The butterfly's VPOp blocks at lab set 1 need 695,601 values in all; a 1,000-line G1 program
@@ -45,8 +45,6 @@
  * a stored stop): this capacity holds some 6,000 such lines.
  */
 #define GEOMETRY_VALUES (1 << 22)
-
-#define RecordStop_VALUES 4
 
 /**
  * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
@@ -158,11 +156,40 @@ typedef struct PathBlock {
 } PathBlock;
 
 /**
+ * The stop the module makes after a segment record if no further record is taken (underrun,
+ * hold, abort), as the planner chose and checked it (within the axis limits by finite
+ * differences). Every segment record carries its own: a record is never run before its stop
+ * is known, and the planner can hand records out while it is still choosing later stops.
+ */
+typedef struct RecordStop {
+  /**
+   * Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
+   */
+  double accel;
+  double jerk;
+  /**
+   * Non-zero: instead, the planner's stop sequence of this many positions, stored as
+   * [`StopRun`](nurbs_rtcore::StopRun)s in the geometry arena from value `stored_offset`
+   * (written before the record was pushed).
+   */
+  uint32_t stored_len;
+  uint32_t stored_offset;
+} RecordStop;
+
+/**
+ * A segment record with the stop after it: the segment payload of a [`Slot`].
+ */
+typedef struct SegmentSlot {
+  struct SegmentRecord record;
+  struct RecordStop stop;
+} SegmentSlot;
+
+/**
  * The payload of a [`Slot`]; which field is meant is [`Slot::kind`]. Both are plain numbers,
  * so any bytes read as either are valid values (the module still validates them).
  */
 typedef union SlotData {
-  struct SegmentRecord segment;
+  struct SegmentSlot segment;
   struct PathBlock block;
 } SlotData;
 
@@ -203,7 +230,8 @@ typedef struct CurveDesc {
 } CurveDesc;
 
 /**
- * The fixed-size part of a geometry.
+ * The fixed-size part of a geometry. (The stop after each record travels with the record:
+ * [`RecordStop`], [`PathBlock::stop_accel`].)
  */
 typedef struct GeometryHeader {
   uint32_t curve_count;
@@ -211,19 +239,6 @@ typedef struct GeometryHeader {
    * Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
    */
   uint32_t tip_axes;
-  /**
-   * Per-record stop table in the arena: the [`RecordStop`] after record `seq` at values
-   * `RecordStop::VALUES * seq ..` (chosen by the planner, which checked that stop); records
-   * beyond the table use `stop_accel`, `stop_jerk`.
-   */
-  uint32_t stop_table_offset;
-  uint32_t stop_table_len;
-  /**
-   * Tangential deceleration and jerk (mm/s^2, mm/s^3) of the stop the module makes when the
-   * planner falls behind.
-   */
-  double stop_accel;
-  double stop_jerk;
 } GeometryHeader;
 
 /**

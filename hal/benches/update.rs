@@ -51,8 +51,7 @@ fn bench_update(c: &mut Criterion) {
             (geometry, slots, format!("update/{name} (VPOp blocks)"))
         } else {
             let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
-            let (geometry, _) = plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
-            let slots: Vec<Slot> = plan.records.iter().map(Slot::segment).collect();
+            let (geometry, slots, _) = plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
             (geometry, slots, format!("update/{name}"))
         };
 

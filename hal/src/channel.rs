@@ -12,7 +12,11 @@
 //! records refer to, in one fixed-capacity arena of `f64` published seqlock-style (a generation
 //! counter, odd while the planner writes, even and non-zero once published, stored last). The
 //! module validates a published geometry with `CurveView::new` before it runs a single record
-//! on it and refuses (fault, hold) anything that does not validate.
+//! on it and refuses (fault, hold) anything that does not validate. Behind the published curves
+//! the planner appends stored stop sequences while the motion runs
+//! ([`GeometryArea::append`]), each before the record that refers to it: the ring's
+//! release/acquire pair orders them, so the planner can hand records out while it still
+//! checks the stops of later ones.
 //!
 //! Why not `hal_stream`: it carries at most `HAL_STREAM_MAX_PINS` = 21 values per record, exactly
 //! the size of a segment record, which leaves no room for a record kind, and curve geometry
@@ -25,14 +29,14 @@ use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
 use nurbs_rtcore::CurveView;
 
-pub use crate::record::{PathBlock, Record, SegmentRecord, Slot};
+pub use crate::record::{PathBlock, Record, RecordStop, SegmentRecord, SegmentSlot, Slot};
 
 /// RTAPI shared-memory key of the channel ("NRB0").
 pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 7;
+pub const CHANNEL_VERSION: u32 = 8;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
@@ -40,7 +44,7 @@ pub const SEGMENT_SLOTS: usize = 1024;
 /// bits). A G1 program with its corners rounded is two elements per line.
 pub const MAX_CURVES: usize = 1 << 16;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together, the per-record stop table and the stored stop sequences): 32 MiB. The curves need
+/// together, and the stored stop sequences): 32 MiB. The curves need
 /// little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
 /// 208); a stored stop sequence needs two values per period and three per element it runs on.
 /// The butterfly's VPOp blocks at lab set 1 need 695,601 values in all; a 1,000-line G1 program
@@ -337,22 +341,14 @@ pub struct CurveDesc {
     pub stops_len: u32,
 }
 
-/// The fixed-size part of a geometry.
+/// The fixed-size part of a geometry. (The stop after each record travels with the record:
+/// [`RecordStop`], [`PathBlock::stop_accel`].)
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GeometryHeader {
     pub curve_count: u32,
     /// Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
     pub tip_axes: u32,
-    /// Per-record stop table in the arena: the [`RecordStop`] after record `seq` at values
-    /// `RecordStop::VALUES * seq ..` (chosen by the planner, which checked that stop); records
-    /// beyond the table use `stop_accel`, `stop_jerk`.
-    pub stop_table_offset: u32,
-    pub stop_table_len: u32,
-    /// Tangential deceleration and jerk (mm/s^2, mm/s^3) of the stop the module makes when the
-    /// planner falls behind.
-    pub stop_accel: f64,
-    pub stop_jerk: f64,
 }
 
 /// A geometry as the channel holds it: the header, the descriptors of its curves (in their own
@@ -369,9 +365,6 @@ pub struct GeometryRef<'a> {
 pub enum GeometryFault {
     /// No curve, more than [`MAX_CURVES`], or a tip-axis count outside 2..=3.
     Header,
-    /// Stop deceleration or jerk (default or per record) not finite and positive, or the stop
-    /// table outside the arena.
-    StopLimits,
     /// A curve's data lies (partly) outside the arena.
     OutOfBounds { curve: usize },
     /// A curve has fewer coordinates than the tip axes.
@@ -392,46 +385,6 @@ pub struct ValidCurve<'a> {
     pub stops: &'a [f64],
 }
 
-/// The stop after one segment record, as the planner chose and checked it: an entry of the
-/// per-record stop table, [`RecordStop::VALUES`] values.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RecordStop {
-    /// Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
-    pub accel: f64,
-    pub jerk: f64,
-    /// Non-zero: instead, the planner's stop sequence of this many positions, stored as
-    /// [`StopRun`](nurbs_rtcore::StopRun)s from arena value `stored_offset`.
-    pub stored_len: u32,
-    pub stored_offset: u32,
-}
-
-impl RecordStop {
-    pub const VALUES: usize = 4;
-
-    pub fn to_values(&self) -> [f64; Self::VALUES] {
-        [self.accel, self.jerk, self.stored_offset as f64, self.stored_len as f64]
-    }
-
-    /// The entry stored in `values`; `None` unless the limits are positive and finite and the
-    /// offset and length whole numbers below 2^32.
-    pub fn from_values(values: &[f64]) -> Option<Self> {
-        let &[accel, jerk, offset, len] = values.get(..Self::VALUES)? else {
-            return None;
-        };
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        let whole = |x: f64| (0.0..=u32::MAX as f64).contains(&x) && x == (x as u32) as f64;
-        if !(positive(accel) && positive(jerk) && whole(offset) && whole(len)) {
-            return None;
-        }
-        Some(RecordStop {
-            accel,
-            jerk,
-            stored_len: len as u32,
-            stored_offset: offset as u32,
-        })
-    }
-}
-
 /// Validated curves of a geometry, indexed like the records' curve numbers (planner side).
 pub type CurveViews<'a> = Vec<Option<ValidCurve<'a>>>;
 
@@ -441,31 +394,20 @@ fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     values.get(start..end)
 }
 
-/// Checks the header and every curve of `g` (see [`valid_curve`]); returns the per-record stop
-/// table. Allocation-free and panic-free: the realtime module runs it once per published
-/// geometry; the planner runs it before publishing.
-pub fn validate_geometry<'a>(g: &GeometryRef<'a>) -> Result<&'a [f64], GeometryFault> {
+/// Checks the header and every curve of `g` (see [`valid_curve`]). Allocation-free and
+/// panic-free: the realtime module runs it once per published geometry; the planner runs it
+/// before publishing.
+pub fn validate_geometry(g: &GeometryRef) -> Result<(), GeometryFault> {
     let header = &g.header;
     let count = header.curve_count as usize;
     let tip = header.tip_axes as usize;
     if count == 0 || count > MAX_CURVES || count > g.curves.len() || !(2..=3).contains(&tip) {
         return Err(GeometryFault::Header);
     }
-    let positive = |x: f64| x.is_finite() && x > 0.0;
-    if !positive(header.stop_accel) || !positive(header.stop_jerk) {
-        return Err(GeometryFault::StopLimits);
-    }
-    let table = slice_of(g.values, header.stop_table_offset, header.stop_table_len)
-        .filter(|t| {
-            t.len() % RecordStop::VALUES == 0
-                && t.chunks_exact(RecordStop::VALUES)
-                    .all(|e| RecordStop::from_values(e).is_some())
-        })
-        .ok_or(GeometryFault::StopLimits)?;
     for curve in 0..count {
         valid_curve(g, curve)?;
     }
-    Ok(table)
+    Ok(())
 }
 
 /// Curve `curve` of `g`, checked: its data within the arena, its stop points finite `(s, feed >=
@@ -576,6 +518,24 @@ impl GeometryArea {
         published
     }
 
+    /// Producer side, after [`GeometryArea::publish`]: writes `values` into the arena from value
+    /// `offset`, behind everything published and appended before (the caller keeps count), for
+    /// records pushed afterwards to refer to (stored stop sequences). No reader looks there
+    /// before it has taken such a record, so the generation stays as it is.
+    pub fn append(&self, offset: usize, values: &[f64]) -> Result<(), PublishError> {
+        let end = offset.checked_add(values.len()).ok_or(PublishError::TooLarge)?;
+        if end > GEOMETRY_VALUES {
+            return Err(PublishError::TooLarge);
+        }
+        let base = self.values.get() as *mut f64;
+        for (i, v) in values.iter().enumerate() {
+            // SAFETY: within the array (checked above); the module reads these values only
+            // after the ring has handed it a record pushed after this write.
+            unsafe { base.add(offset + i).write_volatile(*v) };
+        }
+        Ok(())
+    }
+
     /// Test helper: publish without validating (to prove the module refuses bad geometry).
     #[cfg(test)]
     pub(crate) fn publish_unchecked(&self, g: &GeometryRef) -> u32 {
@@ -641,11 +601,18 @@ mod tests {
             b.u[0] = seq as f64 / 7.0;
             Slot::block(&b)
         } else {
-            Slot::segment(&SegmentRecord {
+            let stop = RecordStop {
+                accel: 1e4,
+                jerk: 6e4,
+                stored_len: seq,
+                stored_offset: 2 * seq,
+            };
+            let r = SegmentRecord {
                 seq,
                 u_start: seq as f64 / 7.0,
                 ..SegmentRecord::default()
-            })
+            };
+            Slot::segment(&r, &stop)
         }
     }
 
@@ -736,9 +703,6 @@ mod tests {
         let header = GeometryHeader {
             curve_count: 1,
             tip_axes: 2,
-            stop_accel: 1e4,
-            stop_jerk: 6e4,
-            ..GeometryHeader::default()
         };
         (header, vec![desc], values)
     }
@@ -763,6 +727,15 @@ mod tests {
         assert_eq!((p[0], p[1]), (10.0, 0.0));
         assert_eq!(valid_curve(&snap, 1).unwrap_err(), GeometryFault::Header);
         assert!(c.geometry.unchanged(gen));
+        // Values appended behind the published ones: seen in place, the generation kept.
+        c.geometry.append(values.len(), &[1.5, -2.5]).unwrap();
+        let (gen2, snap) = c.geometry.snapshot().unwrap();
+        assert_eq!((gen2, &snap.values[values.len()..][..2]), (gen, &[1.5, -2.5][..]));
+        assert_eq!(
+            c.geometry.append(GEOMETRY_VALUES - 1, &[0.0, 0.0]),
+            Err(PublishError::TooLarge)
+        );
+        assert_eq!(c.geometry.append(usize::MAX, &[0.0]), Err(PublishError::TooLarge));
         assert_eq!(c.geometry.publish(&g), Ok(4));
         assert!(!c.geometry.unchanged(gen));
     }
@@ -784,8 +757,8 @@ mod tests {
         h.curve_count = 2; // more than the descriptors
         assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
         let mut h = header;
-        h.stop_jerk = f64::NAN;
-        assert_eq!(check(h, &curves, &values), Err(GeometryFault::StopLimits));
+        h.tip_axes = 4;
+        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
         let mut v = values.clone();
         v[5] = 0.1; // knots decrease
         assert!(matches!(

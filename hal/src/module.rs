@@ -39,8 +39,8 @@
 //! record is missing) take the next record, it appends a jerk-limited stop of its own (a
 //! three-phase S-curve from the feed at the segment end to rest, [`underrun_stop`]) and runs it
 //! through the same interpolator along the same curve: no jump, the feed ramps down to zero.
-//! Its deceleration and jerk come from the per-record stop table the planner published with the
-//! geometry: the planner ran this very stop from every boundary, by finite differences on the
+//! Its deceleration and jerk (or a stored stop sequence to play instead) come with the record
+//! ([`RecordStop`] in its slot): the planner ran this very stop from every boundary, by finite differences on the
 //! setpoints the module will produce, and chose limits under which it stays within the axis
 //! limits (`plan_geometry.rs`); the stop is compressed in time where it would otherwise pass a
 //! corner, critical point or the curve end faster than that point's feed cap. So hold, abort
@@ -55,7 +55,7 @@
 //! position, the last record's sequence number). A planner (the running `nurbs-planner`, or one
 //! started afterwards) plans the rest of the path from rest at exactly that point
 //! (`PlanOptions::start`) and publishes it as a new geometry with its own records (sequence
-//! from 0) and stop table. The module takes it but does not move until the command: for a hold,
+//! from 0). The module takes it but does not move until the command: for a hold,
 //! `hold` false; for an underrun, a rising edge on `resume` (with records queued:
 //! `resume-ready`; `hold` must be false). Then it runs the new plan with a fresh interpolator,
 //! whose first setpoint is the stop point, at rest, as in the planner's own check. The first
@@ -103,7 +103,8 @@ pub enum FaultCode {
     Geometry = 2,
     /// The geometry was re-published while a motion was running.
     GeometryChanged = 3,
-    /// A record failed its structural check (non-finite, negative, inconsistent profile).
+    /// A record failed its structural check (non-finite, negative, inconsistent profile, or the
+    /// limits of the stop it carries not finite and positive).
     Record = 4,
     /// A record's sequence number is not the next one (lost or repeated record).
     Sequence = 5,
@@ -155,10 +156,6 @@ pub struct RtGeometry {
     header: GeometryHeader,
     curves: &'static [CurveDesc],
     tip: usize,
-    stop_accel: f64,
-    stop_jerk: f64,
-    /// The stop after each record, by sequence number ([`RecordStop`] entries).
-    stop_table: &'static [f64],
     /// The geometry arena (curve data, stored stop sequences).
     values: &'static [f64],
     /// The last curve asked for.
@@ -172,9 +169,6 @@ impl RtGeometry {
             header: GeometryHeader::default(),
             curves: &[],
             tip: 2,
-            stop_accel: 0.0,
-            stop_jerk: 0.0,
-            stop_table: &[],
             values: &[],
             cache: Cell::new(None),
         }
@@ -199,20 +193,6 @@ impl RtGeometry {
 
     fn is_valid(&self) -> bool {
         self.generation != 0
-    }
-
-    /// The stop after record `seq` (the default stop beyond the table).
-    fn record_stop(&self, seq: u32) -> RecordStop {
-        let i = (seq as usize).saturating_mul(RecordStop::VALUES);
-        self.stop_table
-            .get(i..)
-            .and_then(RecordStop::from_values)
-            .unwrap_or(RecordStop {
-                accel: self.stop_accel,
-                jerk: self.stop_jerk,
-                stored_len: 0,
-                stored_offset: 0,
-            })
     }
 }
 
@@ -248,6 +228,8 @@ pub struct Instance {
     interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
+    /// The stop after the last segment record taken (it came with the record).
+    record_stop: RecordStop,
     records: u32,
     underruns: u32,
     /// Motion time of the records taken so far (s).
@@ -673,8 +655,7 @@ impl Instance {
         };
         self.geometry.generation = 0;
         match validate_geometry(&g) {
-            Ok(table) if channel.geometry.unchanged(generation) => {
-                self.geometry.stop_table = table;
+            Ok(()) if channel.geometry.unchanged(generation) => {
                 self.geometry.values = g.values;
                 self.geometry.curves = g.curves;
                 self.geometry.cache.set(None);
@@ -690,8 +671,6 @@ impl Instance {
         let g = &mut self.geometry;
         g.header = *header;
         g.tip = header.tip_axes as usize;
-        g.stop_accel = header.stop_accel;
-        g.stop_jerk = header.stop_jerk;
         g.generation = generation;
         // After a stop on the path (underrun or hold) the new geometry carries the plan from the
         // stop point: it waits for the command, and its first record must start there.
@@ -708,6 +687,7 @@ impl Instance {
         self.mode = Mode::Undecided;
         self.player = BlockPlayer::IDLE;
         self.next_seq = 0;
+        self.record_stop = RecordStop::default();
         self.taken_time = 0.0;
         self.stopping = false;
         self.stopped = false;
@@ -751,6 +731,7 @@ impl Instance {
             let no_more = self.stopping || hold || abort;
             let resume_from = if self.resuming { self.held } else { None };
             let next_seq = &mut self.next_seq;
+            let record_stop = &mut self.record_stop;
             let records = &mut self.records;
             let taken_time = &mut self.taken_time;
             let pins = &self.pins;
@@ -760,7 +741,7 @@ impl Instance {
                 }
                 let popped = match ring.pop() {
                     Ok(Some(slot)) => match slot.decode() {
-                        Some(Record::Segment(r)) => Ok(Some(r)),
+                        Some(Record::Segment(r, stop)) => Ok(Some((r, stop))),
                         _ => {
                             pull = Pull::Fault(FaultCode::RecordKind);
                             return None;
@@ -770,17 +751,22 @@ impl Instance {
                     Err(e) => Err(e),
                 };
                 match popped {
-                    Ok(Some(r)) if r.seq != *next_seq => {
+                    Ok(Some((r, _))) if r.seq != *next_seq => {
                         pull = Pull::Fault(FaultCode::Sequence);
                         None
                     }
-                    Ok(Some(r)) if resume_from.is_some_and(|h| !starts_at(&r, &h)) => {
+                    Ok(Some((r, _))) if resume_from.is_some_and(|h| !starts_at(&r, &h)) => {
                         pull = Pull::Fault(FaultCode::ResumePoint);
                         None
                     }
-                    Ok(Some(r)) => match check_record(&r) {
+                    Ok(Some((_, stop))) if !stop.is_valid() => {
+                        pull = Pull::Fault(FaultCode::Record);
+                        None
+                    }
+                    Ok(Some((r, stop))) => match check_record(&r) {
                         Ok(()) => {
                             *next_seq = r.seq.wrapping_add(1);
+                            *record_stop = stop;
                             *records = records.wrapping_add(1);
                             *taken_time += r.profile().total_time();
                             pins.seq.set(r.seq);
@@ -837,7 +823,7 @@ impl Instance {
                     return false;
                 }
                 self.begin_stop(hold, abort);
-                let planned = self.geometry.record_stop(last.seq);
+                let planned = self.record_stop;
                 if planned.stored_len > 0 {
                     // The planner's stop sequence from the last sample (which may cross a join).
                     let held = self.held_by_interp();
@@ -1293,6 +1279,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).geometry).write(RtGeometry::empty());
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
+    addr_of_mut!((*inst).record_stop).write(RecordStop::default());
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);
     addr_of_mut!((*inst).taken_time).write(0.0);

@@ -6,9 +6,15 @@
 //! [`underrun_stop`] and interpolator on the same geometry and period), so the planner can run
 //! it offline from every boundary and pick, per boundary, the largest stop deceleration and jerk
 //! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
-//! check). That choice goes to the module as the per-record stop table.
+//! check). That choice goes to the module with each record ([`RecordStop`] in the record's
+//! slot), so records can be handed out while the stops of later ones are still being checked
+//! ([`StopChooser`]).
 
-use nurbs_hal::channel::{curve_views, CurveViews, RecordStop, Slot, StopPoint};
+use std::collections::VecDeque;
+
+use nurbs_hal::channel::{
+    curve_views, valid_curve, CurveViews, GeometryRef, RecordStop, Slot, StopPoint, GEOMETRY_VALUES,
+};
 use nurbs_hal::module::{block_stop, underrun_stop};
 use nurbs_hal::record::{PathBlock, SegmentRecord, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
@@ -67,37 +73,93 @@ pub struct StopChoice {
     pub stored: usize,
 }
 
-/// Runs the plan through the interpolator and, at every segment boundary, the module's stop
-/// with each jerk fraction in `fractions` (largest first) and deceleration shares 1, 1/2, 1/4,
-/// 1/10 of it, until one stays within the limits; returns the choice per record (the least
-/// violating one where none does). Where none does (e.g. a boundary at an element join, where
-/// the module's stop would have to end on its curve at once), a stop sequence that goes on
-/// along the path ([`planned_then_brake`]) is checked the same way and returned with the
-/// arc length of the last sample it follows, if it does better.
-pub fn choose_stops(
-    toolpath: &Toolpath,
-    plan: &Plan,
-    valid: &CurveViews,
-    fractions: &[f64],
-) -> (Vec<StopChoice>, Vec<Option<(StoredStop, f64)>>) {
-    let curves = PathCurves::new(toolpath);
-    let limits = &plan.limits;
-    let tip = limits.velocity.len();
-    let (a_max, j_max) = (limits.min_accel(), limits.min_jerk());
-    // The module's stop after `last` with these limits, run by the interpolator from `interp`
-    // and checked by finite differences continuing `fd`; abandoned as soon as it is worse than
-    // `bound` (it cannot be the choice then).
-    let tangential = |interp: Interpolator,
-                      fd: FiniteDifferences,
-                      last: &SegmentRecord,
-                      (fraction, accel_share): (f64, f64),
-                      bound: f64| {
-        let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
-        let curve = valid.get(last.curve()).copied().flatten();
+/// Chooses the stop after each segment record, one record at a time in plan order, so that
+/// `nurbs-planner` can hand records out while it still checks later ones.
+///
+/// Each record is run through the interpolator (the samples the module will output), then,
+/// from its last sample, the module's stop with each jerk fraction in `fractions` (largest
+/// first) and deceleration shares 1, 1/2, 1/4, 1/10 of it, until one stays within the limits
+/// by finite differences; the least violating one where none does. Where none does (e.g. a
+/// boundary at an element join, where the module's stop would have to end on its curve at
+/// once), a stop sequence that goes on along the path ([`planned_then_brake`]) is checked the
+/// same way and stored if it does better. That sequence follows the plan's next samples, so
+/// such a record is ready only once the records after it reach a state that brakes to rest
+/// (or the plan ends); the records behind it wait, in order.
+pub struct StopChooser<'t> {
+    curves: PathCurves<'t>,
+    path: JointPath<'t>,
+    limits: Limits,
+    fractions: Vec<f64>,
+    arcs: ArcLengths<'t>,
+    interp: Interpolator,
+    fd: FiniteDifferences,
+    /// Every sample so far: curve, parameter, arc length.
+    samples: Vec<(usize, f64, f64)>,
+    /// Records not handed out yet, in plan order.
+    pending: VecDeque<Pending>,
+    /// No more records come.
+    finished: bool,
+}
+
+/// A record whose stop is chosen, or being chosen.
+struct Pending {
+    record: SegmentRecord,
+    choice: StopChoice,
+    /// No tangential stop within the limits: a stored sequence is still to be tried.
+    failing: Option<Failing>,
+}
+
+/// The state at the end of a record with no tangential stop within the limits.
+#[derive(Clone, Copy)]
+struct Failing {
+    /// Samples up to the record's end.
+    end: usize,
+    fd: FiniteDifferences,
+    interp: Interpolator,
+    last: SegmentRecord,
+    /// The record ends at its curve's end at speed: no tangential stop has room there.
+    no_room: bool,
+    /// Sample from which the search for a state that brakes to rest goes on.
+    resume_at: usize,
+}
+
+impl<'t> StopChooser<'t> {
+    pub fn new(toolpath: &'t Toolpath, limits: &Limits, max_fraction: f64) -> Result<Self, String> {
+        if !(max_fraction > 0.0 && max_fraction <= 1.0) {
+            return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
+        }
+        Ok(StopChooser {
+            curves: PathCurves::new(toolpath),
+            path: JointPath::tip(toolpath),
+            limits: limits.clone(),
+            fractions: fractions(max_fraction),
+            arcs: ArcLengths::new(toolpath),
+            interp: Interpolator::new(),
+            fd: FiniteDifferences::new(limits.velocity.len(), limits.period),
+            samples: Vec::new(),
+            pending: VecDeque::new(),
+            finished: false,
+        })
+    }
+
+    /// The module's stop after `last` with `trial` = (jerk fraction, deceleration share), run
+    /// by the interpolator from `interp` and checked by finite differences continuing `fd`;
+    /// abandoned as soon as it is worse than `bound` (it cannot be the choice then).
+    fn tangential(
+        &self,
+        g: &GeometryRef,
+        (interp, fd, last): (Interpolator, FiniteDifferences, &SegmentRecord),
+        (fraction, accel_share): (f64, f64),
+        bound: f64,
+    ) -> StopChoice {
+        let limits = &self.limits;
+        let accel = fraction * accel_share * limits.min_accel();
+        let jerk = fraction * limits.min_jerk();
+        let curve = valid_curve(g, last.curve()).ok();
         let mut stop = Some(underrun_stop(curve, last, accel, jerk));
         let mut i = interp;
         let ratio = stop_ratio(limits, fd, bound, &mut || {
-            i.step(&curves, limits.period, &mut || stop.take())
+            i.step(&self.curves, limits.period, &mut || stop.take())
         });
         StopChoice {
             fraction,
@@ -107,140 +169,255 @@ pub fn choose_stops(
             ratio,
             stored: 0,
         }
-    };
-    let mut interp = Interpolator::new();
-    let mut fd = FiniteDifferences::new(tip, limits.period);
-    let mut choices = Vec::with_capacity(plan.records.len());
-    // Every sample (curve, u, s), and the boundaries no tangential stop passes.
-    let mut samples: Vec<(usize, f64, f64)> = Vec::new();
-    let mut failing = Vec::new();
-    for record in &plan.records {
-        let mut pending = Some(*record);
-        while let Step::Sample(s) = interp.step(&curves, limits.period, &mut || pending.take()) {
-            fd.push(&s.point[..tip], limits);
-            samples.push((s.curve, s.u, s.s));
+    }
+
+    /// Takes the next record of the plan (`g`: the published geometry the module runs it on).
+    pub fn push(&mut self, record: &SegmentRecord, g: &GeometryRef) {
+        let tip = self.limits.velocity.len();
+        let mut next = Some(*record);
+        while let Step::Sample(s) = self.interp.step(&self.curves, self.limits.period, &mut || next.take()) {
+            self.fd.push(&s.point[..tip], &self.limits);
+            self.samples.push((s.curve, s.u, s.s));
         }
-        let Some(last) = interp.record().copied() else {
-            break;
+        // The full stop with no trial: what the module falls back to (reported as exceeding)
+        // if the interpolator refused the record (a plan's records never are).
+        let mut choice = StopChoice {
+            fraction: 1.0,
+            accel_share: 1.0,
+            accel: self.limits.min_accel(),
+            jerk: self.limits.min_jerk(),
+            ratio: f64::INFINITY,
+            stored: 0,
         };
-        // A record that ends at its curve's end at speed leaves the tangential stop no room (it
-        // runs on its own curve): the stored sequence, and one tangential trial for the table
-        // only if there is none (such a trial grinds at the curve end).
-        let curve = valid.get(last.curve()).copied().flatten();
-        let no_room = !last.is_last()
-            && curve.is_some_and(|c| last.u_end >= c.view.u_max())
-            && last.profile().table().end().v > 0.0;
-        let mut best: Option<StopChoice> = None;
-        if no_room {
-            best = Some(StopChoice {
-                fraction: 1.0,
-                accel_share: 1.0,
-                accel: a_max,
-                jerk: j_max,
-                ratio: f64::INFINITY,
-                stored: 0,
+        let Some(last) = self.interp.record().copied().filter(|r| r.seq == record.seq) else {
+            self.pending.push_back(Pending {
+                record: *record,
+                choice,
+                failing: None,
             });
-        } else {
-            for trial in fractions
+            return;
+        };
+        let state = (self.interp, self.fd, &last);
+        // A record that ends at its curve's end at speed leaves the tangential stop no room (it
+        // runs on its own curve): the stored sequence, and one tangential trial only if there
+        // is none (such a trial grinds at the curve end).
+        let no_room = !last.is_last()
+            && valid_curve(g, last.curve()).is_ok_and(|c| last.u_end >= c.view.u_max())
+            && last.profile().table().end().v > 0.0;
+        if !no_room {
+            let mut best: Option<StopChoice> = None;
+            for trial in self
+                .fractions
                 .iter()
                 .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
             {
                 let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
-                let choice = tangential(interp, fd, &last, trial, bound);
-                if best.is_none_or(|b| choice.ratio < b.ratio) {
-                    best = Some(choice);
+                let c = self.tangential(g, state, trial, bound);
+                if best.is_none_or(|b| c.ratio < b.ratio) {
+                    best = Some(c);
                 }
-                if choice.ratio <= 1.0 {
-                    best = Some(choice);
+                if c.ratio <= 1.0 {
+                    best = Some(c);
                     break;
                 }
             }
+            choice = best.unwrap_or(choice);
         }
-        if let Some(b) = best {
-            if b.ratio > 1.0 && !last.is_last() {
-                failing.push((choices.len(), samples.len(), fd, interp, last, no_room));
-            }
-            choices.push(b);
-        }
+        let failing = (choice.ratio > 1.0 && !last.is_last()).then_some(Failing {
+            end: self.samples.len(),
+            fd: self.fd,
+            interp: self.interp,
+            last,
+            no_room,
+            resume_at: 0,
+        });
+        self.pending.push_back(Pending {
+            record: *record,
+            choice,
+            failing,
+        });
     }
-    let mut sequences: Vec<Option<(StoredStop, f64)>> = vec![None; choices.len()];
-    let path = JointPath::tip(toolpath);
-    let point = |i: usize| samples.get(i).and_then(|&(e, u, _)| path.eval_at(e, u));
-    for (k, end, fd, interp, last, no_room) in failing {
-        let from = end.checked_sub(1).and_then(point);
-        let stored =
-            from.and_then(|from| stored_stop(&path, &curves, limits, fd, &point, samples.len(), end, from, choices[k]));
-        match stored {
-            Some(stored) => {
-                choices[k] = stored.choice;
-                sequences[k] = Some((stored, samples[end - 1].2));
-            }
-            None if no_room => choices[k] = tangential(interp, fd, &last, (1.0, 1.0), f64::INFINITY),
-            None => {}
-        }
+
+    /// No more records come: every pending record can be decided.
+    pub fn finish(&mut self) {
+        self.finished = true;
     }
-    (choices, sequences)
+
+    pub fn is_finished(&self) -> bool {
+        self.finished
+    }
+
+    /// The next record in plan order whose stop is decided, with that stop and the choice
+    /// behind it; `None` while it still waits for the records after it (or none is pending).
+    /// A stored sequence goes to `arena` (returns its offset, or `None` when full: then the
+    /// tangential stop stays).
+    pub fn pop_ready(
+        &mut self,
+        g: &GeometryRef,
+        arena: &mut dyn FnMut(&[f64]) -> Option<u32>,
+    ) -> Option<(SegmentRecord, RecordStop, StopChoice)> {
+        let front = self.pending.front()?;
+        let mut choice = front.choice;
+        let mut stop = RecordStop {
+            accel: choice.accel,
+            jerk: choice.jerk,
+            stored_len: 0,
+            stored_offset: 0,
+        };
+        if let Some(f) = front.failing {
+            let samples = &self.samples;
+            let path = &self.path;
+            let point = |i: usize| samples.get(i).and_then(|&(e, u, _)| path.eval_at(e, u));
+            let outcome = match f.end.checked_sub(1).and_then(point) {
+                Some(from) => stored_stop(
+                    path,
+                    &self.curves,
+                    &self.limits,
+                    (f.fd, &point, samples.len()),
+                    (f.end, from, f.resume_at),
+                    choice,
+                ),
+                None => Ok(None),
+            };
+            let stored = match outcome {
+                Err(resume_at) if !self.finished => {
+                    if let Some(Pending { failing: Some(f), .. }) = self.pending.front_mut() {
+                        f.resume_at = resume_at;
+                    }
+                    return None;
+                }
+                Err(_) => None, // the plan ends first
+                Ok(stored) => stored,
+            };
+            let placed = stored.and_then(|stored| {
+                // In the measure of the interpolator's samples (the records').
+                self.arcs
+                    .set_anchor(stored.from.element, stored.from.u, self.samples[f.end - 1].2);
+                let offset = arena(&stop_runs(&self.arcs, stored.from, &stored.points))?;
+                Some((stored, offset))
+            });
+            match placed {
+                Some((stored, offset)) => {
+                    choice = stored.choice;
+                    stop.stored_offset = offset;
+                    stop.stored_len = stored.points.len() as u32;
+                }
+                None if f.no_room => {
+                    choice = self.tangential(g, (f.interp, f.fd, &f.last), (1.0, 1.0), f64::INFINITY);
+                    (stop.accel, stop.jerk) = (choice.accel, choice.jerk);
+                }
+                None => {}
+            }
+        }
+        let record = self.pending.pop_front()?.record;
+        Some((record, stop, choice))
+    }
 }
 
-/// The geometry `nurbs-planner` publishes for `plan`: the curves with their stop points, the
-/// default stop (`max_fraction` of the smallest axis limits) and the per-record stop table
-/// (fractions up to `max_fraction`). Also returns the choices.
+/// The records of a plan as ring slots, each with its checked stop, produced one at a time
+/// ([`StopChooser`]); or path blocks whose stops are all chosen already.
+pub enum Records<'t> {
+    Segments {
+        records: VecDeque<SegmentRecord>,
+        chooser: Box<StopChooser<'t>>,
+    },
+    Ready(VecDeque<(Slot, f64, StopChoice)>),
+}
+
+/// What [`Records::next`] did. (Returned by value once per record: boxing the slot would
+/// allocate for each.)
+#[allow(clippy::large_enum_variant)]
+pub enum Next {
+    /// A slot ready for the ring, its motion time (s) and its stop choice.
+    Slot(Slot, f64, StopChoice),
+    /// Some work towards the next slot (call again).
+    Working,
+    /// Every slot has been handed out.
+    Done,
+}
+
+impl Records<'_> {
+    /// The next slot, or one record's worth of stop checks towards it. `g`: the published
+    /// geometry; `arena`: where stored stop sequences go.
+    pub fn next(&mut self, g: &GeometryRef, arena: &mut dyn FnMut(&[f64]) -> Option<u32>) -> Next {
+        match self {
+            Records::Ready(slots) => match slots.pop_front() {
+                Some((slot, time, choice)) => Next::Slot(slot, time, choice),
+                None => Next::Done,
+            },
+            Records::Segments { records, chooser } => {
+                if let Some((record, stop, choice)) = chooser.pop_ready(g, arena) {
+                    let time = record.profile().total_time();
+                    return Next::Slot(Slot::segment(&record, &stop), time, choice);
+                }
+                if let Some(record) = records.pop_front() {
+                    chooser.push(&record, g);
+                    Next::Working
+                } else if !chooser.is_finished() {
+                    chooser.finish();
+                    Next::Working
+                } else {
+                    Next::Done
+                }
+            }
+        }
+    }
+}
+
+/// The geometry `nurbs-planner` publishes for `plan` (the curves with their stop points; the
+/// stored stop sequences behind them) and every record as a slot with its checked stop (jerk
+/// fractions up to `max_fraction`), all at once; also returns the choices. (The tests' and
+/// the benchmark's form of what `nurbs-planner` streams.)
+#[allow(dead_code)]
 pub fn geometry(
     toolpath: &Toolpath,
     plan: &Plan,
     max_fraction: f64,
-) -> Result<(GeometryBuilder, Vec<StopChoice>), String> {
-    if !(max_fraction > 0.0 && max_fraction <= 1.0) {
-        return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
-    }
-    let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stop_points(toolpath, plan))?;
-    let fractions = fractions(max_fraction);
-    let (mut choices, sequences) = {
-        let valid = curve_views(&g.layout()).map_err(|e| format!("geometry refused: {e:?}"))?;
-        choose_stops(toolpath, plan, &valid, &fractions)
+) -> Result<(GeometryBuilder, Vec<Slot>, Vec<StopChoice>), String> {
+    let mut g = segment_geometry(toolpath, plan)?;
+    let mut records = Records::Segments {
+        records: plan.records.iter().copied().collect(),
+        chooser: Box::new(StopChooser::new(toolpath, &plan.limits, max_fraction)?),
     };
-    // The stored sequences, in the measure of the interpolator's samples (the records').
-    let mut arcs = ArcLengths::new(toolpath);
-    let mut table = Vec::with_capacity(choices.len());
-    for (c, sequence) in choices.iter_mut().zip(sequences) {
-        let mut entry = RecordStop {
-            accel: c.accel,
-            jerk: c.jerk,
-            stored_len: 0,
-            stored_offset: 0,
+    let mut stored: Vec<f64> = Vec::new();
+    let mut slots = Vec::with_capacity(plan.records.len());
+    let mut choices = Vec::with_capacity(plan.records.len());
+    {
+        let layout = g.layout();
+        let base = layout.values.len();
+        let mut arena = |values: &[f64]| -> Option<u32> {
+            let offset = base + stored.len();
+            if offset + values.len() > GEOMETRY_VALUES {
+                return None;
+            }
+            stored.extend_from_slice(values);
+            u32::try_from(offset).ok()
         };
-        if let Some((stored, s)) = sequence {
-            arcs.set_anchor(stored.from.element, stored.from.u, s);
-            match g.add_values(&stop_runs(&arcs, stored.from, &stored.points)) {
-                Ok(offset) => {
-                    entry.stored_offset = offset;
-                    entry.stored_len = stored.points.len() as u32;
+        loop {
+            match records.next(&layout, &mut arena) {
+                Next::Slot(slot, _, choice) => {
+                    slots.push(slot);
+                    choices.push(choice);
                 }
-                Err(_) => *c = stored.tangential,
+                Next::Working => {}
+                Next::Done => break,
             }
         }
-        table.push(entry);
     }
-    g.set_stop_table(&table)?;
-    Ok((g, choices))
+    g.add_values(&stored)?;
+    Ok((g, slots, choices))
 }
 
-/// The curves of `toolpath` with their stop points, and the default stop (`max_fraction` of the
-/// smallest axis limits): the part of the geometry both record kinds share.
-fn curves_geometry(
-    toolpath: &Toolpath,
-    limits: &Limits,
-    max_fraction: f64,
-    stops: Vec<Vec<(f64, f64)>>,
-) -> Result<GeometryBuilder, String> {
-    if !(max_fraction > 0.0 && max_fraction <= 1.0) {
-        return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
-    }
-    let mut g = GeometryBuilder::new(
-        toolpath.tip_dim(),
-        max_fraction * limits.min_accel(),
-        max_fraction * limits.min_jerk(),
-    );
+/// The geometry published before the records of `plan`: the curves with the plan's stop points
+/// ([`stop_points`]); the stored stop sequences are appended behind it.
+pub fn segment_geometry(toolpath: &Toolpath, plan: &Plan) -> Result<GeometryBuilder, String> {
+    curves_geometry(toolpath, stop_points(toolpath, plan))
+}
+
+/// The curves of `toolpath` with their stop points: the part of the geometry both record kinds
+/// share.
+fn curves_geometry(toolpath: &Toolpath, stops: Vec<Vec<(f64, f64)>>) -> Result<GeometryBuilder, String> {
+    let mut g = GeometryBuilder::new(toolpath.tip_dim());
     for (e, stops) in toolpath.elements.iter().zip(stops) {
         let c = &e.curve;
         g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights(), &stops)?;
@@ -368,7 +545,7 @@ pub struct StoredStop {
 /// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
 /// every block end, the module's stop ([`block_stop`]) with each jerk fraction of the
 /// tangential limits there (largest first) and deceleration shares 1, 1/2, 1/4, 1/10 of it,
-/// until one stays within the axis limits by finite differences, as [`choose_stops`] does for
+/// until one stays within the axis limits by finite differences, as [`StopChooser`] does for
 /// segment records, then bisects towards the next larger fraction (the tangential limits hold
 /// for the direction at the block end only, so the largest stop that passes is often just
 /// below them). Where none passes, VPOp's own deceleration sequence from the block end
@@ -468,13 +645,12 @@ pub fn choose_block_stops(
                     &path,
                     &curves,
                     limits,
-                    fd,
-                    &point,
-                    points.len(),
-                    end,
-                    points[end - 1],
+                    (fd, &point, points.len()),
+                    (end, points[end - 1], 0),
                     tangential,
-                );
+                )
+                .ok()
+                .flatten();
                 best = sequence.as_ref().map(|s| s.choice).or(best);
             }
         }
@@ -493,15 +669,16 @@ pub fn choose_block_stops(
 /// where that does not reach rest (VPOp checks its deceleration only where it has to, so not
 /// every planned state has one), the plan's own next positions up to the first state whose
 /// deceleration sequence does. Every step is a planned or a braking step, so all pass VPOp's
-/// constraints; the sequence may cross element joins (only onwards). `None` if the plan reaches
-/// its end first.
+/// constraints; the sequence may cross element joins (only onwards). The search for that state
+/// starts at position `resume_at` (or at the stop's start); `Err(resume_at)` if the `count`
+/// positions known end first (call again from there with more, or the plan ends there).
 fn planned_then_brake(
     path: &JointPath,
     limits: &Limits,
-    point: &dyn Fn(usize) -> Option<PathPoint>,
-    count: usize,
+    (point, count): (&dyn Fn(usize) -> Option<PathPoint>, usize),
     end: usize,
-) -> Option<Vec<PathPoint>> {
+    resume_at: usize,
+) -> Result<Vec<PathPoint>, usize> {
     // VPOp's constraints use its own (power-basis) evaluation of the curve; the module plays the
     // positions from its own (de Boor): the deceleration aims a hair inside the limits so that
     // the finite differences of the played positions stay within them.
@@ -512,42 +689,44 @@ fn planned_then_brake(
         jerk: scale(&limits.jerk),
         ..limits.clone()
     };
-    for i in end.max(1) - 1..count.saturating_sub(1) {
-        let last = [point(i.saturating_sub(2))?, point(i.saturating_sub(1))?, point(i)?];
-        if let Ok(Some(brake)) = brake_points(path, &inside, SearchOptions::default(), last) {
-            let planned: Option<Vec<PathPoint>> = (end..=i).map(point).collect();
-            return Some(planned?.into_iter().chain(brake).collect());
+    let first = resume_at.max(end.max(1) - 1);
+    for i in first..count.saturating_sub(1) {
+        let last = [point(i.saturating_sub(2)), point(i.saturating_sub(1)), point(i)];
+        let [Some(a), Some(b), Some(c)] = last else {
+            continue;
+        };
+        if let Ok(Some(brake)) = brake_points(path, &inside, SearchOptions::default(), [a, b, c]) {
+            if let Some(planned) = (end..=i).map(point).collect::<Option<Vec<PathPoint>>>() {
+                return Ok(planned.into_iter().chain(brake).collect());
+            }
         }
     }
-    None
+    Err(first.max(count.saturating_sub(1)))
 }
 
 /// Relative margin of the stored decelerations to the axis limits.
 const BRAKE_MARGIN: f64 = 1e-5;
 
-/// [`planned_then_brake`] after the first `end` planned positions, checked as the module runs
-/// it (each position the curve point at its `u`) by finite differences continuing `fd` (the
-/// motion up to `from`, the last position before the stop): returned if it does better than
-/// `tangential`, the best tangential stop there.
-#[allow(clippy::too_many_arguments)]
+/// [`planned_then_brake`] after the first `end` of the `count` planned positions known
+/// (searching from `resume_at`), checked as the module runs it (each position the curve point
+/// at its `u`) by finite differences continuing `fd` (the motion up to `from`, the last
+/// position before the stop): `Some` if it does better than `tangential`, the best tangential
+/// stop there; `Err` as from [`planned_then_brake`].
 fn stored_stop(
     path: &JointPath,
     curves: &PathCurves,
     limits: &Limits,
-    fd: FiniteDifferences,
-    point: &dyn Fn(usize) -> Option<PathPoint>,
-    count: usize,
-    end: usize,
-    from: PathPoint,
+    (fd, point, count): (FiniteDifferences, &dyn Fn(usize) -> Option<PathPoint>, usize),
+    (end, from, resume_at): (usize, PathPoint, usize),
     tangential: StopChoice,
-) -> Option<StoredStop> {
-    let points = planned_then_brake(path, limits, point, count, end)?;
+) -> Result<Option<StoredStop>, usize> {
+    let points = planned_then_brake(path, limits, (point, count), end, resume_at)?;
     // Elements only onwards, one at a time (the module checks each step).
     let onwards = points.iter().try_fold(from.element, |e, p| {
         (p.element == e || p.element == e + 1).then_some(p.element)
     });
     if points.is_empty() || onwards.is_none() {
-        return None;
+        return Ok(None);
     }
     let tip = limits.velocity.len();
     let mut f = fd;
@@ -557,7 +736,7 @@ fn stored_stop(
     }
     f.finish(limits);
     let ratio = f.worst_ratio(limits);
-    (ratio < tangential.ratio).then_some(StoredStop {
+    Ok((ratio < tangential.ratio).then_some(StoredStop {
         from,
         choice: StopChoice {
             ratio,
@@ -566,7 +745,7 @@ fn stored_stop(
         },
         points,
         tangential,
-    })
+    }))
 }
 
 /// The arena values of the stored stop `points` that follow `from`: a [`StopRun`] per element,
@@ -668,8 +847,10 @@ pub fn block_geometry(
     }
     let mut blocks = pack_blocks(&arcs, &plan.points);
     let stops = block_stop_points(toolpath, &blocks, plan.limits.period);
-    let mut g = curves_geometry(toolpath, &plan.limits, max_fraction, stops)?;
-    g.set_stop_table(&[])?;
+    if !(max_fraction > 0.0 && max_fraction <= 1.0) {
+        return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
+    }
+    let mut g = curves_geometry(toolpath, stops)?;
     let (mut choices, sequences) = {
         let valid = curve_views(&g.layout()).map_err(|e| format!("geometry refused: {e:?}"))?;
         let fractions = fractions(max_fraction);
@@ -713,28 +894,26 @@ pub enum PlannerKind {
     Vpop,
 }
 
-/// A planned motion ready for the channel: its geometry, its records as ring slots with the
-/// motion time of each, and the stop check's outcome.
-pub struct Motion {
+/// A planned motion ready for the channel: its geometry (to publish first) and its records,
+/// which come as ring slots with their checked stops.
+pub struct Motion<'t> {
     pub geometry: GeometryBuilder,
-    pub slots: Vec<Slot>,
-    /// Motion time of each slot (s).
-    pub durations: Vec<f64>,
-    pub stops: Vec<StopChoice>,
+    pub records: Records<'t>,
     /// One line for the log.
     pub summary: String,
 }
 
 /// Plans `toolpath` (from its start, or from rest at the module's stop point `from`) with
-/// `planner`, checks the module's stops and prepares what goes into the channel. One way for
+/// `planner` and prepares what goes into the channel: segment records get their stops checked
+/// one by one as they are handed out ([`Records::next`]), path blocks all at once. One way for
 /// both record kinds.
-pub fn motion(
-    toolpath: &Toolpath,
+pub fn motion<'t>(
+    toolpath: &'t Toolpath,
     limits: &Limits,
     planner: PlannerKind,
     from: Option<&StopPoint>,
     max_fraction: f64,
-) -> Result<Motion, String> {
+) -> Result<Motion<'t>, String> {
     match planner {
         PlannerKind::Erwinski => {
             let plan = match from {
@@ -747,12 +926,13 @@ pub fn motion(
                 plan.motion_time,
                 plan.plan_time
             );
-            let (geometry, stops) = geometry(toolpath, &plan, max_fraction)?;
+            let chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
             Ok(Motion {
-                geometry,
-                slots: plan.records.iter().map(Slot::segment).collect(),
-                durations: plan.records.iter().map(|r| r.profile().total_time()).collect(),
-                stops,
+                geometry: segment_geometry(toolpath, &plan)?,
+                records: Records::Segments {
+                    records: plan.records.into(),
+                    chooser: Box::new(chooser),
+                },
                 summary,
             })
         }
@@ -766,11 +946,16 @@ pub fn motion(
                 plan.motion_time,
                 plan.plan_time
             );
+            let period = plan.limits.period;
             Ok(Motion {
                 geometry,
-                slots: blocks.iter().map(Slot::block).collect(),
-                durations: blocks.iter().map(|b| b.len() as f64 * plan.limits.period).collect(),
-                stops,
+                records: Records::Ready(
+                    blocks
+                        .iter()
+                        .zip(stops)
+                        .map(|(b, c)| (Slot::block(b), b.len() as f64 * period, c))
+                        .collect(),
+                ),
                 summary,
             })
         }

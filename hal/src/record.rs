@@ -18,12 +18,45 @@ pub const KIND_SEGMENT: u32 = 1;
 /// [`Slot::kind`] of a [`PathBlock`].
 pub const KIND_BLOCK: u32 = 2;
 
+/// The stop the module makes after a segment record if no further record is taken (underrun,
+/// hold, abort), as the planner chose and checked it (within the axis limits by finite
+/// differences). Every segment record carries its own: a record is never run before its stop
+/// is known, and the planner can hand records out while it is still choosing later stops.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RecordStop {
+    /// Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
+    pub accel: f64,
+    pub jerk: f64,
+    /// Non-zero: instead, the planner's stop sequence of this many positions, stored as
+    /// [`StopRun`](nurbs_rtcore::StopRun)s in the geometry arena from value `stored_offset`
+    /// (written before the record was pushed).
+    pub stored_len: u32,
+    pub stored_offset: u32,
+}
+
+impl RecordStop {
+    /// The limits are positive and finite (the stored sequence is checked as it is played).
+    pub fn is_valid(&self) -> bool {
+        let positive = |x: f64| x.is_finite() && x > 0.0;
+        positive(self.accel) && positive(self.jerk)
+    }
+}
+
+/// A segment record with the stop after it: the segment payload of a [`Slot`].
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SegmentSlot {
+    pub record: SegmentRecord,
+    pub stop: RecordStop,
+}
+
 /// The payload of a [`Slot`]; which field is meant is [`Slot::kind`]. Both are plain numbers,
 /// so any bytes read as either are valid values (the module still validates them).
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub union SlotData {
-    pub segment: SegmentRecord,
+    pub segment: SegmentSlot,
     pub block: PathBlock,
 }
 
@@ -40,7 +73,7 @@ pub struct Slot {
 /// A decoded slot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Record {
-    Segment(SegmentRecord),
+    Segment(SegmentRecord, RecordStop),
     Block(PathBlock),
 }
 
@@ -56,9 +89,12 @@ impl Slot {
         }
     }
 
-    pub fn segment(r: &SegmentRecord) -> Slot {
+    pub fn segment(record: &SegmentRecord, stop: &RecordStop) -> Slot {
         let mut slot = Slot::zeroed(KIND_SEGMENT);
-        slot.data.segment = *r;
+        slot.data.segment = SegmentSlot {
+            record: *record,
+            stop: *stop,
+        };
         slot
     }
 
@@ -74,7 +110,7 @@ impl Slot {
         // slot is always written whole (`Slot::segment`, `Slot::block`, or zeroed memory).
         unsafe {
             match self.kind {
-                KIND_SEGMENT => Some(Record::Segment(self.data.segment)),
+                KIND_SEGMENT => Some(Record::Segment(self.data.segment.record, self.data.segment.stop)),
                 KIND_BLOCK => Some(Record::Block(self.data.block)),
                 _ => None,
             }
@@ -84,7 +120,7 @@ impl Slot {
     /// Sequence number (either kind; 0 for an unknown kind).
     pub fn seq(&self) -> u32 {
         match self.decode() {
-            Some(Record::Segment(r)) => r.seq,
+            Some(Record::Segment(r, _)) => r.seq,
             Some(Record::Block(b)) => b.seq,
             None => 0,
         }
@@ -109,12 +145,6 @@ impl core::fmt::Debug for Slot {
     }
 }
 
-impl From<&SegmentRecord> for Slot {
-    fn from(r: &SegmentRecord) -> Slot {
-        Slot::segment(r)
-    }
-}
-
 impl From<&PathBlock> for Slot {
     fn from(b: &PathBlock) -> Slot {
         Slot::block(b)
@@ -124,6 +154,7 @@ impl From<&PathBlock> for Slot {
 // The shared-memory layout is an ABI between two separately built programs: pin it.
 const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 160);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
+const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 184);
 const _: () = assert!(core::mem::size_of::<PathBlock>() == 312);
 const _: () = assert!(core::mem::size_of::<Slot>() == 320);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

@@ -8,13 +8,14 @@ use std::time::Duration;
 
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::simulate::setpoints;
-use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
+use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::Sample;
 
-use crate::channel::{Channel, SegmentRecord, Slot};
+use crate::channel::{Channel, Record, RecordStop, SegmentRecord, Slot};
 use crate::mock::{self, Value};
 use crate::module::{rtapi_app_exit, rtapi_app_main, FaultCode};
+use crate::plan_geometry::StopChoice;
 use crate::sys;
 use crate::user::{Component, GeometryBuilder, StreamReader, StreamValue};
 
@@ -118,13 +119,17 @@ fn lock_module() -> MutexGuard<'static, ()> {
     MODULE.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-/// A toolpath, its plan and the offline setpoints (what `nurbs-plan plan --out` writes).
+/// A toolpath, its plan, the offline setpoints (what `nurbs-plan plan --out` writes) and what
+/// nurbs-planner sends for it: the geometry and the records as slots with their checked stops
+/// (default stop fraction 1).
 struct Job {
     toolpath: Toolpath,
-    plan: Plan,
     limits: Limits,
     records: Vec<SegmentRecord>,
     samples: Vec<Sample>,
+    geometry: GeometryBuilder,
+    slots: Vec<Slot>,
+    choices: Vec<StopChoice>,
 }
 
 fn job(name: &str) -> Job {
@@ -144,24 +149,27 @@ fn job_of(toolpath: Toolpath) -> Job {
     let limits = Limits::uniform(toolpath.tip_dim(), 2500.0, 1e4, 6e4, 0.001, PERIOD);
     let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
     let samples = setpoints(&PathCurves::new(&toolpath), &plan.limits, &plan.records);
+    let (geometry, slots, choices) = crate::plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
     Job {
         limits: plan.limits.clone(),
         records: plan.records.clone(),
-        plan,
         samples,
         toolpath,
+        geometry,
+        slots,
+        choices,
     }
 }
 
-/// What nurbs-planner publishes (default stop fraction 1).
-fn geometry(job: &Job) -> GeometryBuilder {
-    crate::plan_geometry::geometry(&job.toolpath, &job.plan, 1.0).unwrap().0
+/// What nurbs-planner publishes.
+fn geometry(job: &Job) -> &GeometryBuilder {
+    &job.geometry
 }
 
-/// Push records from `from` while the ring has room; returns the next index.
-fn fill(channel: &Channel, records: &[SegmentRecord], mut from: usize) -> usize {
-    while let Some(r) = records.get(from) {
-        if channel.segments.push(&Slot::segment(r)).is_err() {
+/// Push slots from `from` while the ring has room; returns the next index.
+fn fill(channel: &Channel, slots: &[Slot], mut from: usize) -> usize {
+    while let Some(r) = slots.get(from) {
+        if channel.segments.push(r).is_err() {
             break;
         }
         from += 1;
@@ -221,7 +229,7 @@ fn run_module(channel: &Channel, job: &Job, batch: usize, periods: usize) -> (Ve
     let mut update_allocations = 0;
     for _ in 0..periods {
         if channel.segments.len() < batch {
-            sent = fill(channel, &job.records[..(sent + batch).min(job.records.len())], sent);
+            sent = fill(channel, &job.slots[..(sent + batch).min(job.slots.len())], sent);
         }
         let before = allocations();
         unsafe { mock::call(update, PERIOD_NS as _) };
@@ -241,7 +249,7 @@ fn trident_runs_exactly_the_offline_setpoints_without_allocating() {
     let update = mock::funct("nurbs_interp.update").unwrap();
 
     // Disabled, and enabled without geometry: nothing moves, nothing is consumed.
-    fill(channel, &job.records, 0);
+    fill(channel, &job.slots, 0);
     unsafe { mock::call(update, PERIOD_NS as _) };
     assert!(mock::set_pin("nurbs_interp.enable", Value::Bit(true)));
     unsafe { mock::call(update, PERIOD_NS as _) };
@@ -309,7 +317,7 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
         let (mut sent, mut got) = (0, Vec::new());
         let mut allocated = 0;
         for _ in 0..job.samples.len() + 50 {
-            sent = fill(channel, &job.records, sent);
+            sent = fill(channel, &job.slots, sent);
             let before = allocations();
             unsafe { mock::call(update, PERIOD_NS as _) };
             allocated += allocations() - before;
@@ -378,7 +386,7 @@ fn an_underrun_stops_along_the_path_without_a_jump() {
         .max_by(|&a, &b| end_feed(a).total_cmp(&end_feed(b)))
         .unwrap();
     assert!(end_feed(cut) > 10.0, "end feed {}", end_feed(cut));
-    fill(channel, &job.records[..cut], 0);
+    fill(channel, &job.slots[..cut], 0);
     let mut xs: Vec<[f64; 3]> = Vec::new();
     let mut allocated = 0;
     for _ in 0..job.samples.len() {
@@ -463,7 +471,7 @@ fn an_underrun_resumes_from_the_stop_point_on_command() {
 fn underrun_and_resume(name: &str, job: &Job, cut: usize) -> (Vec<[f64; 5]>, usize) {
     let (_planner, channel) = load_enabled(job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    fill(channel, &job.records[..cut], 0);
+    fill(channel, &job.slots[..cut], 0);
     let mut samples: Vec<[f64; 5]> = Vec::new();
     let mut allocated = 0;
     let mut period = |samples: &mut Vec<[f64; 5]>| {
@@ -504,12 +512,9 @@ fn underrun_and_resume(name: &str, job: &Job, cut: usize) -> (Vec<[f64; 5]>, usi
         period(&mut samples); // the module empties the ring of the stopped motion
     }
     assert!(channel.segments.is_empty());
-    crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
-        .unwrap()
-        .0
-        .publish(channel)
-        .unwrap();
-    let mut sent = fill(channel, &plan2.records, 0);
+    let (g2, slots2, _) = crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0).unwrap();
+    g2.publish(channel).unwrap();
+    let mut sent = fill(channel, &slots2, 0);
     // Data but no command: the machine stays.
     for _ in 0..400 {
         period(&mut samples);
@@ -521,7 +526,7 @@ fn underrun_and_resume(name: &str, job: &Job, cut: usize) -> (Vec<[f64; 5]>, usi
     mock::set_pin("nurbs_interp.resume", Value::Bit(true));
     let periods = job.samples.len() + 20_000;
     for _ in 0..periods {
-        sent = fill(channel, &plan2.records, sent);
+        sent = fill(channel, &slots2, sent);
         period(&mut samples);
         if bit("nurbs_interp.done") {
             break;
@@ -559,14 +564,14 @@ fn a_resume_from_elsewhere_is_refused() {
     let job = job("trident.json");
     let (_planner, channel) = load_enabled(&job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    fill(channel, &job.records[..job.records.len() / 2], 0);
+    fill(channel, &job.slots[..job.slots.len() / 2], 0);
     for _ in 0..job.samples.len() {
         unsafe { mock::call(update, PERIOD_NS as _) };
     }
     assert!(channel.stop.read().is_some());
     let held = [float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")];
     geometry(&job).publish(channel).unwrap();
-    fill(channel, &job.records, 0);
+    fill(channel, &job.slots, 0);
     mock::set_pin("nurbs_interp.resume", Value::Bit(true));
     for _ in 0..100 {
         unsafe { mock::call(update, PERIOD_NS as _) };
@@ -579,9 +584,9 @@ fn a_resume_from_elsewhere_is_refused() {
 }
 
 /// Runs a few periods and returns the fault code.
-fn fault_after(channel: &Channel, records: &[SegmentRecord]) -> u32 {
+fn fault_after(channel: &Channel, slots: &[Slot]) -> u32 {
     let update = mock::funct("nurbs_interp.update").unwrap();
-    fill(channel, records, 0);
+    fill(channel, slots, 0);
     for _ in 0..100_000 {
         unsafe { mock::call(update, PERIOD_NS as _) };
         if bit("nurbs_interp.fault") {
@@ -595,26 +600,32 @@ fn fault_after(channel: &Channel, records: &[SegmentRecord]) -> u32 {
 fn malformed_records_fault_and_hold() {
     let _guard = lock_module();
     let job = job("trident.json");
-    type Tamper = fn(&mut SegmentRecord);
-    let cases: [(Tamper, FaultCode); 4] = [
-        (|r| r.seq += 1, FaultCode::Sequence),
-        (|r| r.durations[3] = f64::NAN, FaultCode::Record),
-        (|r| r.length *= 2.0, FaultCode::Record),
-        (|r| r.flags |= 7 << 16, FaultCode::BadRecord),
+    type Tamper = fn(&mut SegmentRecord, &mut RecordStop);
+    let cases: [(Tamper, FaultCode); 6] = [
+        (|r, _| r.seq += 1, FaultCode::Sequence),
+        (|r, _| r.durations[3] = f64::NAN, FaultCode::Record),
+        (|r, _| r.length *= 2.0, FaultCode::Record),
+        (|r, _| r.flags |= 7 << 16, FaultCode::BadRecord),
+        (|_, stop| stop.jerk = f64::NAN, FaultCode::Record),
+        (|_, stop| stop.accel = 0.0, FaultCode::Record),
     ];
     for (tamper, code) in cases {
         let (_planner, channel) = load_enabled(&job);
-        let mut records = job.records.clone();
-        let k = records.len() / 2;
-        tamper(&mut records[k]);
-        assert_eq!(fault_after(channel, &records[..=k]), code as u32);
+        let mut slots = job.slots.clone();
+        let k = slots.len() / 2;
+        let Some(Record::Segment(mut record, mut stop)) = slots[k].decode() else {
+            panic!("not a segment slot");
+        };
+        tamper(&mut record, &mut stop);
+        slots[k] = Slot::segment(&record, &stop);
+        assert_eq!(fault_after(channel, &slots[..=k]), code as u32);
         assert!(bit("nurbs_interp.fault"));
         assert!(!bit("nurbs_interp.active"));
         // A record the interpolator refuses has been taken; the others are refused on arrival.
         let taken = k + usize::from(code == FaultCode::BadRecord);
         assert_eq!(u32_pin("nurbs_interp.records") as usize, taken);
         let held = float("nurbs_interp.pos-cmd-x");
-        fill(channel, &job.records[k + 1..], 0);
+        fill(channel, &job.slots[k + 1..], 0);
         fault_after(channel, &[]);
         assert_eq!(float("nurbs_interp.pos-cmd-x"), held, "moved after a fault");
         unsafe { rtapi_app_exit() };
@@ -634,7 +645,7 @@ fn invalid_geometry_is_refused() {
         values: &values,
         ..g.layout()
     });
-    assert_eq!(fault_after(channel, &job.records), FaultCode::Geometry as u32);
+    assert_eq!(fault_after(channel, &job.slots), FaultCode::Geometry as u32);
     assert_eq!(u32_pin("nurbs_interp.records"), 0);
     assert_eq!(float("nurbs_interp.pos-cmd-x"), 0.0);
     unsafe { rtapi_app_exit() };
@@ -644,7 +655,7 @@ fn invalid_geometry_is_refused() {
     mock::set_pin("nurbs_interp.enable", Value::Bit(true));
     g.publish(channel).unwrap();
     let update = mock::funct("nurbs_interp.update").unwrap();
-    fill(channel, &job.records, 0);
+    fill(channel, &job.slots, 0);
     for _ in 0..100 {
         unsafe { mock::call(update, PERIOD_NS as _) };
     }
@@ -686,7 +697,7 @@ fn stream_reader_reads_a_sampler_like_stream() {
 fn underrun_stops_are_within_the_limits_at_every_boundary() {
     for name in ["trident.json", "butterfly.json"] {
         let job = job(name);
-        let (_, choices) = crate::plan_geometry::geometry(&job.toolpath, &job.plan, 1.0).unwrap();
+        let choices = &job.choices;
         assert_eq!(choices.len(), job.records.len());
         let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
         let smallest = choices.iter().map(|c| c.fraction).fold(1.0, f64::min);
@@ -705,7 +716,7 @@ fn underrun_stops_are_within_the_limits_at_every_boundary() {
 fn underrun_stops_cross_element_joins() {
     let _guard = lock_module();
     let job = job_of(rounded_polyline());
-    let (g, choices) = crate::plan_geometry::geometry(&job.toolpath, &job.plan, 1.0).unwrap();
+    let choices = &job.choices;
     let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
     let stored = choices.iter().filter(|c| c.stored > 0).count();
     println!(
@@ -714,9 +725,11 @@ fn underrun_stops_cross_element_joins() {
         job.records.len()
     );
     assert!(worst <= 1.0, "a stop exceeds the limits: {choices:?}");
-    let (h, values) = (g.header(), g.values());
-    let table = &values[h.stop_table_offset as usize..][..h.stop_table_len as usize];
-    let stop_of = |k: usize| crate::channel::RecordStop::from_values(&table[4 * k..]).unwrap();
+    let values = job.geometry.values();
+    let stop_of = |k: usize| match job.slots[k].decode() {
+        Some(Record::Segment(_, stop)) => stop,
+        _ => panic!("not a segment slot"),
+    };
     let crossing: Vec<usize> = (0..job.records.len() - 1)
         .filter(|&k| {
             let s = stop_of(k);
@@ -797,31 +810,56 @@ fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
 }
 
 /// What a long G1 program costs `nurbs-planner` before the motion starts (`G1_LINES` lines,
-/// default 1,000; ignored in CI, a measurement): the plan, and the stop check at every boundary.
-/// Every stop stays within the limits and the geometry fits the channel.
+/// default 1,000; ignored in CI, a measurement): the plan, then the stop checks of the records
+/// it queues first (2 s of motion, the default margin), while the rest are checked during the
+/// motion; and the stop checks of all records. Every stop stays within the limits and the
+/// geometry fits the channel.
 /// `cargo test --release -p nurbs-hal --features mock-hal long_g1 -- --ignored --nocapture`
 #[test]
 #[ignore]
 fn long_g1_program_cost() {
+    use crate::plan_geometry::{Next, Records, StopChooser};
     let lines: usize = std::env::var("G1_LINES")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(1000);
+    let toolpath = g1_zigzag(lines);
+    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+    let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
+    // As nurbs-planner streams: stops checked until 2 s of motion are ready.
     let t = std::time::Instant::now();
-    let job = job_of(g1_zigzag(lines));
-    let planned = t.elapsed().as_secs_f64();
+    let g = crate::plan_geometry::segment_geometry(&toolpath, &plan).unwrap();
+    let mut records = Records::Segments {
+        records: plan.records.iter().copied().collect(),
+        chooser: Box::new(StopChooser::new(&toolpath, &plan.limits, 1.0).unwrap()),
+    };
+    let (mut ready, mut count) = (0.0, 0);
+    let mut stored = Vec::new();
+    while ready < 2.0 {
+        match records.next(&g.layout(), &mut |v| {
+            stored.extend_from_slice(v);
+            Some(0)
+        }) {
+            Next::Slot(_, time, _) => (ready, count) = (ready + time, count + 1),
+            Next::Working => {}
+            Next::Done => break,
+        }
+    }
+    let first = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let (g, choices) = crate::plan_geometry::geometry(&job.toolpath, &job.plan, 1.0).unwrap();
+    let (g, _, choices) = crate::plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+    let all = t.elapsed().as_secs_f64();
     let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
     println!(
-        "{lines} lines: motion {:.1} s; plan {planned:.2} s; stops of {} records {:.2} s ({} stored, worst ratio {worst:.7}); {} arena values",
-        job.plan.motion_time,
-        job.records.len(),
-        t.elapsed().as_secs_f64(),
+        "{lines} lines: motion {:.1} s; plan {:.2} s; stops of the first {count} records ({ready:.2} s of motion) {first:.3} s; stops of all {} records {all:.2} s ({} stored, worst ratio {worst:.7}); {} arena values",
+        plan.motion_time,
+        plan.plan_time,
+        plan.records.len(),
         choices.iter().filter(|c| c.stored > 0).count(),
         g.values().len()
     );
     assert!(worst <= 1.0 + nurbs_motion::planner::verify::SLACK);
+    assert!(ready >= 2.0 && count < plan.records.len());
 }
 
 /// A G1 program of `lines` 2 mm lines zigzagging up to 5 mm sideways, its corners rounded
@@ -878,7 +916,7 @@ fn run_with(channel: &Channel, job: &Job, periods: usize, control: &mut dyn FnMu
     let mut out = Vec::new();
     let mut allocated = 0;
     for period in 0..periods {
-        sent = fill(channel, &job.records, sent);
+        sent = fill(channel, &job.slots, sent);
         control(period);
         let before = allocations();
         unsafe { mock::call(update, PERIOD_NS as _) };
@@ -927,7 +965,7 @@ fn peak_periods(job: &Job) -> Vec<usize> {
 fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Option<usize>, usize) {
     let (_planner, channel) = load_enabled(job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    let mut records = job.records.clone();
+    let mut slots = job.slots.clone();
     let (mut sent, mut out, mut allocated) = (0, Vec::new(), 0);
     let (mut rest_at, mut release_at, mut end, mut last_running) = (None, None, 0, false);
     for p in 0..job.samples.len() + 50_000 {
@@ -941,12 +979,9 @@ fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Optio
                 assert!(channel.segments.is_empty());
                 assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.underrun"));
                 let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
-                crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
-                    .unwrap()
-                    .0
-                    .publish(channel)
-                    .unwrap();
-                records = plan2.records;
+                let (g2, slots2, _) = crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0).unwrap();
+                g2.publish(channel).unwrap();
+                slots = slots2;
                 sent = 0;
                 rest_at = Some(p);
                 release_at = Some(p + held_for);
@@ -956,7 +991,7 @@ fn hold_run(job: &Job, hold_at: usize, held_for: usize) -> (Vec<[f64; 5]>, Optio
             assert!(bit("nurbs_interp.resume-ready") && !bit("nurbs_interp.active"));
             mock::set_pin("nurbs_interp.hold", Value::Bit(false));
         }
-        sent = fill(channel, &records, sent);
+        sent = fill(channel, &slots, sent);
         let before = allocations();
         unsafe { mock::call(update, PERIOD_NS as _) };
         allocated += allocations() - before;
@@ -1049,7 +1084,7 @@ fn commands_wait_for_the_plan_from_the_stop_point() {
             unsafe { mock::call(update, PERIOD_NS as _) };
         }
     };
-    fill(channel, &job.records, 0);
+    fill(channel, &job.slots, 0);
     periods(job.samples.len() / 3);
     mock::set_pin("nurbs_interp.hold", Value::Bit(true));
     periods(3000);
@@ -1066,12 +1101,9 @@ fn commands_wait_for_the_plan_from_the_stop_point() {
     let plan2 = crate::plan_geometry::plan_from_stop(&job.toolpath, &job.limits, &stop).unwrap();
     // Under hold again, the plan arrives; a resume edge does not start it.
     mock::set_pin("nurbs_interp.hold", Value::Bit(true));
-    crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0)
-        .unwrap()
-        .0
-        .publish(channel)
-        .unwrap();
-    let mut sent = fill(channel, &plan2.records, 0);
+    let (g2, slots2, _) = crate::plan_geometry::geometry(&job.toolpath, &plan2, 1.0).unwrap();
+    g2.publish(channel).unwrap();
+    let mut sent = fill(channel, &slots2, 0);
     mock::set_pin("nurbs_interp.resume", Value::Bit(true));
     periods(100);
     mock::set_pin("nurbs_interp.resume", Value::Bit(false));
@@ -1083,7 +1115,7 @@ fn commands_wait_for_the_plan_from_the_stop_point() {
     assert!(bit("nurbs_interp.active"));
     assert_eq!([float("nurbs_interp.pos-cmd-x"), float("nurbs_interp.pos-cmd-y")], here);
     for _ in 0..job.samples.len() {
-        sent = fill(channel, &plan2.records, sent);
+        sent = fill(channel, &slots2, sent);
         periods(1);
     }
     assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault") && !bit("nurbs_interp.held"));
@@ -1143,7 +1175,7 @@ fn update_cost() {
         let mut sent = 0;
         let mut ns = Vec::with_capacity(job.samples.len());
         while !bit("nurbs_interp.done") {
-            sent = fill(channel, &job.records, sent);
+            sent = fill(channel, &job.slots, sent);
             let t = std::time::Instant::now();
             unsafe { mock::call(update, PERIOD_NS as _) };
             ns.push(t.elapsed().as_nanos() as u64);
@@ -1179,13 +1211,13 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
     type End = fn(&Channel, &Job);
     let endings: [(&str, End); 3] = [
         ("done", |c, job| {
-            fill(c, &job.records, 0);
+            fill(c, &job.slots, 0);
         }),
         ("underrun", |c, job| {
-            fill(c, &job.records[..job.records.len() / 2], 0);
+            fill(c, &job.slots[..job.slots.len() / 2], 0);
         }),
         ("abort", |c, job| {
-            fill(c, &job.records, 0);
+            fill(c, &job.slots, 0);
             mock::set_pin("nurbs_interp.abort", Value::Bit(true));
         }),
     ];
@@ -1202,7 +1234,7 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
             assert!(channel.stop.read().is_none(), "abort keeps the stop point");
         }
         // Records of the old motion still coming are dropped, not run.
-        fill(channel, &job.records[1..], 0);
+        fill(channel, &job.slots[1..], 0);
         periods(10);
         assert!(channel.segments.is_empty(), "{what}: ring not emptied");
         mock::set_pin("nurbs_interp.abort", Value::Bit(false));
@@ -1222,7 +1254,7 @@ fn a_new_geometry_starts_a_new_motion_after_done_underrun_or_abort() {
 mod blocks {
     use super::*;
     use crate::channel::PathBlock;
-    use crate::plan_geometry::{block_geometry, vpop_plan};
+    use crate::plan_geometry::{block_geometry, vpop_plan, Motion, Next};
     use crate::record::BLOCK_SAMPLES;
     use nurbs_motion::planner::verify::{verify, Row};
     use nurbs_motion::planner::vpop::VpopPlan;
@@ -1671,7 +1703,28 @@ mod blocks {
         block_job("butterfly.json");
     }
 
-    /// What `nurbs-planner` streams: Erwinski plans as segment slots, VPOp plans as block
+    /// Every slot of a motion as `nurbs-planner` streams it, with its motion time, and the
+    /// values appended to the arena behind the published geometry.
+    fn drain(m: &mut Motion) -> (Vec<(Slot, f64, StopChoice)>, Vec<f64>) {
+        let Motion { geometry, records, .. } = m;
+        let layout = geometry.layout();
+        let (mut out, mut appended) = (Vec::new(), Vec::new());
+        loop {
+            let mut arena = |v: &[f64]| {
+                let offset = (layout.values.len() + appended.len()) as u32;
+                appended.extend_from_slice(v);
+                Some(offset)
+            };
+            match records.next(&layout, &mut arena) {
+                Next::Slot(slot, time, choice) => out.push((slot, time, choice)),
+                Next::Working => {}
+                Next::Done => return (out, appended),
+            }
+        }
+    }
+
+    /// What `nurbs-planner` streams: Erwinski plans as segment slots with their checked stops,
+    /// the same as all at once ([`crate::plan_geometry::geometry`]), VPOp plans as block
     /// slots (one per block, their motion time one period per sample); a 5-axis toolpath is
     /// refused for VPOp with a message saying why.
     #[test]
@@ -1679,24 +1732,39 @@ mod blocks {
         use crate::plan_geometry::{motion, PlannerKind};
         use crate::record::{KIND_BLOCK, KIND_SEGMENT};
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
-        let trident = read_toolpath(&dir.join("trident.json")).unwrap();
         let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+        for toolpath in [
+            read_toolpath(&dir.join("trident.json")).unwrap(),
+            super::rounded_polyline(),
+        ] {
+            let job = super::job_of(toolpath.clone());
+            let mut e = motion(&toolpath, &limits, PlannerKind::Erwinski, None, 1.0).unwrap();
+            let (slots, appended) = drain(&mut e);
+            assert!(slots.iter().all(|s| s.0.kind == KIND_SEGMENT));
+            let streamed: Vec<Slot> = slots.iter().map(|s| s.0).collect();
+            assert_eq!(streamed, job.slots);
+            let mut values = e.geometry.values().to_vec();
+            values.extend_from_slice(&appended);
+            assert_eq!(values, job.geometry.values());
+            let stored = slots.iter().filter(|s| s.2.stored > 0).count();
+            println!("{} records streamed, {stored} with stored stops", slots.len());
+        }
+        let trident = read_toolpath(&dir.join("trident.json")).unwrap();
         let e = motion(&trident, &limits, PlannerKind::Erwinski, None, 1.0).unwrap();
-        assert!(e.slots.iter().all(|s| s.kind == KIND_SEGMENT));
-        let v = motion(&trident, &limits, PlannerKind::Vpop, None, 1.0).unwrap();
-        assert!(v.slots.iter().all(|s| s.kind == KIND_BLOCK));
-        assert_eq!(v.stops.len(), v.slots.len());
+        let mut v = motion(&trident, &limits, PlannerKind::Vpop, None, 1.0).unwrap();
+        let (slots, appended) = drain(&mut v);
+        assert!(appended.is_empty());
+        assert!(slots.iter().all(|s| s.0.kind == KIND_BLOCK));
         assert_eq!(v.geometry.header().curve_count, 1);
-        assert_eq!(v.geometry.header().stop_table_len, 0);
-        let samples: usize = v
-            .slots
+        let samples: usize = slots
             .iter()
+            .map(|s| s.0)
             .map(|s| match s.decode() {
                 Some(crate::record::Record::Block(b)) => b.len(),
                 _ => 0,
             })
             .sum();
-        let time: f64 = v.durations.iter().sum();
+        let time: f64 = slots.iter().map(|s| s.1).sum();
         assert!((time - samples as f64 * PERIOD).abs() < 1e-9);
         println!("{}; {}", e.summary, v.summary);
         let pocket = read_toolpath(&dir.join("open_pocket.json")).unwrap();
@@ -1817,10 +1885,18 @@ mod blocks {
         }
         // Another kind within a block motion, and a slot of no known kind.
         let mut slots: Vec<Slot> = job.blocks[..k].iter().map(Slot::block).collect();
-        slots.push(Slot::segment(&SegmentRecord {
-            seq: k as u32,
-            ..SegmentRecord::default()
-        }));
+        let stop = RecordStop {
+            accel: 1e4,
+            jerk: 6e4,
+            ..RecordStop::default()
+        };
+        slots.push(Slot::segment(
+            &SegmentRecord {
+                seq: k as u32,
+                ..SegmentRecord::default()
+            },
+            &stop,
+        ));
         assert_eq!(fault_of(&job, &slots), (FaultCode::RecordKind as u32, true));
         let mut slots: Vec<Slot> = job.blocks[..k].iter().map(Slot::block).collect();
         let mut unknown = Slot::block(&job.blocks[k]);
@@ -1873,7 +1949,7 @@ fn random_polylines_have_a_stop_within_the_limits_at_every_boundary() {
             toolpath.elements.len()
         );
         let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
-        let (_, choices) = crate::plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
+        let (_, _, choices) = crate::plan_geometry::geometry(&toolpath, &plan, 1.0).unwrap();
         let vpop = crate::plan_geometry::vpop_plan(&toolpath, &limits, None).unwrap();
         let (_, b, block_choices) = crate::plan_geometry::block_geometry(&toolpath, &vpop, None, 1.0).unwrap();
         let worst = |c: &[crate::plan_geometry::StopChoice]| c.iter().map(|c| c.ratio).fold(0.0, f64::max);

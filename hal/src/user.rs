@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::channel::{
-    Channel, CurveDesc, GeometryHeader, GeometryRef, PublishError, RecordStop, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
+    Channel, CurveDesc, GeometryHeader, GeometryRef, PublishError, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
 };
 use crate::pins::{Pin, PinType};
 use crate::sys;
@@ -111,14 +111,11 @@ pub struct GeometryBuilder {
 }
 
 impl GeometryBuilder {
-    /// `tip_axes`: tool-tip coordinates (2 or 3); `stop_accel`, `stop_jerk`: tangential limits of
-    /// the stop the module makes on an underrun.
-    pub fn new(tip_axes: usize, stop_accel: f64, stop_jerk: f64) -> GeometryBuilder {
+    /// `tip_axes`: tool-tip coordinates (2 or 3).
+    pub fn new(tip_axes: usize) -> GeometryBuilder {
         GeometryBuilder {
             header: GeometryHeader {
                 tip_axes: tip_axes as u32,
-                stop_accel,
-                stop_jerk,
                 ..GeometryHeader::default()
             },
             curves: Vec::new(),
@@ -182,21 +179,6 @@ impl GeometryBuilder {
         Ok(offset)
     }
 
-    /// The per-record stop table: the stop after record k at index k.
-    pub fn set_stop_table(&mut self, table: &[RecordStop]) -> Result<(), String> {
-        let values: Vec<f64> = table.iter().flat_map(RecordStop::to_values).collect();
-        if self.values.len() + values.len() > GEOMETRY_VALUES {
-            return Err(format!(
-                "stop table of {} records does not fit the channel",
-                table.len()
-            ));
-        }
-        self.header.stop_table_offset = self.values.len() as u32;
-        self.header.stop_table_len = values.len() as u32;
-        self.values.extend_from_slice(&values);
-        Ok(())
-    }
-
     pub fn header(&self) -> &GeometryHeader {
         &self.header
     }
@@ -218,12 +200,35 @@ impl GeometryBuilder {
         }
     }
 
-    /// Validate and publish; the module takes it at its next period (if idle).
-    pub fn publish(&self, channel: &Channel) -> Result<u32, String> {
+    /// Validate and publish; the module takes it at its next period (if idle). Returns the
+    /// writer of the values appended behind it while the motion runs.
+    pub fn publish<'a>(&self, channel: &'a Channel) -> Result<ArenaAppender<'a>, String> {
         channel.geometry.publish(&self.layout()).map_err(|e| match e {
             PublishError::TooLarge => "geometry too large for the channel".to_owned(),
             PublishError::Invalid(f) => format!("geometry refused: {f:?}"),
+        })?;
+        Ok(ArenaAppender {
+            channel,
+            next: self.values.len(),
         })
+    }
+}
+
+/// Appends values to the published geometry's arena (stored stop sequences chosen while the
+/// motion runs), each before the record that refers to it is pushed.
+pub struct ArenaAppender<'a> {
+    channel: &'a Channel,
+    /// First free value.
+    next: usize,
+}
+
+impl ArenaAppender<'_> {
+    /// Writes `values`; returns their offset, or `None` if the arena is full.
+    pub fn put(&mut self, values: &[f64]) -> Option<u32> {
+        let offset = u32::try_from(self.next).ok()?;
+        self.channel.geometry.append(self.next, values).ok()?;
+        self.next += values.len();
+        Some(offset)
     }
 }
 

@@ -4,6 +4,10 @@
 //! the curve geometry to the realtime module `nurbs_interp` through the shared-memory channel and
 //! streams the segment records into the channel's ring while motion runs, keeping at most
 //! `--margin` seconds of motion queued ahead of the module (and never more than the ring holds).
+//! Each record goes out with the stop the module makes if nothing follows it (underrun, hold,
+//! abort), checked by simulation against the axis limits; the stops are checked as the records
+//! go out, a margin ahead, so the motion starts once the plan is done and the first records'
+//! stops are checked, not after every stop of a long program.
 //!
 //! ```text
 //! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
@@ -29,14 +33,15 @@
 //! (underrun). (To start a different job instead, abort
 //! first: `nurbs_interp.abort` clears the stop point.)
 
+use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use clap::Parser;
-use nurbs_hal::channel::{Channel, ChannelError, Slot, StopPoint};
+use nurbs_hal::channel::{Channel, ChannelError, Slot, StopPoint, SEGMENT_SLOTS};
 use nurbs_hal::sys::HAL_OUT;
-use nurbs_hal::user::{install_signal_handlers, stopped, Component};
+use nurbs_hal::user::{install_signal_handlers, stopped, ArenaAppender, Component};
 
 #[path = "../plan_geometry.rs"]
 mod plan_geometry;
@@ -44,7 +49,7 @@ use nurbs_motion::cli::corners::{prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
-use plan_geometry::PlannerKind;
+use plan_geometry::{Motion, Next, PlannerKind};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -193,41 +198,108 @@ fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
     .map_err(|e| e.to_string())
 }
 
-/// Streams planned records into the ring within the time margin.
+/// Streams a planned motion's records into the ring within the time margin, checking the stop
+/// after each record as it goes: a record is pushed once its stop is known, so motion can start
+/// long before every stop of a long program is checked.
 struct Streamer<'a> {
     channel: &'a Channel,
-    records: Vec<Slot>,
-    /// `ends[k]`: motion time of records 0..k.
+    motion: Motion<'a>,
+    arena: ArenaAppender<'a>,
+    /// Slots whose stops are checked, not pushed yet, with their motion times.
+    ready: VecDeque<(Slot, f64)>,
+    ready_time: f64,
+    /// `ends[k]`: motion time of the first k pushed slots.
     ends: Vec<f64>,
-    sent: usize,
     margin: f64,
+    /// Every slot has come out of the motion.
+    all_checked: bool,
+    /// Worst stop ratio to an axis limit so far, and how many stops are stored sequences.
+    worst: f64,
+    stored: usize,
 }
 
-impl Streamer<'_> {
-    /// Motion time of the sent records the module has not taken yet.
-    fn buffered(&self) -> f64 {
-        let taken = self.sent.saturating_sub(self.channel.segments.len());
-        self.ends.get(self.sent).copied().unwrap_or(0.0) - self.ends.get(taken).copied().unwrap_or(0.0)
+/// Longest the stop checks may hold up one pass of the main loop (which also watches for
+/// stops and signals).
+const CHECK_SLICE: Duration = Duration::from_millis(20);
+
+impl<'a> Streamer<'a> {
+    fn sent(&self) -> usize {
+        self.ends.len() - 1
     }
 
-    fn fill(&mut self) -> Result<(), String> {
-        while let Some(record) = self.records.get(self.sent) {
-            if self.buffered() >= self.margin {
-                break;
+    /// Motion time of the sent records the module has not taken yet.
+    fn buffered(&self) -> f64 {
+        let sent = self.sent();
+        let taken = sent.saturating_sub(self.channel.segments.len());
+        self.ends[sent] - self.ends[taken.min(sent)]
+    }
+
+    /// Pushes checked slots while the margin allows, and checks more stops while fewer than
+    /// `margin` seconds of motion are checked ahead (for at most `slice`).
+    fn fill(&mut self, slice: Duration) -> Result<(), String> {
+        let started = Instant::now();
+        loop {
+            while self.buffered() < self.margin {
+                let Some(&(slot, time)) = self.ready.front() else {
+                    break;
+                };
+                match self.channel.segments.push(&slot) {
+                    Ok(()) => {
+                        self.ready.pop_front();
+                        self.ready_time -= time;
+                        let end = self.ends[self.sent()] + time;
+                        self.ends.push(end);
+                        self.channel.set_planned_time(end);
+                    }
+                    Err(ChannelError::Full) => break,
+                    Err(e) => return Err(format!("channel: {e:?}")),
+                }
             }
-            match self.channel.segments.push(record) {
-                Ok(()) => self.sent += 1,
-                Err(ChannelError::Full) => break,
-                Err(e) => return Err(format!("channel: {e:?}")),
+            if self.all_checked || self.ready_time >= self.margin || started.elapsed() >= slice {
+                return Ok(());
             }
-            self.channel
-                .set_planned_time(self.ends.get(self.sent).copied().unwrap_or(0.0));
+            let Streamer { motion, arena, .. } = self;
+            let layout = motion.geometry.layout();
+            match motion.records.next(&layout, &mut |values| arena.put(values)) {
+                Next::Slot(slot, time, choice) => {
+                    self.ready.push_back((slot, time));
+                    self.ready_time += time;
+                    self.worst = self.worst.max(choice.ratio);
+                    self.stored += usize::from(choice.stored > 0);
+                }
+                Next::Working => {}
+                Next::Done => {
+                    self.all_checked = true;
+                    self.report();
+                }
+            }
         }
-        Ok(())
+    }
+
+    fn report(&self) {
+        eprintln!(
+            "nurbs-planner: underrun stops checked after every record: worst {:.4} x an axis limit{}{}",
+            self.worst,
+            if self.stored > 0 {
+                format!(
+                    " ({} of them stored stop sequences, VPOp's deceleration at the end)",
+                    self.stored
+                )
+            } else {
+                String::new()
+            },
+            // The verifier's rounding slack: stored VPOp positions are evaluated by the module's
+            // de Boor code, which rounds differently from VPOp's power basis.
+            if self.worst <= 1.0 + nurbs_motion::planner::verify::SLACK {
+                ""
+            } else {
+                " (EXCEEDS the limits at some boundary)"
+            }
+        );
     }
 
     fn done(&self) -> bool {
-        self.sent >= self.records.len()
+        self.all_checked && self.ready.is_empty()
     }
 }
 
@@ -235,50 +307,29 @@ impl Streamer<'_> {
 /// publishes the geometry once the module has emptied the ring, and queues the first records.
 fn start_motion<'a>(
     args: &Args,
-    toolpath: &Toolpath,
+    toolpath: &'a Toolpath,
     limits: &Limits,
     channel: &'a Channel,
     from: Option<&StopPoint>,
 ) -> Result<Streamer<'a>, String> {
     if let Some(p) = from {
-        {
-            eprintln!(
-                "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
-                match p.cause {
-                    1 => "underrun",
-                    2 => "hold",
-                    _ => "?",
-                },
-                p.curve,
-                p.u,
-                p.seq
-            );
-        }
+        eprintln!(
+            "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
+            match p.cause {
+                1 => "underrun",
+                2 => "hold",
+                _ => "?",
+            },
+            p.curve,
+            p.u,
+            p.seq
+        );
     }
     let motion = plan_geometry::motion(toolpath, limits, args.planner.into(), from, args.stop_fraction)?;
     eprintln!("nurbs-planner: {}", motion.summary);
-    let stops = &motion.stops;
-    let worst = stops.iter().map(|c| c.ratio).fold(0.0, f64::max);
-    let stored = stops.iter().filter(|c| c.stored > 0).count();
-    eprintln!(
-        "nurbs-planner: underrun stops checked after every record: worst {:.4} x an axis limit{}{}",
-        worst,
-        if stored > 0 {
-            format!(" ({stored} of them stored stop sequences, VPOp's deceleration at the end)")
-        } else {
-            String::new()
-        },
-        // The verifier's rounding slack: stored VPOp positions are evaluated by the module's
-        // de Boor code, which rounds differently from VPOp's power basis.
-        if worst <= 1.0 + nurbs_motion::planner::verify::SLACK {
-            ""
-        } else {
-            " (EXCEEDS the limits at some boundary)"
-        }
-    );
     // A motion of an earlier planner may still be queued: the module empties the ring once
     // that motion is over (finished, aborted or stopped), and refuses a new geometry before.
-    let waited = std::time::Instant::now();
+    let waited = Instant::now();
     while !channel.segments.is_empty() {
         if stopped() || waited.elapsed() > Duration::from_secs(10) {
             return Err("the channel still holds records of a running motion".into());
@@ -291,23 +342,31 @@ fn start_motion<'a>(
             return Err("the stop point was withdrawn (abort) while planning from it".into());
         }
     }
-    motion.geometry.publish(channel)?;
-    let mut ends = vec![0.0];
-    let mut t = 0.0;
-    for d in &motion.durations {
-        t += d;
-        ends.push(t);
-    }
+    let arena = motion.geometry.publish(channel)?;
     let mut streamer = Streamer {
         channel,
-        records: motion.slots,
-        ends,
-        sent: 0,
+        motion,
+        arena,
+        ready: VecDeque::new(),
+        ready_time: 0.0,
+        ends: vec![0.0],
         margin: args.margin,
+        all_checked: false,
+        worst: 0.0,
+        stored: 0,
     };
     // Queue what the margin allows before hal_ready, so `loadusr -W` returns with data in
     // place and the servo thread can start at once.
-    streamer.fill()?;
+    let began = Instant::now();
+    while !streamer.done() && streamer.buffered() < streamer.margin && streamer.channel.segments.len() < SEGMENT_SLOTS {
+        streamer.fill(CHECK_SLICE)?;
+    }
+    eprintln!(
+        "nurbs-planner: first {} records ({:.3} s of motion) queued, their stops checked in {:.3} s",
+        streamer.sent(),
+        streamer.buffered(),
+        began.elapsed().as_secs_f64()
+    );
     Ok(streamer)
 }
 
@@ -340,7 +399,7 @@ fn run(args: &Args) -> Result<(), String> {
         let mut from = channel.stop.read();
         let mut streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
         let show = |s: &Streamer| {
-            sent_pin.set(s.sent as u32);
+            sent_pin.set(s.sent() as u32);
             running.set(!s.done());
             buffered_pin.set(s.buffered());
         };
@@ -356,7 +415,7 @@ fn run(args: &Args) -> Result<(), String> {
                     streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
                 }
             }
-            streamer.fill()?;
+            streamer.fill(CHECK_SLICE)?;
             show(&streamer);
             std::thread::sleep(Duration::from_millis(1));
         }

@@ -476,7 +476,13 @@ impl CurvatureTable {
         let mut offset = Vec::new();
         let mut base = Vec::new();
         for c in curves {
-            let cells = KAPPA_CELLS.max(16 * c.spans.len());
+            // A straight element (degree 1: G1 lines) has no curvature: one cell holds it, which
+            // keeps the table small on long G1 programs.
+            let cells = if c.degree == 1 {
+                1
+            } else {
+                KAPPA_CELLS.max(16 * c.spans.len())
+            };
             offset.push(base.len());
             cells_per_element.push(cells);
             let (u_min, u_max) = (c.starts[0], {
