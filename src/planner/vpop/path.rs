@@ -3,6 +3,8 @@
 //! the limits apply to (the tool tip for 2-/3-axis paths, x y z a|b c on a table-tilting machine) and
 //! the tool tip in the workpiece frame (feed and chord error).
 
+use std::cell::OnceCell;
+
 use crate::geometry::Toolpath;
 use crate::kinematics::TableTilting;
 use crate::planner::axial::MAX_AXES;
@@ -238,7 +240,7 @@ impl<'a> JointPath<'a> {
     /// Upper estimate of the tool-tip curvature on `[w0, w1]` (tabulated maxima of the cells
     /// the interval touches).
     pub fn max_curvature(&self, w0: f64, w1: f64) -> f64 {
-        self.kappa.max(w0.min(w1), w0.max(w1))
+        self.kappa.max(&self.fast, w0.min(w1), w0.max(w1))
     }
 
     /// Largest distance between the tip curve on `(a, b)` and the chord between their tips,
@@ -461,46 +463,39 @@ const KAPPA_CELLS: usize = 2048;
 /// Curvature samples per cell.
 const KAPPA_SAMPLES: usize = 4;
 
-/// Range-maximum table of the curvature over cells of `w`.
+/// Upper estimate of the curvature over cells of `w`: per element, a range-maximum table over
+/// its cells, built the first time a query reaches the element (the stop check of
+/// `nurbs-planner` touches only the elements near the boundaries it checks; building all 2,000
+/// elements of a 1,000-line G1 program up front took a second).
 struct CurvatureTable {
-    cells_per_element: Vec<usize>,
-    /// First cell of every element.
-    offset: Vec<usize>,
-    /// `levels[k][c]`: largest curvature over cells `c .. c + 2^k`.
+    tip: usize,
+    elements: Vec<OnceCell<ElementCurvature>>,
+}
+
+/// `levels[k][c]`: largest curvature over cells `c .. c + 2^k` of one element.
+struct ElementCurvature {
     levels: Vec<Vec<f64>>,
 }
 
-impl CurvatureTable {
-    fn new(curves: &[PowerCurve], tip: usize) -> Self {
-        let mut cells_per_element = Vec::new();
-        let mut offset = Vec::new();
-        let mut base = Vec::new();
-        for c in curves {
-            // A straight element (degree 1: G1 lines) has no curvature: one cell holds it, which
-            // keeps the table small on long G1 programs.
-            let cells = if c.degree == 1 {
-                1
-            } else {
-                KAPPA_CELLS.max(16 * c.spans.len())
-            };
-            offset.push(base.len());
-            cells_per_element.push(cells);
-            let (u_min, u_max) = (c.starts[0], {
-                let s = c.spans.last().unwrap_or(&c.spans[0]);
-                s.u0 + 1.0 / s.inv
-            });
-            for k in 0..cells {
+impl ElementCurvature {
+    fn new(c: &PowerCurve, tip: usize) -> Self {
+        let cells = cells_of(c);
+        let (u_min, u_max) = (c.starts[0], {
+            let s = c.spans.last().unwrap_or(&c.spans[0]);
+            s.u0 + 1.0 / s.inv
+        });
+        let base: Vec<f64> = (0..cells)
+            .map(|k| {
                 let mut m: f64 = 0.0;
                 for j in 0..=KAPPA_SAMPLES {
                     let f = (k as f64 + j as f64 / KAPPA_SAMPLES as f64) / cells as f64;
                     let u = (u_min + (u_max - u_min) * f).min(u_max);
-                    let kappa = curvature_of(&c.eval(u, 2), tip);
                     // A zero speed (cusp) gives infinity: kept, the caps then stop there.
-                    m = m.max(kappa);
+                    m = m.max(curvature_of(&c.eval(u, 2), tip));
                 }
-                base.push(m);
-            }
-        }
+                m
+            })
+            .collect();
         let mut levels = vec![base];
         let mut width = 1;
         while 2 * width <= levels[0].len() {
@@ -509,28 +504,61 @@ impl CurvatureTable {
             levels.push(next);
             width *= 2;
         }
-        CurvatureTable {
-            cells_per_element,
-            offset,
-            levels,
-        }
+        ElementCurvature { levels }
     }
 
-    fn cell(&self, w: f64) -> usize {
-        let n = self.offset.len();
-        let w = w.clamp(0.0, n as f64);
-        let e = (w.floor() as usize).min(n - 1);
-        let cells = self.cells_per_element[e];
-        let k = (((w - e as f64) * cells as f64) as usize).min(cells - 1);
-        self.offset[e] + k
-    }
-
-    fn max(&self, w0: f64, w1: f64) -> f64 {
-        let (a, b) = (self.cell(w0), self.cell(w1));
+    /// Largest curvature over cells `a ..= b`.
+    fn max(&self, a: usize, b: usize) -> f64 {
         let len = b - a + 1;
         let k = (usize::BITS - 1 - len.leading_zeros()) as usize;
         let lvl = &self.levels[k];
         lvl[a].max(lvl[b + 1 - (1 << k)])
+    }
+}
+
+/// Cells of one element: a straight element (degree 1: G1 lines) has no curvature, one cell
+/// holds it.
+fn cells_of(c: &PowerCurve) -> usize {
+    if c.degree == 1 {
+        1
+    } else {
+        KAPPA_CELLS.max(16 * c.spans.len())
+    }
+}
+
+impl CurvatureTable {
+    fn new(curves: &[PowerCurve], tip: usize) -> Self {
+        CurvatureTable {
+            tip,
+            elements: curves.iter().map(|_| OnceCell::new()).collect(),
+        }
+    }
+
+    /// Element and cell of `w`.
+    fn cell(curves: &[PowerCurve], w: f64) -> (usize, usize) {
+        let n = curves.len();
+        let w = w.clamp(0.0, n as f64);
+        let e = (w.floor() as usize).min(n - 1);
+        let cells = cells_of(&curves[e]);
+        (e, (((w - e as f64) * cells as f64) as usize).min(cells - 1))
+    }
+
+    fn element(&self, curves: &[PowerCurve], e: usize) -> &ElementCurvature {
+        self.elements[e].get_or_init(|| ElementCurvature::new(&curves[e], self.tip))
+    }
+
+    /// Largest curvature over the cells from `w0` to `w1` (`w0 <= w1`).
+    fn max(&self, curves: &[PowerCurve], w0: f64, w1: f64) -> f64 {
+        let ((ea, a), (eb, b)) = (Self::cell(curves, w0), Self::cell(curves, w1));
+        if ea == eb {
+            return self.element(curves, ea).max(a, b);
+        }
+        let last = |e: usize| cells_of(&curves[e]) - 1;
+        let mut m = self.element(curves, ea).max(a, last(ea));
+        for e in ea + 1..eb {
+            m = m.max(self.element(curves, e).max(0, last(e)));
+        }
+        m.max(self.element(curves, eb).max(0, b))
     }
 }
 
