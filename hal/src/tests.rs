@@ -795,6 +795,46 @@ fn holds_on_a_g1_program_stop_and_resume_within_the_limits() {
     );
 }
 
+/// When the arena has no room for a stored stop sequence, the record keeps the best tangential
+/// stop (checked: its ratio is what `nurbs-planner` reports, as `EXCEEDS` above 1) and refers to
+/// no stored values; the records after it still go out, in order.
+#[test]
+fn a_full_arena_keeps_the_tangential_stops() {
+    use crate::plan_geometry::{Next, Records, StopChooser};
+    let job = job_of(rounded_polyline());
+    let g = &job.geometry;
+    let mut records = Records::Segments {
+        records: job.records.iter().copied().collect(),
+        chooser: Box::new(StopChooser::new(&job.toolpath, &job.limits, 1.0).unwrap()),
+    };
+    let mut out = Vec::new();
+    loop {
+        match records.next(&g.layout(), &mut |_| None) {
+            Next::Slot(slot, _, choice) => out.push((slot, choice)),
+            Next::Working => {}
+            Next::Done => break,
+        }
+    }
+    assert_eq!(out.len(), job.slots.len());
+    let mut kept = 0;
+    for (k, (((slot, choice), full), full_choice)) in out.iter().zip(&job.slots).zip(&job.choices).enumerate() {
+        let (Some(Record::Segment(r, stop)), Some(Record::Segment(r_full, stop_full))) = (slot.decode(), full.decode())
+        else {
+            panic!("not a segment slot");
+        };
+        assert_eq!((r, stop.stored_len, choice.stored), (r_full, 0, 0), "record {k}");
+        assert_eq!((stop.accel, stop.jerk), (choice.accel, choice.jerk));
+        if stop_full.stored_len > 0 {
+            kept += 1;
+            assert!(choice.ratio > 1.0, "record {k}: a stored stop was needed: {choice:?}");
+        } else {
+            assert_eq!(choice, full_choice);
+        }
+    }
+    println!("{kept} records keep a tangential stop over the limits");
+    assert!(kept > 0, "no stored stop in the full run: the test lost its subject");
+}
+
 /// The curve of the last run of the stored stop sequence of `len` positions at `offset`.
 fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
     let (mut at, mut left, mut curve) = (offset as usize, len as usize, usize::MAX);
