@@ -899,6 +899,8 @@ pub enum PlannerKind {
 pub struct Motion<'t> {
     pub geometry: GeometryBuilder,
     pub records: Records<'t>,
+    /// Motion time of all its records (s).
+    pub motion_time: f64,
     /// One line for the log.
     pub summary: String,
 }
@@ -929,6 +931,7 @@ pub fn motion<'t>(
             let chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
             Ok(Motion {
                 geometry: segment_geometry(toolpath, &plan)?,
+                motion_time: plan.records.iter().map(|r| r.profile().total_time()).sum(),
                 records: Records::Segments {
                     records: plan.records.into(),
                     chooser: Box::new(chooser),
@@ -949,6 +952,7 @@ pub fn motion<'t>(
             let period = plan.limits.period;
             Ok(Motion {
                 geometry,
+                motion_time: blocks.iter().map(|b| b.len() as f64 * period).sum(),
                 records: Records::Ready(
                     blocks
                         .iter()
@@ -960,6 +964,26 @@ pub fn motion<'t>(
             })
         }
     }
+}
+
+/// Whether a motion of `total` seconds can start with the stops of its first `checked` seconds
+/// checked, the checks running at `rate` seconds of motion per second: they must stay `margin`
+/// ahead of the motion to its end, counted at half the measured rate (the stop checks share the
+/// machine with the module and everything else, and later records may cost more). Where the
+/// checks are faster than the motion that is `margin`; where slower, enough more that the motion
+/// does not catch up with them (an underrun stop on the way).
+pub fn checked_far_enough(checked: f64, total: f64, rate: f64, margin: f64) -> bool {
+    if checked >= total {
+        return true;
+    }
+    if checked < margin {
+        return false;
+    }
+    let rate = 0.5 * rate;
+    if rate >= 1.0 {
+        return true;
+    }
+    rate > 0.0 && checked >= margin + (total - checked) * (1.0 - rate) / rate
 }
 
 /// The plan of the rest of the path from where the module stopped after an underrun (at rest,

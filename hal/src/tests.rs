@@ -835,6 +835,42 @@ fn a_full_arena_keeps_the_tangential_stops() {
     assert!(kept > 0, "no stored stop in the full run: the test lost its subject");
 }
 
+/// When `nurbs-planner` may start the motion while it still checks stops: with the checks
+/// faster than the motion (at half the measured rate), once a margin is checked; slower, once
+/// the rest cannot catch up with them; always once everything is checked.
+#[test]
+fn the_motion_starts_once_the_stop_checks_stay_ahead() {
+    use crate::plan_geometry::checked_far_enough;
+    // 20 x the motion's pace (a 1,000-line G1 program): the margin is enough.
+    assert!(!checked_far_enough(1.9, 120.0, 20.0, 2.0));
+    assert!(checked_far_enough(2.0, 120.0, 20.0, 2.0));
+    // 1.5 x, counted as 0.75 x: with c s checked, the 100 - c s left must be checked within
+    // c - 2 s of motion, c >= 2 + (100 - c) / 3, so c >= 26.5.
+    assert!(!checked_far_enough(26.4, 100.0, 1.5, 2.0));
+    assert!(checked_far_enough(26.6, 100.0, 1.5, 2.0));
+    // Simulated: the motion never catches up with the checks at the true rate.
+    for rate in [0.3, 0.8, 1.5, 2.5] {
+        let total = 50.0;
+        let mut checked: f64 = 0.0;
+        let mut t: f64 = 0.0;
+        while !checked_far_enough(checked, total, rate, 2.0) {
+            checked = (checked + rate * 0.01).min(total);
+            t += 0.01;
+        }
+        // From here the motion runs (1 s per s) while the checks go on at `rate`.
+        let start = t;
+        while checked < total {
+            checked = (checked + rate * 0.01).min(total);
+            t += 0.01;
+            assert!(checked >= (t - start).min(total), "rate {rate}: the motion caught up");
+        }
+        println!("rate {rate}: motion starts after {start:.2} s of checks");
+    }
+    // Nothing checked at all never starts (unless the motion is empty).
+    assert!(!checked_far_enough(0.0, 10.0, 0.0, 2.0));
+    assert!(checked_far_enough(0.0, 0.0, 0.0, 2.0));
+}
+
 /// The curve of the last run of the stored stop sequence of `len` positions at `offset`.
 fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
     let (mut at, mut left, mut curve) = (offset as usize, len as usize, usize::MAX);
@@ -1782,6 +1818,7 @@ mod blocks {
             let (slots, appended) = drain(&mut e);
             assert!(slots.iter().all(|s| s.0.kind == KIND_SEGMENT));
             let streamed: Vec<Slot> = slots.iter().map(|s| s.0).collect();
+            assert_eq!(slots.iter().map(|s| s.1).sum::<f64>(), e.motion_time);
             assert_eq!(streamed, job.slots);
             let mut values = e.geometry.values().to_vec();
             values.extend_from_slice(&appended);
@@ -1805,6 +1842,7 @@ mod blocks {
             })
             .sum();
         let time: f64 = slots.iter().map(|s| s.1).sum();
+        assert_eq!(time, v.motion_time);
         assert!((time - samples as f64 * PERIOD).abs() < 1e-9);
         println!("{}; {}", e.summary, v.summary);
         let pocket = read_toolpath(&dir.join("open_pocket.json")).unwrap();

@@ -211,6 +211,9 @@ struct Streamer<'a> {
     /// `ends[k]`: motion time of the first k pushed slots.
     ends: Vec<f64>,
     margin: f64,
+    /// Motion time (s) whose stops to keep checked ahead of what is pushed (`margin`, once the
+    /// motion runs).
+    ahead: f64,
     /// Every slot has come out of the motion.
     all_checked: bool,
     /// Worst stop ratio to an axis limit so far, and how many stops are stored sequences.
@@ -234,8 +237,13 @@ impl<'a> Streamer<'a> {
         self.ends[sent] - self.ends[taken.min(sent)]
     }
 
+    /// Motion time of the records whose stops are checked (pushed or ready).
+    fn checked_time(&self) -> f64 {
+        self.ends[self.sent()] + self.ready_time
+    }
+
     /// Pushes checked slots while the margin allows, and checks more stops while fewer than
-    /// `margin` seconds of motion are checked ahead (for at most `slice`).
+    /// `ahead` seconds of motion are checked ahead (for at most `slice`).
     fn fill(&mut self, slice: Duration) -> Result<(), String> {
         let started = Instant::now();
         loop {
@@ -255,7 +263,7 @@ impl<'a> Streamer<'a> {
                     Err(e) => return Err(format!("channel: {e:?}")),
                 }
             }
-            if self.all_checked || self.ready_time >= self.margin || started.elapsed() >= slice {
+            if self.all_checked || self.ready_time >= self.ahead || started.elapsed() >= slice {
                 return Ok(());
             }
             let Streamer { motion, arena, .. } = self;
@@ -343,6 +351,7 @@ fn start_motion<'a>(
         }
     }
     let arena = motion.geometry.publish(channel)?;
+    let total = motion.motion_time;
     let mut streamer = Streamer {
         channel,
         motion,
@@ -351,21 +360,36 @@ fn start_motion<'a>(
         ready_time: 0.0,
         ends: vec![0.0],
         margin: args.margin,
+        ahead: f64::INFINITY,
         all_checked: false,
         worst: 0.0,
         stored: 0,
     };
-    // Queue what the margin allows before hal_ready, so `loadusr -W` returns with data in
-    // place and the servo thread can start at once.
+    // Check stops until the checks can stay ahead of the motion to its end, and queue what the
+    // margin allows, before hal_ready: `loadusr -W` returns with data in place and the servo
+    // thread can start at once.
     let began = Instant::now();
+    loop {
+        streamer.fill(CHECK_SLICE)?;
+        let checked = streamer.checked_time();
+        let rate = checked / began.elapsed().as_secs_f64().max(1e-9);
+        if streamer.all_checked || plan_geometry::checked_far_enough(checked, total, rate, args.margin) {
+            break;
+        }
+    }
+    streamer.ahead = streamer.margin;
     while !streamer.done() && streamer.buffered() < streamer.margin && streamer.channel.segments.len() < SEGMENT_SLOTS {
         streamer.fill(CHECK_SLICE)?;
     }
+    let elapsed = began.elapsed().as_secs_f64();
     eprintln!(
-        "nurbs-planner: first {} records ({:.3} s of motion) queued, their stops checked in {:.3} s",
+        "nurbs-planner: first {} records ({:.3} s of motion) queued; stops of {:.3} of {:.3} s of motion checked in {:.3} s ({:.0} x the motion's pace)",
         streamer.sent(),
         streamer.buffered(),
-        began.elapsed().as_secs_f64()
+        streamer.checked_time(),
+        total,
+        elapsed,
+        streamer.checked_time() / elapsed.max(1e-9)
     );
     Ok(streamer)
 }
