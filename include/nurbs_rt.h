@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 8
+#define CHANNEL_VERSION 9
 
 /**
  * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
@@ -147,6 +147,13 @@ typedef struct PathBlock {
    */
   uint32_t stop_len;
   uint32_t stop_offset;
+  /**
+   * The stop points of the block's curve: `points_len` `(s, feed cap)` pairs in the geometry
+   * arena from value `points_offset` (the places the module's stop after this block must not
+   * pass faster than their cap).
+   */
+  uint32_t points_offset;
+  uint32_t points_len;
   uint32_t reserved;
   double stop_accel;
   double stop_jerk;
@@ -174,6 +181,14 @@ typedef struct RecordStop {
    */
   uint32_t stored_len;
   uint32_t stored_offset;
+  /**
+   * The stop points of the record's curve: `points_len` `(s, feed cap)` pairs in the arena
+   * from value `points_offset` (arc length from the curve start in the records' measure, mm;
+   * feed cap, mm/s): the planner's critical points and the curve end (feed 0), which the
+   * tangential stop must not pass faster than their cap.
+   */
+  uint32_t points_offset;
+  uint32_t points_len;
 } RecordStop;
 
 /**
@@ -220,13 +235,6 @@ typedef struct CurveDesc {
   uint32_t points_len;
   uint32_t weights_offset;
   uint32_t weights_len;
-  /**
-   * Points the module's underrun stop must not pass faster than allowed: `(s, feed)` pairs
-   * (arc length from the curve start in the records' measure, mm; feed cap, mm/s), e.g. the
-   * planner's critical points, corners and the curve end (feed 0).
-   */
-  uint32_t stops_offset;
-  uint32_t stops_len;
 } CurveDesc;
 
 /**

@@ -36,7 +36,7 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 8;
+pub const CHANNEL_VERSION: u32 = 9;
 /// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
 /// time margin the planner keeps.
 pub const SEGMENT_SLOTS: usize = 1024;
@@ -334,11 +334,6 @@ pub struct CurveDesc {
     pub points_len: u32,
     pub weights_offset: u32,
     pub weights_len: u32,
-    /// Points the module's underrun stop must not pass faster than allowed: `(s, feed)` pairs
-    /// (arc length from the curve start in the records' measure, mm; feed cap, mm/s), e.g. the
-    /// planner's critical points, corners and the curve end (feed 0).
-    pub stops_offset: u32,
-    pub stops_len: u32,
 }
 
 /// The fixed-size part of a geometry. (The stop after each record travels with the record:
@@ -369,24 +364,12 @@ pub enum GeometryFault {
     OutOfBounds { curve: usize },
     /// A curve has fewer coordinates than the tip axes.
     Dimension { curve: usize },
-    /// A curve's stop points are not finite `(s, feed >= 0)` pairs.
-    Stops { curve: usize },
     /// `CurveView::new` refused the curve.
     Curve {
         curve: usize,
         error: nurbs_rtcore::GeometryError,
     },
 }
-
-/// One validated curve: the NURBS and its stop points (`(s, feed)` pairs, finite, feed >= 0).
-#[derive(Clone, Copy, Debug)]
-pub struct ValidCurve<'a> {
-    pub view: CurveView<'a>,
-    pub stops: &'a [f64],
-}
-
-/// Validated curves of a geometry, indexed like the records' curve numbers (planner side).
-pub type CurveViews<'a> = Vec<Option<ValidCurve<'a>>>;
 
 fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     let start = offset as usize;
@@ -410,10 +393,9 @@ pub fn validate_geometry(g: &GeometryRef) -> Result<(), GeometryFault> {
     Ok(())
 }
 
-/// Curve `curve` of `g`, checked: its data within the arena, its stop points finite `(s, feed >=
-/// 0)` pairs, at least the tip axes, and a NURBS `CurveView::new` accepts (O(size of the
-/// curve)). Allocation-free and panic-free.
-pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<ValidCurve<'a>, GeometryFault> {
+/// Curve `curve` of `g`, checked: its data within the arena, at least the tip axes, and a NURBS
+/// `CurveView::new` accepts (O(size of the curve)). Allocation-free and panic-free.
+pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a>, GeometryFault> {
     let header = &g.header;
     let desc = g
         .curves
@@ -421,35 +403,29 @@ pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<ValidCurve<'
         .filter(|_| curve < header.curve_count as usize)
         .ok_or(GeometryFault::Header)?;
     let values = g.values;
-    let (Some(knots), Some(points), Some(weights), Some(stops)) = (
+    let (Some(knots), Some(points), Some(weights)) = (
         slice_of(values, desc.knots_offset, desc.knots_len),
         slice_of(values, desc.points_offset, desc.points_len),
         slice_of(values, desc.weights_offset, desc.weights_len),
-        slice_of(values, desc.stops_offset, desc.stops_len),
     ) else {
         return Err(GeometryFault::OutOfBounds { curve });
     };
-    let pairs_ok = stops.len() % 2 == 0
-        && stops
-            .chunks_exact(2)
-            .all(|p| p.iter().all(|v| v.is_finite()) && p.get(1).is_some_and(|f| *f >= 0.0));
-    if !pairs_ok {
-        return Err(GeometryFault::Stops { curve });
-    }
     if (desc.dim as usize) < header.tip_axes as usize {
         return Err(GeometryFault::Dimension { curve });
     }
-    let view = CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
-        .map_err(|error| GeometryFault::Curve { curve, error })?;
-    Ok(ValidCurve { view, stops })
+    CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
+        .map_err(|error| GeometryFault::Curve { curve, error })
 }
 
-/// Every curve of `g`, validated (planner side).
-pub fn curve_views<'a>(g: &GeometryRef<'a>) -> Result<CurveViews<'a>, GeometryFault> {
-    validate_geometry(g)?;
-    (0..g.header.curve_count as usize)
-        .map(|c| valid_curve(g, c).map(Some))
-        .collect()
+/// The stop points a record or block refers to: `pairs` `(s, feed cap)` pairs in `values` from
+/// value `offset`, if they lie within the arena and are finite with a cap >= 0. O(pairs),
+/// allocation-free and panic-free.
+pub fn stop_points(values: &[f64], offset: u32, pairs: u32) -> Option<&[f64]> {
+    let points = slice_of(values, offset, pairs.checked_mul(2)?)?;
+    points
+        .chunks_exact(2)
+        .all(|p| matches!(*p, [s, cap] if s.is_finite() && cap.is_finite() && cap >= 0.0))
+        .then_some(points)
 }
 
 /// The curve geometry in shared memory, written by the planner, read by the module.
@@ -606,6 +582,8 @@ mod tests {
                 jerk: 6e4,
                 stored_len: seq,
                 stored_offset: 2 * seq,
+                points_offset: 3 * seq,
+                points_len: 1,
             };
             let r = SegmentRecord {
                 seq,
@@ -723,7 +701,7 @@ mod tests {
         let (gen, snap) = c.geometry.snapshot().unwrap();
         assert_eq!((gen, snap.header, snap.curves), (generation, header, &curves[..]));
         validate_geometry(&snap).unwrap();
-        let p = valid_curve(&snap, 0).unwrap().view.point(1.0);
+        let p = valid_curve(&snap, 0).unwrap().point(1.0);
         assert_eq!((p[0], p[1]), (10.0, 0.0));
         assert_eq!(valid_curve(&snap, 1).unwrap_err(), GeometryFault::Header);
         assert!(c.geometry.unchanged(gen));
@@ -738,6 +716,18 @@ mod tests {
         assert_eq!(c.geometry.append(usize::MAX, &[0.0]), Err(PublishError::TooLarge));
         assert_eq!(c.geometry.publish(&g), Ok(4));
         assert!(!c.geometry.unchanged(gen));
+    }
+
+    #[test]
+    fn stop_points_are_checked_pairs_within_the_arena() {
+        let values = [1.0, 0.5, 2.0, 0.0, 3.0, -1.0, f64::NAN, 1.0];
+        assert_eq!(stop_points(&values, 0, 2), Some(&values[..4]));
+        assert_eq!(stop_points(&values, 0, 0), Some(&values[..0]));
+        assert_eq!(stop_points(&values, 2, 3), None, "negative cap");
+        assert_eq!(stop_points(&values, 6, 1), None, "NaN");
+        assert_eq!(stop_points(&values, 6, 2), None, "past the end");
+        assert_eq!(stop_points(&values, u32::MAX, 1), None);
+        assert_eq!(stop_points(&values, 0, u32::MAX), None);
     }
 
     #[test]

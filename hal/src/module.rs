@@ -75,8 +75,8 @@ use nurbs_rtcore::{CurveView, StopRun};
 use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
-    valid_curve, validate_geometry, Channel, CurveDesc, GeometryHeader, GeometryRef, RecordStop, StopPoint, ValidCurve,
-    CHANNEL_KEY,
+    stop_points, valid_curve, validate_geometry, Channel, CurveDesc, GeometryHeader, GeometryRef, RecordStop,
+    StopPoint, CHANNEL_KEY,
 };
 use crate::pins::Pin;
 use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
@@ -159,7 +159,7 @@ pub struct RtGeometry {
     /// The geometry arena (curve data, stored stop sequences).
     values: &'static [f64],
     /// The last curve asked for.
-    cache: Cell<Option<(usize, ValidCurve<'static>)>>,
+    cache: Cell<Option<(usize, CurveView<'static>)>>,
 }
 
 impl RtGeometry {
@@ -174,8 +174,8 @@ impl RtGeometry {
         }
     }
 
-    /// Curve `index` with its stop points, if the geometry has it.
-    fn valid(&self, index: usize) -> Option<ValidCurve<'static>> {
+    /// Curve `index`, if the geometry has it.
+    fn valid(&self, index: usize) -> Option<CurveView<'static>> {
         if let Some((i, c)) = self.cache.get() {
             if i == index {
                 return Some(c);
@@ -198,7 +198,7 @@ impl RtGeometry {
 
 impl CurveSet for RtGeometry {
     fn curve(&self, index: usize) -> Option<CurveView<'_>> {
-        self.valid(index).map(|c| c.view)
+        self.valid(index)
     }
     fn tip_axes(&self) -> usize {
         self.tip
@@ -230,6 +230,9 @@ pub struct Instance {
     next_seq: u32,
     /// The stop after the last segment record taken (it came with the record).
     record_stop: RecordStop,
+    /// The stop points of the last record or block taken, validated (with the arena offset and
+    /// length they came as: records on one curve share them, checked once).
+    points: StopPoints,
     records: u32,
     underruns: u32,
     /// Motion time of the records taken so far (s).
@@ -302,6 +305,8 @@ impl BlockPlayer {
             count: 0,
             stop_len: 0,
             stop_offset: 0,
+            points_offset: 0,
+            points_len: 0,
             reserved: 0,
             stop_accel: 0.0,
             stop_jerk: 0.0,
@@ -350,6 +355,30 @@ impl StoredCursor {
             run_left: 0,
             run_s_before: None,
         }
+    }
+}
+
+/// Validated stop points (`(s, feed cap)` pairs in the arena) and where they came from.
+#[derive(Clone, Copy, Debug)]
+struct StopPoints {
+    key: Option<(u32, u32)>,
+    pairs: &'static [f64],
+}
+
+impl StopPoints {
+    const NONE: StopPoints = StopPoints { key: None, pairs: &[] };
+
+    /// The `len` pairs at `offset` of `values`, checked unless they are the ones held already;
+    /// `None` if they are not valid stop points ([`stop_points`]).
+    fn take(&mut self, values: &'static [f64], offset: u32, len: u32) -> Option<()> {
+        if self.key != Some((offset, len)) {
+            let pairs = stop_points(values, offset, len)?;
+            *self = StopPoints {
+                key: Some((offset, len)),
+                pairs,
+            };
+        }
+        Some(())
     }
 }
 
@@ -441,16 +470,17 @@ fn distance_at_feed(table: &SCurveTable, v: f64) -> f64 {
     table.state_at(hi).s
 }
 
-/// The stop the module runs after `last` on `curve`: deceleration `accel` and jerk `jerk`,
-/// compressed in time just enough to pass every stop point of the curve (the planner's critical
-/// points, corners, the curve end) no faster than its feed cap. Bounded work: one pass over the
-/// curve's stop points, a 60-step bisection for each one the stop reaches too fast.
-pub fn underrun_stop(curve: Option<ValidCurve>, last: &SegmentRecord, accel: f64, jerk: f64) -> SegmentRecord {
+/// The stop the module runs after `last` on its curve: deceleration `accel` and jerk `jerk`,
+/// compressed in time just enough to pass every stop point of the curve (`points`, `(s, feed
+/// cap)` pairs: the planner's critical points, corners, the curve end) no faster than its feed
+/// cap. Bounded work: one pass over the stop points, a 60-step bisection for each one the stop
+/// reaches too fast.
+pub fn underrun_stop(points: &[f64], last: &SegmentRecord, accel: f64, jerk: f64) -> SegmentRecord {
     let nominal = stop_record(last, accel, jerk, 1.0);
     let table = nominal.profile().table();
     let (v0, s0, reach) = (nominal.feed_start, nominal.s_start, nominal.length);
     let mut k = 1.0f64;
-    for pair in curve.map_or(&[][..], |c| c.stops).chunks_exact(2) {
+    for pair in points.chunks_exact(2) {
         if let [s, cap] = *pair {
             // Points within a micrometre are the one the last segment ends at: passed as planned.
             let d = s - s0;
@@ -491,17 +521,17 @@ pub fn block_end_state(block: &PathBlock, dt: f64) -> (f64, f64, f64) {
 /// The stop the module runs after `block` (an underrun, hold or abort at its end): from the
 /// block's end state ([`block_end_state`]) to rest along its curve with the block's checked
 /// deceleration and jerk, both raised (deceleration by `k`, jerk by `k^2`) just enough to pass
-/// every stop point of the curve no faster than its cap, as [`underrun_stop`] does. Returns the
+/// every stop point of the curve (`points`) no faster than its cap, as [`underrun_stop`] does. Returns the
 /// stop as a record (start, curve, profile) and its start acceleration (for
 /// [`SCurve::table_from`](nurbs_rtcore::SCurve::table_from)). Bounded work: for each stop point
 /// the stop reaches too fast, a 40-step bisection of `k` with a 60-step bisection inside.
-pub fn block_stop(curve: Option<ValidCurve>, block: &PathBlock, dt: f64) -> (SegmentRecord, f64) {
+pub fn block_stop(points: &[f64], block: &PathBlock, dt: f64) -> (SegmentRecord, f64) {
     let (s0, v0, a0) = block_end_state(block, dt);
     let (accel, jerk) = (block.stop_accel, block.stop_jerk);
     let profile = |k: f64| stop_from(v0, a0, accel * k, jerk * k * k);
     let reach = profile(1.0).table_from(a0).length();
     let mut k = 1.0f64;
-    for pair in curve.map_or(&[][..], |c| c.stops).chunks_exact(2) {
+    for pair in points.chunks_exact(2) {
         if let [s, cap] = *pair {
             let d = s - s0;
             let fits = |k: f64| distance_at_feed(&profile(k).table_from(a0), cap) <= 0.999 * d;
@@ -688,6 +718,7 @@ impl Instance {
         self.player = BlockPlayer::IDLE;
         self.next_seq = 0;
         self.record_stop = RecordStop::default();
+        self.points = StopPoints::NONE;
         self.taken_time = 0.0;
         self.stopping = false;
         self.stopped = false;
@@ -732,6 +763,8 @@ impl Instance {
             let resume_from = if self.resuming { self.held } else { None };
             let next_seq = &mut self.next_seq;
             let record_stop = &mut self.record_stop;
+            let points = &mut self.points;
+            let values = self.geometry.values;
             let records = &mut self.records;
             let taken_time = &mut self.taken_time;
             let pins = &self.pins;
@@ -759,7 +792,9 @@ impl Instance {
                         pull = Pull::Fault(FaultCode::ResumePoint);
                         None
                     }
-                    Ok(Some((_, stop))) if !stop.is_valid() => {
+                    Ok(Some((_, stop)))
+                        if !stop.is_valid() || points.take(values, stop.points_offset, stop.points_len).is_none() =>
+                    {
                         pull = Pull::Fault(FaultCode::Record);
                         None
                     }
@@ -833,8 +868,7 @@ impl Instance {
                     player.stored = Some(cursor);
                     return self.advance_stored_stop(channel, cursor);
                 }
-                let curve = self.geometry.valid(last.curve());
-                let mut stop = Some(underrun_stop(curve, &last, planned.accel, planned.jerk));
+                let mut stop = Some(underrun_stop(self.points.pairs, &last, planned.accel, planned.jerk));
                 match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
                     Step::Sample(s) => {
                         self.output(&s);
@@ -942,8 +976,7 @@ impl Instance {
                     self.player.stored = Some(cursor);
                     return self.advance_stored_stop(channel, cursor);
                 }
-                let curve = self.geometry.valid(last.curve());
-                let (stop, a0) = block_stop(curve, &last, dt);
+                let (stop, a0) = block_stop(self.points.pairs, &last, dt);
                 let table = stop.profile().table_from(a0);
                 if !self.interp.start_profile(&self.geometry, stop, table) {
                     self.fault = FaultCode::BadRecord;
@@ -1040,6 +1073,9 @@ impl Instance {
             return Err(FaultCode::Sequence);
         }
         b.check().map_err(|_| FaultCode::Record)?;
+        self.points
+            .take(self.geometry.values, b.points_offset, b.points_len)
+            .ok_or(FaultCode::Record)?;
         let n = b.len();
         let view = self.geometry.curve(b.curve()).ok_or(FaultCode::BadRecord)?;
         let (lo, hi) = (view.u_min(), view.u_max());
@@ -1280,6 +1316,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
     addr_of_mut!((*inst).record_stop).write(RecordStop::default());
+    addr_of_mut!((*inst).points).write(StopPoints::NONE);
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);
     addr_of_mut!((*inst).taken_time).write(0.0);

@@ -12,9 +12,7 @@
 
 use std::collections::VecDeque;
 
-use nurbs_hal::channel::{
-    curve_views, valid_curve, CurveViews, GeometryRef, RecordStop, Slot, StopPoint, GEOMETRY_VALUES,
-};
+use nurbs_hal::channel::{RecordStop, Slot, StopPoint, GEOMETRY_VALUES};
 use nurbs_hal::module::{block_stop, underrun_stop};
 use nurbs_hal::record::{PathBlock, SegmentRecord, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
 use nurbs_hal::user::GeometryBuilder;
@@ -97,6 +95,10 @@ pub struct StopChooser<'t> {
     samples: Vec<(usize, f64, f64)>,
     /// Records not handed out yet, in plan order.
     pending: VecDeque<Pending>,
+    /// Per curve, its stop points as flat `(s, feed cap)` pairs once known, and where they are
+    /// in the arena once a record on the curve has gone out (offset, pairs).
+    points: Vec<Option<Vec<f64>>>,
+    placed: Vec<Option<(u32, u32)>>,
     /// No more records come.
     finished: bool,
 }
@@ -138,8 +140,21 @@ impl<'t> StopChooser<'t> {
             fd: FiniteDifferences::new(limits.velocity.len(), limits.period),
             samples: Vec::new(),
             pending: VecDeque::new(),
+            points: vec![None; toolpath.elements.len()],
+            placed: vec![None; toolpath.elements.len()],
             finished: false,
         })
+    }
+
+    /// The stop points of `curve` ([`stop_points`]): needed before a record on it is pushed.
+    pub fn set_stop_points(&mut self, curve: usize, points: &[(f64, f64)]) {
+        if let Some(slot) = self.points.get_mut(curve) {
+            *slot = Some(points.iter().flat_map(|&(s, cap)| [s, cap]).collect());
+        }
+    }
+
+    fn points_of(&self, curve: usize) -> &[f64] {
+        self.points.get(curve).and_then(Option::as_deref).unwrap_or(&[])
     }
 
     /// The module's stop after `last` with `trial` = (jerk fraction, deceleration share), run
@@ -147,7 +162,6 @@ impl<'t> StopChooser<'t> {
     /// abandoned as soon as it is worse than `bound` (it cannot be the choice then).
     fn tangential(
         &self,
-        g: &GeometryRef,
         (interp, fd, last): (Interpolator, FiniteDifferences, &SegmentRecord),
         (fraction, accel_share): (f64, f64),
         bound: f64,
@@ -155,8 +169,7 @@ impl<'t> StopChooser<'t> {
         let limits = &self.limits;
         let accel = fraction * accel_share * limits.min_accel();
         let jerk = fraction * limits.min_jerk();
-        let curve = valid_curve(g, last.curve()).ok();
-        let mut stop = Some(underrun_stop(curve, last, accel, jerk));
+        let mut stop = Some(underrun_stop(self.points_of(last.curve()), last, accel, jerk));
         let mut i = interp;
         let ratio = stop_ratio(limits, fd, bound, &mut || {
             i.step(&self.curves, limits.period, &mut || stop.take())
@@ -171,8 +184,8 @@ impl<'t> StopChooser<'t> {
         }
     }
 
-    /// Takes the next record of the plan (`g`: the published geometry the module runs it on).
-    pub fn push(&mut self, record: &SegmentRecord, g: &GeometryRef) {
+    /// Takes the next record of the plan (the stop points of its curve set before).
+    pub fn push(&mut self, record: &SegmentRecord) {
         let tip = self.limits.velocity.len();
         let mut next = Some(*record);
         while let Step::Sample(s) = self.interp.step(&self.curves, self.limits.period, &mut || next.take()) {
@@ -202,7 +215,8 @@ impl<'t> StopChooser<'t> {
         // runs on its own curve): the stored sequence, and one tangential trial only if there
         // is none (such a trial grinds at the curve end).
         let no_room = !last.is_last()
-            && valid_curve(g, last.curve()).is_ok_and(|c| last.u_end >= c.view.u_max())
+            && last.curve() < self.curves.len()
+            && last.u_end >= self.curves.view(last.curve()).u_max()
             && last.profile().table().end().v > 0.0;
         if !no_room {
             let mut best: Option<StopChoice> = None;
@@ -212,7 +226,7 @@ impl<'t> StopChooser<'t> {
                 .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
             {
                 let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
-                let c = self.tangential(g, state, trial, bound);
+                let c = self.tangential(state, trial, bound);
                 if best.is_none_or(|b| c.ratio < b.ratio) {
                     best = Some(c);
                 }
@@ -248,21 +262,38 @@ impl<'t> StopChooser<'t> {
     }
 
     /// The next record in plan order whose stop is decided, with that stop and the choice
-    /// behind it; `None` while it still waits for the records after it (or none is pending).
-    /// A stored sequence goes to `arena` (returns its offset, or `None` when full: then the
-    /// tangential stop stays).
+    /// behind it; `Ok(None)` while it still waits for the records after it (or none is
+    /// pending). A stored sequence goes to `arena` (returns its offset, or `None` when full:
+    /// then the tangential stop stays), and so do the stop points of a curve when its first
+    /// record goes out (an error if they do not fit: the module needs them).
     pub fn pop_ready(
         &mut self,
-        g: &GeometryRef,
         arena: &mut dyn FnMut(&[f64]) -> Option<u32>,
-    ) -> Option<(SegmentRecord, RecordStop, StopChoice)> {
-        let front = self.pending.front()?;
+    ) -> Result<Option<(SegmentRecord, RecordStop, StopChoice)>, String> {
+        let Some(front) = self.pending.front() else {
+            return Ok(None);
+        };
         let mut choice = front.choice;
+        let curve = front.record.curve();
+        let (points_offset, points_len) = match self.placed.get(curve).copied().flatten() {
+            Some(placed) => placed,
+            None => {
+                let points = self.points_of(curve);
+                let offset = arena(points).ok_or("the channel's geometry arena is full")?;
+                let placed = (offset, (points.len() / 2) as u32);
+                if let Some(slot) = self.placed.get_mut(curve) {
+                    *slot = Some(placed);
+                }
+                placed
+            }
+        };
         let mut stop = RecordStop {
             accel: choice.accel,
             jerk: choice.jerk,
             stored_len: 0,
             stored_offset: 0,
+            points_offset,
+            points_len,
         };
         if let Some(f) = front.failing {
             let samples = &self.samples;
@@ -284,7 +315,7 @@ impl<'t> StopChooser<'t> {
                     if let Some(Pending { failing: Some(f), .. }) = self.pending.front_mut() {
                         f.resume_at = resume_at;
                     }
-                    return None;
+                    return Ok(None);
                 }
                 Err(_) => None, // the plan ends first
                 Ok(stored) => stored,
@@ -303,14 +334,13 @@ impl<'t> StopChooser<'t> {
                     stop.stored_len = stored.points.len() as u32;
                 }
                 None if f.no_room => {
-                    choice = self.tangential(g, (f.interp, f.fd, &f.last), (1.0, 1.0), f64::INFINITY);
+                    choice = self.tangential((f.interp, f.fd, &f.last), (1.0, 1.0), f64::INFINITY);
                     (stop.accel, stop.jerk) = (choice.accel, choice.jerk);
                 }
                 None => {}
             }
         }
-        let record = self.pending.pop_front()?.record;
-        Some((record, stop, choice))
+        Ok(self.pending.pop_front().map(|p| (p.record, stop, choice)))
     }
 }
 
@@ -337,21 +367,21 @@ pub enum Next {
 }
 
 impl Records<'_> {
-    /// The next slot, or one record's worth of stop checks towards it. `g`: the published
-    /// geometry; `arena`: where stored stop sequences go.
-    pub fn next(&mut self, g: &GeometryRef, arena: &mut dyn FnMut(&[f64]) -> Option<u32>) -> Next {
-        match self {
+    /// The next slot, or one record's worth of stop checks towards it. `arena`: where stored
+    /// stop sequences and stop points go (behind the published geometry).
+    pub fn next(&mut self, arena: &mut dyn FnMut(&[f64]) -> Option<u32>) -> Result<Next, String> {
+        Ok(match self {
             Records::Ready(slots) => match slots.pop_front() {
                 Some((slot, time, choice)) => Next::Slot(slot, time, choice),
                 None => Next::Done,
             },
             Records::Segments { records, chooser } => {
-                if let Some((record, stop, choice)) = chooser.pop_ready(g, arena) {
+                if let Some((record, stop, choice)) = chooser.pop_ready(arena)? {
                     let time = record.profile().total_time();
-                    return Next::Slot(Slot::segment(&record, &stop), time, choice);
+                    return Ok(Next::Slot(Slot::segment(&record, &stop), time, choice));
                 }
                 if let Some(record) = records.pop_front() {
-                    chooser.push(&record, g);
+                    chooser.push(&record);
                     Next::Working
                 } else if !chooser.is_finished() {
                     chooser.finish();
@@ -360,7 +390,7 @@ impl Records<'_> {
                     Next::Done
                 }
             }
-        }
+        })
     }
 }
 
@@ -374,17 +404,16 @@ pub fn geometry(
     plan: &Plan,
     max_fraction: f64,
 ) -> Result<(GeometryBuilder, Vec<Slot>, Vec<StopChoice>), String> {
-    let mut g = segment_geometry(toolpath, plan)?;
+    let mut g = curves_geometry(toolpath)?;
     let mut records = Records::Segments {
         records: plan.records.iter().copied().collect(),
-        chooser: Box::new(StopChooser::new(toolpath, &plan.limits, max_fraction)?),
+        chooser: Box::new(segment_chooser(toolpath, plan, max_fraction)?),
     };
     let mut stored: Vec<f64> = Vec::new();
     let mut slots = Vec::with_capacity(plan.records.len());
     let mut choices = Vec::with_capacity(plan.records.len());
     {
-        let layout = g.layout();
-        let base = layout.values.len();
+        let base = g.values().len();
         let mut arena = |values: &[f64]| -> Option<u32> {
             let offset = base + stored.len();
             if offset + values.len() > GEOMETRY_VALUES {
@@ -394,7 +423,7 @@ pub fn geometry(
             u32::try_from(offset).ok()
         };
         loop {
-            match records.next(&layout, &mut arena) {
+            match records.next(&mut arena)? {
                 Next::Slot(slot, _, choice) => {
                     slots.push(slot);
                     choices.push(choice);
@@ -408,19 +437,23 @@ pub fn geometry(
     Ok((g, slots, choices))
 }
 
-/// The geometry published before the records of `plan`: the curves with the plan's stop points
-/// ([`stop_points`]); the stored stop sequences are appended behind it.
-pub fn segment_geometry(toolpath: &Toolpath, plan: &Plan) -> Result<GeometryBuilder, String> {
-    curves_geometry(toolpath, stop_points(toolpath, plan))
+/// The stop chooser for the records of `plan`, with the stop points of every curve from the
+/// plan's critical points ([`stop_points`]).
+pub fn segment_chooser<'t>(toolpath: &'t Toolpath, plan: &Plan, max_fraction: f64) -> Result<StopChooser<'t>, String> {
+    let mut chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
+    for (curve, points) in stop_points(toolpath, plan).iter().enumerate() {
+        chooser.set_stop_points(curve, points);
+    }
+    Ok(chooser)
 }
 
-/// The curves of `toolpath` with their stop points: the part of the geometry both record kinds
-/// share.
-fn curves_geometry(toolpath: &Toolpath, stops: Vec<Vec<(f64, f64)>>) -> Result<GeometryBuilder, String> {
+/// The curves of `toolpath`: what is published before the records (stop points and stored stop
+/// sequences are appended behind it).
+pub fn curves_geometry(toolpath: &Toolpath) -> Result<GeometryBuilder, String> {
     let mut g = GeometryBuilder::new(toolpath.tip_dim());
-    for (e, stops) in toolpath.elements.iter().zip(stops) {
+    for e in &toolpath.elements {
         let c = &e.curve;
-        g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights(), &stops)?;
+        g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights())?;
     }
     Ok(g)
 }
@@ -556,7 +589,7 @@ pub fn choose_block_stops(
     toolpath: &Toolpath,
     limits: &Limits,
     blocks: &mut [PathBlock],
-    valid: &CurveViews,
+    stop_points: &[Vec<f64>],
     fractions: &[f64],
     points: &[PathPoint],
 ) -> (Vec<StopChoice>, Vec<Option<StoredStop>>) {
@@ -574,7 +607,7 @@ pub fn choose_block_stops(
             fd.push(&view.point(u)[..tip], limits);
         }
         end += b.len();
-        let curve = valid.get(b.curve()).copied().flatten();
+        let curve_points = stop_points.get(b.curve()).map_or(&[][..], Vec::as_slice);
         // Tangential limits at the block end: what the axes allow along the path direction
         // there (each axis limit over its share of the unit tangent; at least the smallest axis
         // limit). The fractions scale them down where the path turns during the stop.
@@ -586,7 +619,7 @@ pub fn choose_block_stops(
             let mut trial = *b;
             trial.stop_accel = accel;
             trial.stop_jerk = jerk;
-            let (stop, a0) = block_stop(curve, &trial, dt);
+            let (stop, a0) = block_stop(curve_points, &trial, dt);
             let mut interp = Interpolator::new();
             let started = interp.start_profile(&curves, stop, stop.profile().table_from(a0));
             let mut step = || {
@@ -846,15 +879,25 @@ pub fn block_geometry(
         arcs.set_anchor(a.curve as usize, a.u, a.s);
     }
     let mut blocks = pack_blocks(&arcs, &plan.points);
-    let stops = block_stop_points(toolpath, &blocks, plan.limits.period);
     if !(max_fraction > 0.0 && max_fraction <= 1.0) {
         return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
     }
-    let mut g = curves_geometry(toolpath, stops)?;
+    let mut g = curves_geometry(toolpath)?;
+    // Each curve's stop points, in the arena once; every block refers to its curve's.
+    let points: Vec<Vec<f64>> = block_stop_points(toolpath, &blocks, plan.limits.period)
+        .iter()
+        .map(|list| list.iter().flat_map(|&(s, cap)| [s, cap]).collect())
+        .collect();
+    let mut placed = Vec::with_capacity(points.len());
+    for list in &points {
+        placed.push((g.add_values(list)?, (list.len() / 2) as u32));
+    }
+    for b in &mut blocks {
+        (b.points_offset, b.points_len) = placed.get(b.curve()).copied().unwrap_or((0, 0));
+    }
     let (mut choices, sequences) = {
-        let valid = curve_views(&g.layout()).map_err(|e| format!("geometry refused: {e:?}"))?;
         let fractions = fractions(max_fraction);
-        choose_block_stops(toolpath, &plan.limits, &mut blocks, &valid, &fractions, &plan.points)
+        choose_block_stops(toolpath, &plan.limits, &mut blocks, &points, &fractions, &plan.points)
     };
     // The stored stop sequences as runs per element ([`StopRun`]), in the blocks' arc-length
     // measure. Where the arena is full, the tangential stop (and its check result) stays.
@@ -928,9 +971,9 @@ pub fn motion<'t>(
                 plan.motion_time,
                 plan.plan_time
             );
-            let chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
+            let chooser = segment_chooser(toolpath, &plan, max_fraction)?;
             Ok(Motion {
-                geometry: segment_geometry(toolpath, &plan)?,
+                geometry: curves_geometry(toolpath)?,
                 motion_time: plan.records.iter().map(|r| r.profile().total_time()).sum(),
                 records: Records::Segments {
                     records: plan.records.into(),

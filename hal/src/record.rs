@@ -33,6 +33,12 @@ pub struct RecordStop {
     /// (written before the record was pushed).
     pub stored_len: u32,
     pub stored_offset: u32,
+    /// The stop points of the record's curve: `points_len` `(s, feed cap)` pairs in the arena
+    /// from value `points_offset` (arc length from the curve start in the records' measure, mm;
+    /// feed cap, mm/s): the planner's critical points and the curve end (feed 0), which the
+    /// tangential stop must not pass faster than their cap.
+    pub points_offset: u32,
+    pub points_len: u32,
 }
 
 impl RecordStop {
@@ -154,7 +160,7 @@ impl From<&PathBlock> for Slot {
 // The shared-memory layout is an ABI between two separately built programs: pin it.
 const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 160);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
-const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 184);
-const _: () = assert!(core::mem::size_of::<PathBlock>() == 312);
-const _: () = assert!(core::mem::size_of::<Slot>() == 320);
+const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 192);
+const _: () = assert!(core::mem::size_of::<PathBlock>() == 320);
+const _: () = assert!(core::mem::size_of::<Slot>() == 328);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::simulate::setpoints;
-use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions};
+use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::Sample;
 
@@ -124,6 +124,7 @@ fn lock_module() -> MutexGuard<'static, ()> {
 /// (default stop fraction 1).
 struct Job {
     toolpath: Toolpath,
+    plan: Plan,
     limits: Limits,
     records: Vec<SegmentRecord>,
     samples: Vec<Sample>,
@@ -153,6 +154,7 @@ fn job_of(toolpath: Toolpath) -> Job {
     Job {
         limits: plan.limits.clone(),
         records: plan.records.clone(),
+        plan,
         samples,
         toolpath,
         geometry,
@@ -601,13 +603,18 @@ fn malformed_records_fault_and_hold() {
     let _guard = lock_module();
     let job = job("trident.json");
     type Tamper = fn(&mut SegmentRecord, &mut RecordStop);
-    let cases: [(Tamper, FaultCode); 6] = [
+    let cases: [(Tamper, FaultCode); 8] = [
         (|r, _| r.seq += 1, FaultCode::Sequence),
         (|r, _| r.durations[3] = f64::NAN, FaultCode::Record),
         (|r, _| r.length *= 2.0, FaultCode::Record),
         (|r, _| r.flags |= 7 << 16, FaultCode::BadRecord),
         (|_, stop| stop.jerk = f64::NAN, FaultCode::Record),
         (|_, stop| stop.accel = 0.0, FaultCode::Record),
+        (|_, stop| stop.points_len = u32::MAX, FaultCode::Record),
+        (
+            |_, stop| stop.points_offset = (crate::channel::GEOMETRY_VALUES - 1) as u32,
+            FaultCode::Record,
+        ),
     ];
     for (tamper, code) in cases {
         let (_planner, channel) = load_enabled(&job);
@@ -800,16 +807,17 @@ fn holds_on_a_g1_program_stop_and_resume_within_the_limits() {
 /// no stored values; the records after it still go out, in order.
 #[test]
 fn a_full_arena_keeps_the_tangential_stops() {
-    use crate::plan_geometry::{Next, Records, StopChooser};
+    use crate::plan_geometry::{segment_chooser, Next, Records};
     let job = job_of(rounded_polyline());
-    let g = &job.geometry;
     let mut records = Records::Segments {
         records: job.records.iter().copied().collect(),
-        chooser: Box::new(StopChooser::new(&job.toolpath, &job.limits, 1.0).unwrap()),
+        chooser: Box::new(segment_chooser(&job.toolpath, &job.plan, 1.0).unwrap()),
     };
     let mut out = Vec::new();
     loop {
-        match records.next(&g.layout(), &mut |_| None) {
+        // Room for the stop points of each curve (a few pairs here), none for a stored sequence
+        // (tens of positions).
+        match records.next(&mut |v| (v.len() <= 32).then_some(0)).unwrap() {
             Next::Slot(slot, _, choice) => out.push((slot, choice)),
             Next::Working => {}
             Next::Done => break,
@@ -894,7 +902,7 @@ fn last_run_curve(values: &[f64], offset: u32, len: u32) -> usize {
 #[test]
 #[ignore]
 fn long_g1_program_cost() {
-    use crate::plan_geometry::{Next, Records, StopChooser};
+    use crate::plan_geometry::{segment_chooser, Next, Records};
     let lines: usize = std::env::var("G1_LINES")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -904,18 +912,18 @@ fn long_g1_program_cost() {
     let plan = plan(&toolpath, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
     // As nurbs-planner streams: stops checked until 2 s of motion are ready.
     let t = std::time::Instant::now();
-    let g = crate::plan_geometry::segment_geometry(&toolpath, &plan).unwrap();
     let mut records = Records::Segments {
         records: plan.records.iter().copied().collect(),
-        chooser: Box::new(StopChooser::new(&toolpath, &plan.limits, 1.0).unwrap()),
+        chooser: Box::new(segment_chooser(&toolpath, &plan, 1.0).unwrap()),
     };
     let (mut ready, mut count) = (0.0, 0);
     let mut stored = Vec::new();
     while ready < 2.0 {
-        match records.next(&g.layout(), &mut |v| {
+        let next = records.next(&mut |v| {
             stored.extend_from_slice(v);
             Some(0)
-        }) {
+        });
+        match next.unwrap() {
             Next::Slot(_, time, _) => (ready, count) = (ready + time, count + 1),
             Next::Working => {}
             Next::Done => break,
@@ -1783,15 +1791,15 @@ mod blocks {
     /// values appended to the arena behind the published geometry.
     fn drain(m: &mut Motion) -> (Vec<(Slot, f64, StopChoice)>, Vec<f64>) {
         let Motion { geometry, records, .. } = m;
-        let layout = geometry.layout();
+        let base = geometry.values().len();
         let (mut out, mut appended) = (Vec::new(), Vec::new());
         loop {
             let mut arena = |v: &[f64]| {
-                let offset = (layout.values.len() + appended.len()) as u32;
+                let offset = (base + appended.len()) as u32;
                 appended.extend_from_slice(v);
                 Some(offset)
             };
-            match records.next(&layout, &mut arena) {
+            match records.next(&mut arena).unwrap() {
                 Next::Slot(slot, time, choice) => out.push((slot, time, choice)),
                 Next::Working => {}
                 Next::Done => return (out, appended),
@@ -1926,7 +1934,12 @@ mod blocks {
         let k = job.blocks.len() / 2;
         const MID: usize = BLOCK_SAMPLES / 2;
         type Tamper = fn(&mut PathBlock);
-        let cases: [(&str, Tamper, FaultCode); 9] = [
+        let cases: [(&str, Tamper, FaultCode); 10] = [
+            (
+                "stop points past the arena",
+                |b| b.points_len = u32::MAX,
+                FaultCode::Record,
+            ),
             ("NaN parameter", |b| b.u[3] = f64::NAN, FaultCode::Record),
             ("infinite arc length", |b| b.s[0] = f64::INFINITY, FaultCode::Record),
             (

@@ -123,8 +123,7 @@ impl GeometryBuilder {
         }
     }
 
-    /// Append one curve (becomes curve number `curve_count()` - 1 of the records). `stops`:
-    /// `(s, feed cap)` pairs the module's underrun stop must respect (see [`CurveDesc`]).
+    /// Append one curve (becomes curve number `curve_count()` - 1 of the records).
     pub fn add_curve(
         &mut self,
         degree: usize,
@@ -132,13 +131,11 @@ impl GeometryBuilder {
         knots: &[f64],
         points: &[f64],
         weights: &[f64],
-        stops: &[(f64, f64)],
     ) -> Result<(), String> {
         if self.curves.len() >= MAX_CURVES {
             return Err(format!("more than {MAX_CURVES} curves (path elements)"));
         }
-        let stops: Vec<f64> = stops.iter().flat_map(|&(s, f)| [s, f]).collect();
-        let total = self.values.len() + knots.len() + points.len() + weights.len() + stops.len();
+        let total = self.values.len() + knots.len() + points.len() + weights.len();
         if total > GEOMETRY_VALUES {
             return Err(format!(
                 "geometry needs {total} values, the channel holds {GEOMETRY_VALUES}"
@@ -152,7 +149,6 @@ impl GeometryBuilder {
         let (knots_offset, knots_len) = put(knots);
         let (points_offset, points_len) = put(points);
         let (weights_offset, weights_len) = put(weights);
-        let (stops_offset, stops_len) = put(&stops);
         self.curves.push(CurveDesc {
             degree: degree as u32,
             dim: dim as u32,
@@ -162,8 +158,6 @@ impl GeometryBuilder {
             points_len,
             weights_offset,
             weights_len,
-            stops_offset,
-            stops_len,
         });
         self.header.curve_count += 1;
         Ok(())

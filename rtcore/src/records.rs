@@ -118,6 +118,11 @@ pub struct PathBlock {
     /// arena as [`StopRun`]s from value `stop_offset`; it may go on across element joins.
     pub stop_len: u32,
     pub stop_offset: u32,
+    /// The stop points of the block's curve: `points_len` `(s, feed cap)` pairs in the geometry
+    /// arena from value `points_offset` (the places the module's stop after this block must not
+    /// pass faster than their cap).
+    pub points_offset: u32,
+    pub points_len: u32,
     pub reserved: u32,
     pub stop_accel: f64,
     pub stop_jerk: f64,

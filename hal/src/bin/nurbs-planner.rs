@@ -267,8 +267,7 @@ impl<'a> Streamer<'a> {
                 return Ok(());
             }
             let Streamer { motion, arena, .. } = self;
-            let layout = motion.geometry.layout();
-            match motion.records.next(&layout, &mut |values| arena.put(values)) {
+            match motion.records.next(&mut |values| arena.put(values))? {
                 Next::Slot(slot, time, choice) => {
                     self.ready.push_back((slot, time));
                     self.ready_time += time;
