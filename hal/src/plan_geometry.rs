@@ -19,9 +19,10 @@ use nurbs_hal::user::GeometryBuilder;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
+use nurbs_motion::planner::flf::CriticalPoint;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
-use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions};
+use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions, Planner};
 use nurbs_rtcore::executor::{Interpolator, Step};
 use nurbs_rtcore::StopRun;
 
@@ -31,27 +32,124 @@ pub fn fractions(max_fraction: f64) -> Vec<f64> {
     (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
 }
 
-/// Per curve, the `(s, feed cap)` points the module's underrun stop must respect: the plan's
-/// critical points (FLF minima, corners) at the planner's FLF margin, and the curve end at rest.
+/// Per curve, the `(s, feed cap)` points the module's underrun stop must respect
+/// ([`curve_stop_points`] of the plan's critical points).
 pub fn stop_points(toolpath: &Toolpath, plan: &Plan) -> Vec<Vec<(f64, f64)>> {
-    let margin = PlanOptions::default().flf_margin;
-    toolpath
-        .elements
-        .iter()
-        .enumerate()
-        .map(|(c, e)| {
-            let table = ArcLengthTable::new(&e.curve);
-            let mut stops: Vec<(f64, f64)> = plan
-                .critical_points
-                .iter()
-                .filter(|(curve, _)| *curve == c)
-                .map(|(_, p)| (table.length_to(&e.curve, p.u), margin * p.flf.max(0.0)))
-                .collect();
-            stops.push((table.total(), 0.0));
-            stops.sort_by(|a, b| a.0.total_cmp(&b.0));
-            stops
+    (0..toolpath.elements.len())
+        .map(|c| {
+            let on_curve = plan.critical_points.iter().filter(|(curve, _)| *curve == c);
+            curve_stop_points(toolpath, c, on_curve.map(|(_, p)| *p))
         })
         .collect()
+}
+
+/// The `(s, feed cap)` points of curve `c` the module's stop must respect: its critical points
+/// (FLF minima, corners) at the planner's FLF margin, and the curve end at rest, in order of `s`.
+pub fn curve_stop_points(
+    toolpath: &Toolpath,
+    c: usize,
+    criticals: impl Iterator<Item = CriticalPoint>,
+) -> Vec<(f64, f64)> {
+    let margin = PlanOptions::default().flf_margin;
+    let Some(e) = toolpath.elements.get(c) else {
+        return Vec::new();
+    };
+    let table = ArcLengthTable::new(&e.curve);
+    let mut stops: Vec<(f64, f64)> = criticals
+        .map(|p| (table.length_to(&e.curve, p.u), margin * p.flf.max(0.0)))
+        .collect();
+    stops.push((table.total(), 0.0));
+    stops.sort_by(|a, b| a.0.total_cmp(&b.0));
+    stops
+}
+
+/// What a streamed plan ([`stream_plan`]) hands out, in order.
+#[derive(Clone, Debug)]
+pub enum PlanEvent {
+    /// The stop points of a curve, once the planner has scanned it to its end (its critical
+    /// points are final). Every curve's come before the path end.
+    StopPoints(usize, Vec<(f64, f64)>),
+    /// The next record, final.
+    Record(SegmentRecord),
+    /// The plan is complete (a line for the log).
+    Done(String),
+    Failed(String),
+}
+
+/// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `toolpath`, from its
+/// start or from rest at the module's stop point `from`, and hands each record to `emit` as
+/// soon as it is final, and each curve's stop points as soon as the scan has passed the curve's
+/// end; stops early when `emit` returns false (nobody listens any more).
+pub fn stream_plan(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    from: Option<&StopPoint>,
+    emit: &mut dyn FnMut(PlanEvent) -> bool,
+) {
+    let options = PlanOptions {
+        stream: true,
+        start: from.map(|p| PlanStart {
+            curve: p.curve as usize,
+            u: p.u,
+            s: p.s,
+        }),
+        ..PlanOptions::default()
+    };
+    let mut planner = match Planner::new(toolpath, limits, &options) {
+        Ok(p) => p,
+        Err(e) => {
+            emit(PlanEvent::Failed(e.to_string()));
+            return;
+        }
+    };
+    let (mut curves_sent, mut next_critical) = (0, 0);
+    loop {
+        let next = planner.next_record();
+        let scanned = match next {
+            None => toolpath.elements.len(),
+            Some(_) => planner.scanned_elements(),
+        };
+        // Critical points come in path order: those of each newly scanned curve in a run.
+        while curves_sent < scanned {
+            let criticals = planner.critical_points();
+            let first = next_critical;
+            while criticals.get(next_critical).is_some_and(|(c, _)| *c <= curves_sent) {
+                next_critical += 1;
+            }
+            let on_curve = criticals[first..next_critical]
+                .iter()
+                .filter(|(c, _)| *c == curves_sent)
+                .map(|(_, p)| *p);
+            let points = curve_stop_points(toolpath, curves_sent, on_curve);
+            if !emit(PlanEvent::StopPoints(curves_sent, points)) {
+                return;
+            }
+            curves_sent += 1;
+        }
+        match next {
+            Some(Ok(record)) => {
+                if !emit(PlanEvent::Record(record)) {
+                    return;
+                }
+            }
+            Some(Err(e)) => {
+                emit(PlanEvent::Failed(match from {
+                    None => e.to_string(),
+                    Some(_) => format!("re-plan from the stop point: {e}"),
+                }));
+                return;
+            }
+            None => break,
+        }
+    }
+    let plan = planner.finish();
+    emit(PlanEvent::Done(format!(
+        "streamed plan complete: {} segments, motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms",
+        plan.records.len(),
+        plan.motion_time,
+        plan.plan_time,
+        plan.first_record_time * 1e3
+    )));
 }
 
 /// The stop chosen after one record.
@@ -151,6 +249,11 @@ impl<'t> StopChooser<'t> {
         if let Some(slot) = self.points.get_mut(curve) {
             *slot = Some(points.iter().flat_map(|&(s, cap)| [s, cap]).collect());
         }
+    }
+
+    /// Whether the stop points of `curve` are known.
+    pub fn has_stop_points(&self, curve: usize) -> bool {
+        self.points.get(curve).is_some_and(Option::is_some)
     }
 
     fn points_of(&self, curve: usize) -> &[f64] {
@@ -348,8 +451,11 @@ impl<'t> StopChooser<'t> {
 /// ([`StopChooser`]); or path blocks whose stops are all chosen already.
 pub enum Records<'t> {
     Segments {
+        /// Records to check, in plan order (a streamed plan adds them as they come).
         records: VecDeque<SegmentRecord>,
         chooser: Box<StopChooser<'t>>,
+        /// No more records come.
+        complete: bool,
     },
     Ready(VecDeque<(Slot, f64, StopChoice)>),
 }
@@ -362,6 +468,9 @@ pub enum Next {
     Slot(Slot, f64, StopChoice),
     /// Some work towards the next slot (call again).
     Working,
+    /// Nothing to do until a streamed plan hands out more (its next record, or the stop points
+    /// of the curve of the next record).
+    Waiting,
     /// Every slot has been handed out.
     Done,
 }
@@ -375,14 +484,24 @@ impl Records<'_> {
                 Some((slot, time, choice)) => Next::Slot(slot, time, choice),
                 None => Next::Done,
             },
-            Records::Segments { records, chooser } => {
+            Records::Segments {
+                records,
+                chooser,
+                complete,
+            } => {
                 if let Some((record, stop, choice)) = chooser.pop_ready(arena)? {
                     let time = record.profile().total_time();
                     return Ok(Next::Slot(Slot::segment(&record, &stop), time, choice));
                 }
-                if let Some(record) = records.pop_front() {
+                if let Some(record) = records.front().copied() {
+                    if !chooser.has_stop_points(record.curve()) {
+                        return Ok(Next::Waiting);
+                    }
+                    records.pop_front();
                     chooser.push(&record);
                     Next::Working
+                } else if !*complete {
+                    Next::Waiting
                 } else if !chooser.is_finished() {
                     chooser.finish();
                     Next::Working
@@ -391,6 +510,29 @@ impl Records<'_> {
                 }
             }
         })
+    }
+
+    /// Takes an event of a streamed plan: a record or a curve's stop points go to the checks,
+    /// the end marks the records complete (returns its log line), a failure is an error.
+    pub fn take(&mut self, event: PlanEvent) -> Result<Option<String>, String> {
+        let Records::Segments {
+            records,
+            chooser,
+            complete,
+        } = self
+        else {
+            return Err("a streamed plan's event for path blocks".into());
+        };
+        match event {
+            PlanEvent::StopPoints(curve, points) => chooser.set_stop_points(curve, &points),
+            PlanEvent::Record(record) => records.push_back(record),
+            PlanEvent::Done(line) => {
+                *complete = true;
+                return Ok(Some(line));
+            }
+            PlanEvent::Failed(e) => return Err(e),
+        }
+        Ok(None)
     }
 }
 
@@ -408,6 +550,7 @@ pub fn geometry(
     let mut records = Records::Segments {
         records: plan.records.iter().copied().collect(),
         chooser: Box::new(segment_chooser(toolpath, plan, max_fraction)?),
+        complete: true,
     };
     let mut stored: Vec<f64> = Vec::new();
     let mut slots = Vec::with_capacity(plan.records.len());
@@ -428,7 +571,7 @@ pub fn geometry(
                     slots.push(slot);
                     choices.push(choice);
                 }
-                Next::Working => {}
+                Next::Working | Next::Waiting => {}
                 Next::Done => break,
             }
         }
@@ -978,6 +1121,7 @@ pub fn motion<'t>(
                 records: Records::Segments {
                     records: plan.records.into(),
                     chooser: Box::new(chooser),
+                    complete: true,
                 },
                 summary,
             })
@@ -1007,6 +1151,23 @@ pub fn motion<'t>(
             })
         }
     }
+}
+
+/// A motion whose records come from a streamed plan ([`stream_plan`], run elsewhere; its
+/// events go to [`Records::take`]): the curves to publish, and the checks waiting for records.
+/// Its motion time is unknown until the plan is complete (infinite here).
+pub fn streamed_motion<'t>(toolpath: &'t Toolpath, limits: &Limits, max_fraction: f64) -> Result<Motion<'t>, String> {
+    let limits = limits.for_axes(toolpath.tip_dim()).map_err(|e| e.to_string())?;
+    Ok(Motion {
+        geometry: curves_geometry(toolpath)?,
+        records: Records::Segments {
+            records: VecDeque::new(),
+            chooser: Box::new(StopChooser::new(toolpath, &limits, max_fraction)?),
+            complete: false,
+        },
+        motion_time: f64::INFINITY,
+        summary: "streamed plan: records go out as they are planned".into(),
+    })
 }
 
 /// Whether a motion of `total` seconds can start with the stops of its first `checked` seconds

@@ -812,6 +812,7 @@ fn a_full_arena_keeps_the_tangential_stops() {
     let mut records = Records::Segments {
         records: job.records.iter().copied().collect(),
         chooser: Box::new(segment_chooser(&job.toolpath, &job.plan, 1.0).unwrap()),
+        complete: true,
     };
     let mut out = Vec::new();
     loop {
@@ -819,7 +820,7 @@ fn a_full_arena_keeps_the_tangential_stops() {
         // (tens of positions).
         match records.next(&mut |v| (v.len() <= 32).then_some(0)).unwrap() {
             Next::Slot(slot, _, choice) => out.push((slot, choice)),
-            Next::Working => {}
+            Next::Working | Next::Waiting => {}
             Next::Done => break,
         }
     }
@@ -841,6 +842,88 @@ fn a_full_arena_keeps_the_tangential_stops() {
     }
     println!("{kept} records keep a tangential stop over the limits");
     assert!(kept > 0, "no stored stop in the full run: the test lost its subject");
+}
+
+/// `nurbs-planner --stream`: the planner hands out records and each curve's stop points as it
+/// plans; the module starts once some records are queued and runs while the plan goes on. The
+/// slots are those of the same plan checked all at once, and the module's setpoints are those
+/// of `nurbs-plan plan --stream`, bit for bit, with no underrun.
+#[test]
+fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
+    use crate::plan_geometry::{stream_plan, streamed_motion, Next, PlanEvent};
+    let _guard = lock_module();
+    let toolpath = g1_zigzag(30);
+    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+    let mut events = Vec::new();
+    stream_plan(&toolpath, &limits, None, &mut |e| {
+        events.push(e);
+        true
+    });
+    let streamed = PlanOptions {
+        stream: true,
+        ..PlanOptions::default()
+    };
+    let offline = plan(&toolpath, &limits, &streamed, &mut |_| {}).unwrap();
+    let samples = setpoints(&PathCurves::new(&toolpath), &offline.limits, &offline.records);
+    let (_, all_at_once, _) = crate::plan_geometry::geometry(&toolpath, &offline, 1.0).unwrap();
+    let record_events = events.iter().filter(|e| matches!(e, PlanEvent::Record(_))).count();
+    assert_eq!(record_events, offline.records.len());
+    assert!(matches!(events.last(), Some(PlanEvent::Done(_))));
+
+    let mut motion = streamed_motion(&toolpath, &limits, 1.0).unwrap();
+    let (_planner, channel) = load();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    let mut arena = motion.geometry.publish(channel).unwrap();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    let (mut slots, mut out, mut taken) = (Vec::new(), Vec::new(), 0);
+    let mut started_after = None;
+    let mut incoming = events.into_iter();
+    for _ in 0..samples.len() + 10_000 {
+        // One event of the plan per period, and a few stop checks.
+        if let Some(event) = incoming.next() {
+            taken += 1;
+            motion.records.take(event).unwrap();
+        }
+        for _ in 0..4 {
+            if let Next::Slot(slot, _, _) = motion.records.next(&mut |v| arena.put(v)).unwrap() {
+                channel.segments.push(&slot).unwrap();
+                slots.push(slot);
+            }
+        }
+        // The module runs once 20 records are queued (nurbs-planner's margin, in short).
+        if started_after.is_none() && slots.len() >= 20 {
+            started_after = Some(taken);
+        }
+        if started_after.is_some() {
+            unsafe { mock::call(update, PERIOD_NS as _) };
+            if bit("nurbs_interp.active") {
+                out.push(sample_pins());
+            }
+            if bit("nurbs_interp.done") {
+                break;
+            }
+        }
+    }
+    let started_after = started_after.expect("never started");
+    println!(
+        "{} events; the motion started after {started_after}, {} samples",
+        taken,
+        out.len()
+    );
+    assert!(
+        started_after < taken / 2,
+        "the motion did not start while the plan went on"
+    );
+    assert_eq!(slots, all_at_once);
+    assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+    assert_eq!(out.len(), samples.len());
+    for (k, (g, e)) in out.iter().zip(&samples).enumerate() {
+        let expected = [e.point[0], e.point[1], e.feed, e.u, e.curve as f64];
+        assert_eq!(g.map(f64::to_bits), expected.map(f64::to_bits), "sample {k}");
+    }
+    let report = nurbs_motion::planner::verify::verify(&PathCurves::new(&toolpath), &offline.limits, &rows_of(&out));
+    assert!(report.violations.is_empty(), "{:?}", report.violations);
+    unsafe { rtapi_app_exit() };
 }
 
 /// When `nurbs-planner` may start the motion while it still checks stops: with the checks
@@ -915,6 +998,7 @@ fn long_g1_program_cost() {
     let mut records = Records::Segments {
         records: plan.records.iter().copied().collect(),
         chooser: Box::new(segment_chooser(&toolpath, &plan, 1.0).unwrap()),
+        complete: true,
     };
     let (mut ready, mut count) = (0.0, 0);
     let mut stored = Vec::new();
@@ -925,7 +1009,7 @@ fn long_g1_program_cost() {
         });
         match next.unwrap() {
             Next::Slot(_, time, _) => (ready, count) = (ready + time, count + 1),
-            Next::Working => {}
+            Next::Working | Next::Waiting => {}
             Next::Done => break,
         }
     }
@@ -944,6 +1028,34 @@ fn long_g1_program_cost() {
     );
     assert!(worst <= 1.0 + nurbs_motion::planner::verify::SLACK);
     assert!(ready >= 2.0 && count < plan.records.len());
+    // Streamed (nurbs-planner --stream): the planner in a thread, records and stop points
+    // checked as they come, until 2 s of motion are ready.
+    let t = std::time::Instant::now();
+    let (sender, receiver) = std::sync::mpsc::channel();
+    let shared = std::sync::Arc::new(toolpath.clone());
+    let path = std::sync::Arc::clone(&shared);
+    let planner = std::thread::spawn(move || {
+        crate::plan_geometry::stream_plan(&path, &limits, None, &mut |e| sender.send(e).is_ok())
+    });
+    let mut motion = crate::plan_geometry::streamed_motion(&shared, &plan.limits, 1.0).unwrap();
+    let (mut ready, mut count) = (0.0, 0);
+    while ready < 2.0 {
+        while let Ok(event) = receiver.try_recv() {
+            motion.records.take(event).unwrap();
+        }
+        match motion.records.next(&mut |_| Some(0)).unwrap() {
+            Next::Slot(_, time, _) => (ready, count) = (ready + time, count + 1),
+            Next::Waiting => std::thread::sleep(std::time::Duration::from_micros(100)),
+            Next::Working => {}
+            Next::Done => break,
+        }
+    }
+    println!(
+        "streamed: the first {count} records ({ready:.2} s of motion) planned and checked after {:.3} s",
+        t.elapsed().as_secs_f64()
+    );
+    drop(receiver);
+    planner.join().unwrap();
 }
 
 /// A G1 program of `lines` 2 mm lines zigzagging up to 5 mm sideways, its corners rounded
@@ -1801,7 +1913,7 @@ mod blocks {
             };
             match records.next(&mut arena).unwrap() {
                 Next::Slot(slot, time, choice) => out.push((slot, time, choice)),
-                Next::Working => {}
+                Next::Working | Next::Waiting => {}
                 Next::Done => return (out, appended),
             }
         }

@@ -51,6 +51,13 @@ enum Command {
         /// intersection at the servo period, seed 003).
         #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
         planner: PlannerKind,
+        /// Erwinski planner: plan as a stream, each segment final as soon as back-tracking can
+        /// no longer reach it (what `nurbs-planner --stream` runs on the machine; the plan time
+        /// then also reports when the first segment was final). Rarely a back-tracking cascade
+        /// that would reach a final segment makes a stop instead, or fails where the whole-path
+        /// plan succeeds.
+        #[arg(long)]
+        stream: bool,
         /// Also draw the profile as a PNG (paper 000, Fig. 5): feedrate with the feedrate limit
         /// function's components and the critical points, axial accelerations and axial jerks
         /// (the finite differences `verify` checks) with their limits, over the curve parameter.
@@ -151,6 +158,7 @@ pub fn run() -> ExitCode {
             out,
             summary,
             planner,
+            stream,
             plot,
             round_corners,
             machine,
@@ -160,6 +168,7 @@ pub fn run() -> ExitCode {
             out: &out,
             summary: summary.as_deref(),
             planner,
+            stream,
             plot: plot.as_deref(),
             round_corners,
             machine: &machine,

@@ -14,6 +14,7 @@ pub struct PlanArgs<'a> {
     pub out: &'a Path,
     pub summary: Option<&'a Path>,
     pub planner: PlannerKind,
+    pub stream: bool,
     pub plot: Option<&'a Path>,
     pub round_corners: RoundCorners,
     pub machine: &'a MachineArgs,
@@ -77,6 +78,9 @@ fn plot_title(args: &PlanArgs, planner: &str, limits: &crate::planner::Limits, m
 
 pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.planner == PlannerKind::Vpop {
+        if args.stream {
+            return Err("--stream is for the erwinski planner (VPOp plans the whole path)".into());
+        }
         return run_vpop(args);
     }
     let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
@@ -86,7 +90,11 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
     )?;
     let limits = args.limits.limits(toolpath.tip_dim())?;
-    let plan = plan(toolpath, &limits, &PlanOptions::default(), &mut |_| {})?;
+    let options = PlanOptions {
+        stream: args.stream,
+        ..PlanOptions::default()
+    };
+    let plan = plan(toolpath, &limits, &options, &mut |_| {})?;
     let curves = PathCurves::new(toolpath);
     let samples = setpoints(&curves, &plan.limits, &plan.records);
     let tip = toolpath.tip_dim();
@@ -107,12 +115,17 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     out.flush()?;
     let motion_time = (samples.len().saturating_sub(1)) as f64 * plan.limits.period;
     eprintln!(
-        "planned {} segments, {} critical points: motion {:.6} s ({} setpoints), planning {:.3} ms",
+        "planned {} segments, {} critical points: motion {:.6} s ({} setpoints), planning {:.3} ms{}",
         plan.records.len(),
         plan.critical_points.len(),
         motion_time,
         samples.len(),
-        plan.plan_time * 1e3
+        plan.plan_time * 1e3,
+        if args.stream {
+            format!(" (first segment final after {:.3} ms)", plan.first_record_time * 1e3)
+        } else {
+            String::new()
+        }
     );
     let deviation = prepared.deviation_from_program(samples.iter().map(|s| &s.point[..tip]));
     if let Some(line) = prepared.describe(deviation, plan.limits.chord_tolerance) {
@@ -125,6 +138,8 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "motion_time_s": motion_time,
                 "profile_time_s": plan.motion_time,
                 "plan_time_s": plan.plan_time,
+                "first_segment_time_s": plan.first_record_time,
+                "streamed": args.stream,
                 "segments": plan.records.len(),
                 "critical_points": plan.critical_points.len(),
                 "setpoints": samples.len(),

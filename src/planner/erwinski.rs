@@ -278,6 +278,18 @@ impl<'a> Planner<'a> {
         None
     }
 
+    /// The critical points found so far, in path order, as (curve, point) (what
+    /// [`Plan::critical_points`] reports at the end); those on the first
+    /// [`Planner::scanned_elements`] elements are final.
+    pub fn critical_points(&self) -> &[(usize, CriticalPoint)] {
+        &self.nodes.criticals
+    }
+
+    /// Elements scanned to their end (their critical points final).
+    pub fn scanned_elements(&self) -> usize {
+        self.nodes.scanned_elements()
+    }
+
     /// Whether the whole path has been scanned (every node produced); the first records are
     /// normally final long before.
     pub fn path_scanned(&self) -> bool {

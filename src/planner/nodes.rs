@@ -150,6 +150,12 @@ impl<'a> NodeStream<'a> {
         self.elements[c].as_ref().expect("element scanned")
     }
 
+    /// Elements scanned to their end: their critical points in [`NodeStream::criticals`] are
+    /// final.
+    pub fn scanned_elements(&self) -> usize {
+        self.current
+    }
+
     /// Whether every node of the path has been produced (the whole path scanned).
     pub fn is_exhausted(&self) -> bool {
         self.current == self.elements.len()

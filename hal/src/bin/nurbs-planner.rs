@@ -36,6 +36,8 @@
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::mpsc::{self, Receiver, TryRecvError};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
@@ -49,7 +51,7 @@ use nurbs_motion::cli::corners::{prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
-use plan_geometry::{Motion, Next, PlannerKind};
+use plan_geometry::{Motion, Next, PlanEvent, PlannerKind};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -97,6 +99,15 @@ struct Args {
     /// every corner.
     #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
     round_corners: RoundCorners,
+    /// Erwinski planner: plan as a stream (`nurbs-plan plan --stream` plans the same) in a
+    /// thread of its own, and start the motion once the first records and their stops are
+    /// checked instead of after the whole plan: a long program starts at once. Each record goes
+    /// out once the stop points of its curve are known (the scan has passed the curve's end), so
+    /// a path of one long curve waits for its scan. The price of a streamed plan: a plan that
+    /// fails does so during the motion (the module then stops on the path, within the limits),
+    /// and rarely a back-tracking cascade makes a stop the whole-path plan would not make.
+    #[arg(long)]
+    stream: bool,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -205,6 +216,8 @@ struct Streamer<'a> {
     channel: &'a Channel,
     motion: Motion<'a>,
     arena: ArenaAppender<'a>,
+    /// A streamed plan's events (records, stop points), from the planner thread.
+    plan_events: Option<Receiver<PlanEvent>>,
     /// Slots whose stops are checked, not pushed yet, with their motion times.
     ready: VecDeque<(Slot, f64)>,
     ready_time: f64,
@@ -242,17 +255,42 @@ impl<'a> Streamer<'a> {
         self.ends[self.sent()] + self.ready_time
     }
 
-    /// Pushes checked slots while the margin allows, and checks more stops while fewer than
-    /// `ahead` seconds of motion are checked ahead (for at most `slice`).
-    fn fill(&mut self, slice: Duration) -> Result<(), String> {
-        let started = Instant::now();
+    /// Takes what a streamed plan has handed out so far.
+    fn receive(&mut self) -> Result<(), String> {
+        let Some(events) = &self.plan_events else {
+            return Ok(());
+        };
         loop {
+            match events.try_recv() {
+                Ok(event) => {
+                    if let Some(line) = self.motion.records.take(event)? {
+                        eprintln!("nurbs-planner: {line}");
+                    }
+                }
+                Err(TryRecvError::Empty) => return Ok(()),
+                Err(TryRecvError::Disconnected) => {
+                    self.plan_events = None;
+                    return Ok(());
+                }
+            }
+        }
+    }
+
+    /// Pushes checked slots while the margin allows, and checks more stops while fewer than
+    /// `ahead` seconds of motion are checked ahead (for at most `slice`). Returns whether it
+    /// did anything (false: waiting for a streamed plan, or nothing left to do).
+    fn fill(&mut self, slice: Duration) -> Result<bool, String> {
+        let started = Instant::now();
+        let mut progressed = false;
+        loop {
+            self.receive()?;
             while self.buffered() < self.margin {
                 let Some(&(slot, time)) = self.ready.front() else {
                     break;
                 };
                 match self.channel.segments.push(&slot) {
                     Ok(()) => {
+                        progressed = true;
                         self.ready.pop_front();
                         self.ready_time -= time;
                         let end = self.ends[self.sent()] + time;
@@ -264,17 +302,19 @@ impl<'a> Streamer<'a> {
                 }
             }
             if self.all_checked || self.ready_time >= self.ahead || started.elapsed() >= slice {
-                return Ok(());
+                return Ok(progressed);
             }
             let Streamer { motion, arena, .. } = self;
             match motion.records.next(&mut |values| arena.put(values))? {
                 Next::Slot(slot, time, choice) => {
+                    progressed = true;
                     self.ready.push_back((slot, time));
                     self.ready_time += time;
                     self.worst = self.worst.max(choice.ratio);
                     self.stored += usize::from(choice.stored > 0);
                 }
-                Next::Working => {}
+                Next::Working => progressed = true,
+                Next::Waiting => return Ok(progressed),
                 Next::Done => {
                     self.all_checked = true;
                     self.report();
@@ -314,7 +354,7 @@ impl<'a> Streamer<'a> {
 /// publishes the geometry once the module has emptied the ring, and queues the first records.
 fn start_motion<'a>(
     args: &Args,
-    toolpath: &'a Toolpath,
+    shared: &'a Arc<Toolpath>,
     limits: &Limits,
     channel: &'a Channel,
     from: Option<&StopPoint>,
@@ -332,7 +372,21 @@ fn start_motion<'a>(
             p.seq
         );
     }
-    let motion = plan_geometry::motion(toolpath, limits, args.planner.into(), from, args.stop_fraction)?;
+    let toolpath: &'a Toolpath = shared;
+    let (motion, plan_events) = if args.stream {
+        // The planner runs in a thread of its own; its events wait in the channel until the
+        // geometry is published and the checks take them.
+        let (sender, receiver) = mpsc::channel();
+        let (path, plan_limits, start) = (Arc::clone(shared), limits.clone(), from.copied());
+        std::thread::spawn(move || {
+            plan_geometry::stream_plan(&path, &plan_limits, start.as_ref(), &mut |e| sender.send(e).is_ok())
+        });
+        let motion = plan_geometry::streamed_motion(toolpath, limits, args.stop_fraction)?;
+        (motion, Some(receiver))
+    } else {
+        let motion = plan_geometry::motion(toolpath, limits, args.planner.into(), from, args.stop_fraction)?;
+        (motion, None)
+    };
     eprintln!("nurbs-planner: {}", motion.summary);
     // A motion of an earlier planner may still be queued: the module empties the ring once
     // that motion is over (finished, aborted or stopped), and refuses a new geometry before.
@@ -355,6 +409,7 @@ fn start_motion<'a>(
         channel,
         motion,
         arena,
+        plan_events,
         ready: VecDeque::new(),
         ready_time: 0.0,
         ends: vec![0.0],
@@ -369,7 +424,12 @@ fn start_motion<'a>(
     // thread can start at once.
     let began = Instant::now();
     loop {
-        streamer.fill(CHECK_SLICE)?;
+        if !streamer.fill(CHECK_SLICE)? {
+            if stopped() {
+                return Err("stopped by signal before the motion started".into());
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
         let checked = streamer.checked_time();
         let rate = checked / began.elapsed().as_secs_f64().max(1e-9);
         if streamer.all_checked || plan_geometry::checked_far_enough(checked, total, rate, args.margin) {
@@ -382,11 +442,15 @@ fn start_motion<'a>(
     }
     let elapsed = began.elapsed().as_secs_f64();
     eprintln!(
-        "nurbs-planner: first {} records ({:.3} s of motion) queued; stops of {:.3} of {:.3} s of motion checked in {:.3} s ({:.0} x the motion's pace)",
+        "nurbs-planner: first {} records ({:.3} s of motion) queued; stops of {:.3} s of motion{} checked in {:.3} s ({:.0} x the motion's pace)",
         streamer.sent(),
         streamer.buffered(),
         streamer.checked_time(),
-        total,
+        if total.is_finite() {
+            format!(" of {total:.3} s")
+        } else {
+            " (planned so far)".into()
+        },
         elapsed,
         streamer.checked_time() / elapsed.max(1e-9)
     );
@@ -404,7 +468,10 @@ fn run(args: &Args) -> Result<(), String> {
             r.corners, limits.chord_tolerance, r.max_deviation
         );
     }
-    let toolpath = prepared.toolpath;
+    let toolpath = Arc::new(prepared.toolpath);
+    if args.stream && args.planner != Planner::Erwinski {
+        return Err("--stream is for the erwinski planner (VPOp plans the whole path)".into());
+    }
     if args.planner == Planner::Vpop {
         // Before touching HAL: a clear refusal, not a half-started component.
         plan_geometry::check_tip_path(&toolpath)?;
