@@ -9,6 +9,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs};
+use nurbs_motion::planner::simulate::fit_fcp;
 use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::{Interpolator, Step};
@@ -29,51 +30,6 @@ fn targets() -> (Nurbs, Vec<f64>) {
         s.push(x.s);
     }
     (tp.elements[0].curve.clone(), s)
-}
-
-/// Least-squares polynomial u(x) of degree 7 on x in [0, 1] (normal equations on 64 points).
-fn fit_fcp(curve: &Nurbs, table: &ArcLengthTable, s0: f64, s1: f64) -> [f64; 8] {
-    let n = 64;
-    let mut ata = [[0.0f64; 8]; 8];
-    let mut atb = [0.0f64; 8];
-    for i in 0..=n {
-        let x = 0.5 - 0.5 * (std::f64::consts::PI * i as f64 / n as f64).cos();
-        let u = table.parameter_at(curve, s0 + x * (s1 - s0));
-        let mut pw = [1.0f64; 8];
-        for k in 1..8 {
-            pw[k] = pw[k - 1] * x;
-        }
-        for r in 0..8 {
-            atb[r] += pw[r] * u;
-            for c in 0..8 {
-                ata[r][c] += pw[r] * pw[c];
-            }
-        }
-    }
-    // Gaussian elimination with partial pivoting.
-    for col in 0..8 {
-        let piv = (col..8)
-            .max_by(|&a, &b| ata[a][col].abs().total_cmp(&ata[b][col].abs()))
-            .unwrap();
-        ata.swap(col, piv);
-        atb.swap(col, piv);
-        for r in col + 1..8 {
-            let f = ata[r][col] / ata[col][col];
-            for c in col..8 {
-                ata[r][c] -= f * ata[col][c];
-            }
-            atb[r] -= f * atb[col];
-        }
-    }
-    let mut x = [0.0; 8];
-    for r in (0..8).rev() {
-        let mut v = atb[r];
-        for c in r + 1..8 {
-            v -= ata[r][c] * x[c];
-        }
-        x[r] = v / ata[r][r];
-    }
-    x
 }
 
 fn error_table(curve: &Nurbs, s: &[f64]) {

@@ -108,6 +108,72 @@ fn plan_then_verify_and_verify_catches_a_jump() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `plan --interp` (paper 000, Table I): `rk2pc` is the default output bit for bit; `sot`, `tot`
+/// and `fcp` give the same periods with positions computed their way, off the planned arc length
+/// (but near it); `--stream` plans the same motion on the trident; VPOp refuses both flags.
+#[test]
+fn plan_interpolation_methods_and_streaming() {
+    let dir = scratch_dir("nurbs-cli-interp");
+    let run = |name: &str, extra: &[&str]| -> (Vec<Vec<f64>>, serde_json::Value) {
+        let csv = dir.join(format!("{name}.csv"));
+        let summary = dir.join(format!("{name}.json"));
+        let out = bin()
+            .arg("plan")
+            .arg(example("trident.json"))
+            .args(LAB1)
+            .args(extra)
+            .arg("--out")
+            .arg(&csv)
+            .arg("--summary")
+            .arg(&summary)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+        let s = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+        (csv_columns(&csv, &["u", "x", "y"]), s)
+    };
+    let (default, _) = run("default", &[]);
+    let (rk2pc, s) = run("rk2pc", &["--interp", "rk2pc"]);
+    assert_eq!(rk2pc, default);
+    assert_eq!(s["interpolation"], "rk2pc");
+    for method in ["sot", "tot", "fcp"] {
+        let (other, s) = run(method, &["--interp", method]);
+        assert_eq!(s["interpolation"], method);
+        assert_eq!(other.len(), default.len(), "{method}: another period count");
+        let worst = other
+            .iter()
+            .zip(&default)
+            .flat_map(|(a, b)| (1..3).map(|c| (a[c] - b[c]).abs()))
+            .fold(0.0, f64::max);
+        println!("{method}: largest distance from the RK2-PC setpoints {worst:.3e} mm");
+        assert!(worst > 0.0 && worst < 0.05, "{method}: {worst}");
+    }
+    let (streamed, s) = run("stream", &["--stream"]);
+    assert_eq!(s["streamed"], true);
+    assert!(s["first_segment_time_s"].as_f64().is_some_and(|t| t > 0.0));
+    assert_eq!(streamed.len(), default.len());
+    for extra in [["--interp", "sot"], ["--stream", "--planner"]] {
+        let mut args = extra.to_vec();
+        if args[1] == "--planner" {
+            args.push("vpop");
+        } else {
+            args.extend(["--planner", "vpop"]);
+        }
+        let out = bin()
+            .arg("plan")
+            .arg(example("trident.json"))
+            .args(LAB1)
+            .args(&args)
+            .arg("--out")
+            .arg(dir.join("refused.csv"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{args:?} accepted with vpop");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("erwinski planner"));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// Width, height and colour type from a PNG's signature and IHDR chunk.
 fn png_header(bytes: &[u8]) -> (u32, u32, u8) {
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");

@@ -58,6 +58,13 @@ enum Command {
         /// plan succeeds.
         #[arg(long)]
         stream: bool,
+        /// Erwinski planner: how the setpoints map each period's arc length to the curve
+        /// parameter (paper 000, Table I): `rk2pc` (RK2 predictor-corrector, what the realtime
+        /// module runs and the plan is checked with), or for comparison `sot`, `tot` (second-,
+        /// third-order Taylor) and `fcp` (feed correction polynomial, degree 7 per 2 mm), whose
+        /// positions drift off the planned arc length and may exceed the limits (`verify` tells).
+        #[arg(long, value_enum, default_value_t = Interp::Rk2pc)]
+        interp: Interp,
         /// Also draw the profile as a PNG (paper 000, Fig. 5): feedrate with the feedrate limit
         /// function's components and the critical points, axial accelerations and axial jerks
         /// (the finite differences `verify` checks) with their limits, over the curve parameter.
@@ -100,6 +107,27 @@ enum Command {
         #[command(flatten)]
         machine: MachineArgs,
     },
+}
+
+/// `plan --interp`: how the setpoints are interpolated.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interp {
+    Rk2pc,
+    Sot,
+    Tot,
+    Fcp,
+}
+
+impl From<Interp> for crate::planner::simulate::Interpolation {
+    fn from(i: Interp) -> Self {
+        use crate::planner::simulate::Interpolation;
+        match i {
+            Interp::Rk2pc => Interpolation::Rk2pc,
+            Interp::Sot => Interpolation::Sot,
+            Interp::Tot => Interpolation::Tot,
+            Interp::Fcp => Interpolation::Fcp,
+        }
+    }
 }
 
 /// Which feedrate planner `plan` runs.
@@ -159,6 +187,7 @@ pub fn run() -> ExitCode {
             summary,
             planner,
             stream,
+            interp,
             plot,
             round_corners,
             machine,
@@ -169,6 +198,7 @@ pub fn run() -> ExitCode {
             summary: summary.as_deref(),
             planner,
             stream,
+            interp: interp.into(),
             plot: plot.as_deref(),
             round_corners,
             machine: &machine,

@@ -3,8 +3,8 @@ use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
 use crate::planner::axial::{FiniteDifferences, MAX_AXES};
-use crate::planner::simulate::setpoints;
-use crate::planner::{plan, PathCurves, PlanOptions};
+use crate::planner::simulate::{setpoints_with, Interpolation};
+use crate::planner::{plan, PlanOptions};
 use std::io::Write;
 use std::path::Path;
 
@@ -15,6 +15,7 @@ pub struct PlanArgs<'a> {
     pub summary: Option<&'a Path>,
     pub planner: PlannerKind,
     pub stream: bool,
+    pub interp: Interpolation,
     pub plot: Option<&'a Path>,
     pub round_corners: RoundCorners,
     pub machine: &'a MachineArgs,
@@ -81,6 +82,9 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         if args.stream {
             return Err("--stream is for the erwinski planner (VPOp plans the whole path)".into());
         }
+        if args.interp != Interpolation::Rk2pc {
+            return Err("--interp is for the erwinski planner (VPOp plans the positions themselves)".into());
+        }
         return run_vpop(args);
     }
     let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
@@ -95,8 +99,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         ..PlanOptions::default()
     };
     let plan = plan(toolpath, &limits, &options, &mut |_| {})?;
-    let curves = PathCurves::new(toolpath);
-    let samples = setpoints(&curves, &plan.limits, &plan.records);
+    let samples = setpoints_with(toolpath, &plan.limits, &plan.records, args.interp);
     let tip = toolpath.tip_dim();
     let names = ["x", "y", "z"];
     let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
@@ -139,6 +142,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "profile_time_s": plan.motion_time,
                 "plan_time_s": plan.plan_time,
                 "first_segment_time_s": plan.first_record_time,
+                "interpolation": format!("{:?}", args.interp).to_lowercase(),
                 "streamed": args.stream,
                 "segments": plan.records.len(),
                 "critical_points": plan.critical_points.len(),
