@@ -1,5 +1,5 @@
 #!/bin/bash
-# underrun_test.sh unload|freeze [PLANNER TOOLPATH KILL_AFTER STOP]: a planner that falls behind, in
+# underrun_test.sh unload|freeze [PLANNER TOOLPATH KILL_AFTER STOP FLAGS]: a planner that falls behind, in
 # real LinuxCNC (PLANNER erwinski, the default, or vpop: then the module stops from the end of a
 # path block, where the acceleration is not zero, and the feed may rise before it falls;
 # TOOLPATH default examples/butterfly.json, cut after KILL_AFTER s, default 1). nurbs-planner
@@ -14,7 +14,8 @@
 # position jump, underrun set and no fault; the resumed motion ends at C(1) at rest; the whole
 # sampled run (to the stop, then resumed) has no axial violation. STOP=any: the stop may be a
 # stored sequence (the plan's next positions, then a deceleration; e.g. across an element join),
-# whose feed need not fall monotonically: only the limit check judges it.
+# whose feed need not fall monotonically: only the limit check judges it. FLAGS (e.g. --stream) go
+# to every nurbs-planner and to the offline nurbs-plan plan.
 here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
@@ -23,10 +24,11 @@ planner=${2:-erwinski}
 toolpath=$(realpath "${3:-$here/../../examples/butterfly.json}")
 kill_after=${4:-1}
 stop_check=${5:-}
+flags=${6:-}
 case $mode in
     unload)
         cut="unloadusr nurbs-planner"
-        replan="loadusr -W nurbs-planner @TOOLPATH@ --ini @INI@ --margin 2 --planner $planner" ;;
+        replan="loadusr -W nurbs-planner @TOOLPATH@ --ini @INI@ --margin 2 --planner $planner $flags" ;;
     freeze)
         cut="loadusr -w @WORK@/signal.sh STOP"
         replan="loadusr -w @WORK@/signal.sh CONT\nloadusr -w @WORK@/wait-ready.sh" ;;
@@ -39,10 +41,10 @@ LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" --out "$work/offline.csv"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $flags --out "$work/offline.csv"
 sed -e "s|@CUT@|$cut|" -e "s|@REPLAN@|$replan|" -e "s|@TOOLPATH@|$toolpath|g" \
     -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
-    -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner|g" -e "s|@KILL_AFTER@|$kill_after|g" -e "s|@WORK@|$work|g" \
+    -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner $flags|g" -e "s|@KILL_AFTER@|$kill_after|g" -e "s|@WORK@|$work|g" \
     "$here/underrun.hal.in" >"$work/underrun.hal"
 
 cat >"$work/signal.sh" <<'SH'
