@@ -13,8 +13,8 @@
 //! counter, odd while the planner writes, even and non-zero once published, stored last). The
 //! module validates a published geometry with `CurveView::new` before it runs a single record
 //! on it and refuses (fault, hold) anything that does not validate. Behind the published curves
-//! the planner appends stored stop sequences while the motion runs
-//! ([`GeometryArea::append`]), each before the record that refers to it: the ring's
+//! the planner appends the curves' stop points and the stored stop sequences while the motion
+//! runs ([`GeometryArea::append`]), each before the first record that refers to it: the ring's
 //! release/acquire pair orders them, so the planner can hand records out while it still
 //! checks the stops of later ones.
 //!
@@ -44,11 +44,11 @@ pub const SEGMENT_SLOTS: usize = 1024;
 /// bits). A G1 program with its corners rounded is two elements per line.
 pub const MAX_CURVES: usize = 1 << 16;
 /// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together, and the stored stop sequences): 32 MiB. The curves need
+/// together, then their stop points and the stored stop sequences): 32 MiB. The curves need
 /// little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
 /// 208); a stored stop sequence needs two values per period and three per element it runs on.
 /// The butterfly's VPOp blocks at lab set 1 need 695,601 values in all; a 1,000-line G1 program
-/// with the Erwinski planner 647,676 (3,038 of its 3,958 boundaries, most at element joins, have
+/// with the Erwinski planner 631,844 (3,038 of its 3,958 boundaries, most at element joins, have
 /// a stored stop): this capacity holds some 6,000 such lines.
 pub const GEOMETRY_VALUES: usize = 1 << 22;
 

@@ -11,11 +11,14 @@
 //!
 //! ```text
 //! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
-//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop]
+//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop] [--stream]
+//!               [--round-corners auto|on|off] [--stop-fraction F]
 //! ```
 //! `--planner vpop` plans with VPOp (one tool-tip position per servo period, 2-/3-axis paths)
 //! and sends the positions as path blocks, which the module outputs exactly; the default
-//! `erwinski` sends S-curve segment records.
+//! `erwinski` sends S-curve segment records. `--stream` (Erwinski) plans in a thread of its own
+//! and sends each record as soon as it is final and checked, so the motion starts before the
+//! plan ends.
 //! With `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given on
 //! the command line win. The period must equal the servo thread's for the motion to be the one
