@@ -6,8 +6,8 @@
 //! `--margin` seconds of motion queued ahead of the module (and never more than the ring holds).
 //! Each record goes out with the stop the module makes if nothing follows it (underrun, hold,
 //! abort), checked by simulation against the axis limits; the stops are checked as the records
-//! go out, a margin ahead, so the motion starts once the plan is done and the first records'
-//! stops are checked, not after every stop of a long program.
+//! go out (as fast as they run, ahead of the records pushed), so the motion starts once the plan
+//! is done and the first records' stops are checked, not after every stop of a long program.
 //!
 //! ```text
 //! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
@@ -227,9 +227,6 @@ struct Streamer<'a> {
     /// `ends[k]`: motion time of the first k pushed slots.
     ends: Vec<f64>,
     margin: f64,
-    /// Motion time (s) whose stops to keep checked ahead of what is pushed (`margin`, once the
-    /// motion runs).
-    ahead: f64,
     /// Every slot has come out of the motion.
     all_checked: bool,
     /// Worst stop ratio to an axis limit so far, and how many stops are stored sequences.
@@ -279,8 +276,9 @@ impl<'a> Streamer<'a> {
         }
     }
 
-    /// Pushes checked slots while the margin allows, and checks more stops while fewer than
-    /// `ahead` seconds of motion are checked ahead (for at most `slice`). Returns whether it
+    /// Pushes checked slots while the margin allows, and checks more stops (for at most `slice`:
+    /// they run until all are checked, so that they stay as far ahead of the motion as the start
+    /// rule, [`plan_geometry::checked_far_enough`], counted on). Returns whether it
     /// did anything (false: waiting for a streamed plan, or nothing left to do).
     fn fill(&mut self, slice: Duration) -> Result<bool, String> {
         let started = Instant::now();
@@ -304,7 +302,7 @@ impl<'a> Streamer<'a> {
                     Err(e) => return Err(format!("channel: {e:?}")),
                 }
             }
-            if self.all_checked || self.ready_time >= self.ahead || started.elapsed() >= slice {
+            if self.all_checked || started.elapsed() >= slice {
                 return Ok(progressed);
             }
             let Streamer { motion, arena, .. } = self;
@@ -417,7 +415,6 @@ fn start_motion<'a>(
         ready_time: 0.0,
         ends: vec![0.0],
         margin: args.margin,
-        ahead: f64::INFINITY,
         all_checked: false,
         worst: 0.0,
         stored: 0,
@@ -439,7 +436,6 @@ fn start_motion<'a>(
             break;
         }
     }
-    streamer.ahead = streamer.margin;
     while !streamer.done() && streamer.buffered() < streamer.margin && streamer.channel.segments.len() < SEGMENT_SLOTS {
         streamer.fill(CHECK_SLICE)?;
     }
