@@ -3,7 +3,8 @@
 //! the limits apply to (the tool tip for 2-/3-axis paths, x y z a|b c on a table-tilting machine) and
 //! the tool tip in the workpiece frame (feed and chord error).
 
-use std::cell::OnceCell;
+use std::cell::RefCell;
+use std::collections::VecDeque;
 
 use crate::geometry::Toolpath;
 use crate::kinematics::TableTilting;
@@ -46,7 +47,7 @@ impl<'a> JointPath<'a> {
         let spans = views.iter().map(|v| (v.u_min(), v.u_max())).collect();
         let fast: Vec<PowerCurve> = views.iter().map(PowerCurve::new).collect();
         let tip = toolpath.tip_dim();
-        let kappa = CurvatureTable::new(&fast, tip);
+        let kappa = CurvatureTable::new(tip);
         let mut stops = tangent_breaks(&views);
         stops.push(views.len() as f64);
         JointPath {
@@ -464,13 +465,19 @@ const KAPPA_CELLS: usize = 2048;
 const KAPPA_SAMPLES: usize = 4;
 
 /// Upper estimate of the curvature over cells of `w`: per element, a range-maximum table over
-/// its cells, built the first time a query reaches the element (the stop check of
-/// `nurbs-planner` touches only the elements near the boundaries it checks; building all 2,000
-/// elements of a 1,000-line G1 program up front took a second).
+/// its cells, built when a query reaches the element, and only the last [`KAPPA_TABLES_KEPT`]
+/// kept (a rebuilt table has the same values). The queries follow the motion, so few elements
+/// are in use at a time: building all 2,000 elements of a 1,000-line G1 program up front took a
+/// second before the first stop check of `nurbs-planner`, and holding them all 330 MB for a VPOp
+/// plan of it.
 struct CurvatureTable {
     tip: usize,
-    elements: Vec<OnceCell<ElementCurvature>>,
+    /// Built tables with their element, the latest last.
+    built: RefCell<VecDeque<(usize, ElementCurvature)>>,
 }
+
+/// Element curvature tables kept at a time (some 180 kB each for a cubic element).
+const KAPPA_TABLES_KEPT: usize = 64;
 
 /// `levels[k][c]`: largest curvature over cells `c .. c + 2^k` of one element.
 struct ElementCurvature {
@@ -527,10 +534,10 @@ fn cells_of(c: &PowerCurve) -> usize {
 }
 
 impl CurvatureTable {
-    fn new(curves: &[PowerCurve], tip: usize) -> Self {
+    fn new(tip: usize) -> Self {
         CurvatureTable {
             tip,
-            elements: curves.iter().map(|_| OnceCell::new()).collect(),
+            built: RefCell::new(VecDeque::new()),
         }
     }
 
@@ -543,22 +550,33 @@ impl CurvatureTable {
         (e, (((w - e as f64) * cells as f64) as usize).min(cells - 1))
     }
 
-    fn element(&self, curves: &[PowerCurve], e: usize) -> &ElementCurvature {
-        self.elements[e].get_or_init(|| ElementCurvature::new(&curves[e], self.tip))
+    /// Largest curvature over cells `a ..= b` of element `e` (its table built if need be).
+    fn element_max(&self, curves: &[PowerCurve], e: usize, a: usize, b: usize) -> f64 {
+        let mut built = self.built.borrow_mut();
+        if let Some((_, table)) = built.iter().rev().find(|(i, _)| *i == e) {
+            return table.max(a, b);
+        }
+        if built.len() == KAPPA_TABLES_KEPT {
+            built.pop_front();
+        }
+        let table = ElementCurvature::new(&curves[e], self.tip);
+        let m = table.max(a, b);
+        built.push_back((e, table));
+        m
     }
 
     /// Largest curvature over the cells from `w0` to `w1` (`w0 <= w1`).
     fn max(&self, curves: &[PowerCurve], w0: f64, w1: f64) -> f64 {
         let ((ea, a), (eb, b)) = (Self::cell(curves, w0), Self::cell(curves, w1));
         if ea == eb {
-            return self.element(curves, ea).max(a, b);
+            return self.element_max(curves, ea, a, b);
         }
         let last = |e: usize| cells_of(&curves[e]) - 1;
-        let mut m = self.element(curves, ea).max(a, last(ea));
+        let mut m = self.element_max(curves, ea, a, last(ea));
         for e in ea + 1..eb {
-            m = m.max(self.element(curves, e).max(0, last(e)));
+            m = m.max(self.element_max(curves, e, 0, last(e)));
         }
-        m.max(self.element(curves, eb).max(0, b))
+        m.max(self.element_max(curves, eb, 0, b))
     }
 }
 
