@@ -227,6 +227,9 @@ struct Streamer<'a> {
     /// `ends[k]`: motion time of the first k pushed slots.
     ends: Vec<f64>,
     margin: f64,
+    /// Records may go into the ring: the module takes the first one as soon as it is there, so
+    /// this is when the motion starts (once the start rule holds).
+    started: bool,
     /// Every slot has come out of the motion.
     all_checked: bool,
     /// Worst stop ratio to an axis limit so far, and how many stops are stored sequences.
@@ -285,7 +288,7 @@ impl<'a> Streamer<'a> {
         let mut progressed = false;
         loop {
             self.receive()?;
-            while self.buffered() < self.margin {
+            while self.started && self.buffered() < self.margin {
                 let Some(&(slot, time)) = self.ready.front() else {
                     break;
                 };
@@ -415,13 +418,14 @@ fn start_motion<'a>(
         ready_time: 0.0,
         ends: vec![0.0],
         margin: args.margin,
+        started: false,
         all_checked: false,
         worst: 0.0,
         stored: 0,
     };
-    // Check stops until the checks can stay ahead of the motion to its end, and queue what the
-    // margin allows, before hal_ready: `loadusr -W` returns with data in place and the servo
-    // thread can start at once.
+    // Check stops until the checks can stay ahead of the motion to its end (nothing goes into the
+    // ring before: a plan that fails by then moves nothing), then queue what the margin allows,
+    // before hal_ready: `loadusr -W` returns with data in place.
     let began = Instant::now();
     loop {
         if !streamer.fill(CHECK_SLICE)? {
@@ -436,8 +440,11 @@ fn start_motion<'a>(
             break;
         }
     }
+    streamer.started = true;
     while !streamer.done() && streamer.buffered() < streamer.margin && streamer.channel.segments.len() < SEGMENT_SLOTS {
-        streamer.fill(CHECK_SLICE)?;
+        if !streamer.fill(CHECK_SLICE)? {
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
     let elapsed = began.elapsed().as_secs_f64();
     eprintln!(
