@@ -512,6 +512,14 @@ impl Records<'_> {
         })
     }
 
+    /// Whether every record has come (a streamed plan has ended).
+    pub fn is_complete(&self) -> bool {
+        match self {
+            Records::Segments { complete, .. } => *complete,
+            Records::Ready(_) => true,
+        }
+    }
+
     /// Takes an event of a streamed plan: a record or a curve's stop points go to the checks,
     /// the end marks the records complete (returns its log line), a failure is an error.
     pub fn take(&mut self, event: PlanEvent) -> Result<Option<String>, String> {

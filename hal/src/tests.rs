@@ -871,6 +871,7 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
     assert!(matches!(events.last(), Some(PlanEvent::Done(_))));
 
     let mut motion = streamed_motion(&toolpath, &limits, 1.0).unwrap();
+    assert!(!motion.records.is_complete());
     let (_planner, channel) = load();
     mock::set_pin("nurbs_interp.enable", Value::Bit(true));
     let mut arena = motion.geometry.publish(channel).unwrap();
@@ -904,6 +905,7 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
             }
         }
     }
+    assert!(motion.records.is_complete());
     let started_after = started_after.expect("never started");
     println!(
         "{} events; the motion started after {started_after}, {} samples",

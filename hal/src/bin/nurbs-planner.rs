@@ -273,6 +273,9 @@ impl<'a> Streamer<'a> {
                 Err(TryRecvError::Empty) => return Ok(()),
                 Err(TryRecvError::Disconnected) => {
                     self.plan_events = None;
+                    if !self.motion.records.is_complete() {
+                        return Err("the planner thread ended before the plan did".into());
+                    }
                     return Ok(());
                 }
             }
