@@ -10,6 +10,7 @@
 //! slot), so records can be handed out while the stops of later ones are still being checked
 //! ([`StopChooser`]).
 
+use std::cell::{OnceCell, RefCell};
 use std::collections::VecDeque;
 
 use nurbs_hal::channel::{RecordStop, Slot, StopPoint, GEOMETRY_VALUES};
@@ -30,17 +31,6 @@ use nurbs_rtcore::StopRun;
 /// acceleration and jerk, largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
 pub fn fractions(max_fraction: f64) -> Vec<f64> {
     (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
-}
-
-/// Per curve, the `(s, feed cap)` points the module's underrun stop must respect
-/// ([`curve_stop_points`] of the plan's critical points).
-pub fn stop_points(toolpath: &Toolpath, plan: &Plan) -> Vec<Vec<(f64, f64)>> {
-    (0..toolpath.elements.len())
-        .map(|c| {
-            let on_curve = plan.critical_points.iter().filter(|(curve, _)| *curve == c);
-            curve_stop_points(toolpath, c, on_curve.map(|(_, p)| *p))
-        })
-        .collect()
 }
 
 /// The `(s, feed cap)` points of curve `c` the module's stop must respect: its critical points
@@ -197,6 +187,9 @@ pub struct StopChooser<'t> {
     /// in the arena once a record on the curve has gone out (offset, pairs).
     points: Vec<Option<Vec<f64>>>,
     placed: Vec<Option<(u32, u32)>>,
+    /// A whole plan's critical points, in path order: the stop points of a curve are made from
+    /// them when a record on it first comes (a streamed plan sets them instead).
+    criticals: Option<(&'t Toolpath, Vec<(usize, CriticalPoint)>)>,
     /// No more records come.
     finished: bool,
 }
@@ -240,20 +233,41 @@ impl<'t> StopChooser<'t> {
             pending: VecDeque::new(),
             points: vec![None; toolpath.elements.len()],
             placed: vec![None; toolpath.elements.len()],
+            criticals: None,
             finished: false,
         })
     }
 
-    /// The stop points of `curve` ([`stop_points`]): needed before a record on it is pushed.
+    /// The stop points of every curve come from `criticals` (a whole plan's, in path order),
+    /// each made when a record on the curve first comes.
+    pub fn with_critical_points(mut self, toolpath: &'t Toolpath, criticals: Vec<(usize, CriticalPoint)>) -> Self {
+        self.criticals = Some((toolpath, criticals));
+        self
+    }
+
+    /// Makes the stop points of `curve` from the plan's critical points, if not yet known.
+    fn ensure_stop_points(&mut self, curve: usize) {
+        if self.points.get(curve).is_none_or(Option::is_some) {
+            return;
+        }
+        if let Some((toolpath, criticals)) = &self.criticals {
+            let first = criticals.partition_point(|(c, _)| *c < curve);
+            let end = criticals.partition_point(|(c, _)| *c <= curve);
+            let points = curve_stop_points(toolpath, curve, criticals[first..end].iter().map(|(_, p)| *p));
+            self.set_stop_points(curve, &points);
+        }
+    }
+
+    /// The stop points of `curve` ([`curve_stop_points`]): needed before a record on it is pushed.
     pub fn set_stop_points(&mut self, curve: usize, points: &[(f64, f64)]) {
         if let Some(slot) = self.points.get_mut(curve) {
             *slot = Some(points.iter().flat_map(|&(s, cap)| [s, cap]).collect());
         }
     }
 
-    /// Whether the stop points of `curve` are known.
+    /// Whether the stop points of `curve` are known (or can be made).
     pub fn has_stop_points(&self, curve: usize) -> bool {
-        self.points.get(curve).is_some_and(Option::is_some)
+        self.criticals.is_some() || self.points.get(curve).is_some_and(Option::is_some)
     }
 
     fn points_of(&self, curve: usize) -> &[f64] {
@@ -289,6 +303,7 @@ impl<'t> StopChooser<'t> {
 
     /// Takes the next record of the plan (the stop points of its curve set before).
     pub fn push(&mut self, record: &SegmentRecord) {
+        self.ensure_stop_points(record.curve());
         let tip = self.limits.velocity.len();
         let mut next = Some(*record);
         while let Step::Sample(s) = self.interp.step(&self.curves, self.limits.period, &mut || next.take()) {
@@ -589,13 +604,10 @@ pub fn geometry(
 }
 
 /// The stop chooser for the records of `plan`, with the stop points of every curve from the
-/// plan's critical points ([`stop_points`]).
+/// plan's critical points ([`curve_stop_points`]).
 pub fn segment_chooser<'t>(toolpath: &'t Toolpath, plan: &Plan, max_fraction: f64) -> Result<StopChooser<'t>, String> {
-    let mut chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
-    for (curve, points) in stop_points(toolpath, plan).iter().enumerate() {
-        chooser.set_stop_points(curve, points);
-    }
-    Ok(chooser)
+    let chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
+    Ok(chooser.with_critical_points(toolpath, plan.critical_points.clone()))
 }
 
 /// The curves of `toolpath`: what is published before the records (stop points and stored stop
@@ -632,43 +644,50 @@ pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
 /// anchor's `u` has exactly its `s`, the arc length the module holds there.
 struct ArcLengths<'a> {
     toolpath: &'a Toolpath,
-    tables: Vec<ArcLengthTable>,
-    /// Path length before each element.
-    before: Vec<f64>,
+    /// Each element's table, built when first needed (a 1,000-line G1 program has 2,000).
+    tables: Vec<OnceCell<ArcLengthTable>>,
+    /// Path length before each element, as far as asked for (summed in path order).
+    before: RefCell<Vec<f64>>,
     /// The anchor's element, arc length, and Gauss-Legendre length to its parameter.
     anchor: Option<(usize, f64, f64)>,
 }
 
 impl<'a> ArcLengths<'a> {
     fn new(toolpath: &'a Toolpath) -> Self {
-        let tables: Vec<ArcLengthTable> = toolpath
-            .elements
-            .iter()
-            .map(|e| ArcLengthTable::new(&e.curve))
-            .collect();
-        let mut before = vec![0.0];
-        for t in &tables {
-            before.push(before.last().copied().unwrap_or(0.0) + t.total());
-        }
         ArcLengths {
             toolpath,
-            tables,
-            before,
+            tables: toolpath.elements.iter().map(|_| OnceCell::new()).collect(),
+            before: RefCell::new(vec![0.0]),
             anchor: None,
         }
     }
 
+    fn table(&self, e: usize) -> &ArcLengthTable {
+        self.tables[e].get_or_init(|| ArcLengthTable::new(&self.toolpath.elements[e].curve))
+    }
+
+    /// Path length before element `e`.
+    fn before(&self, e: usize) -> f64 {
+        let mut before = self.before.borrow_mut();
+        while before.len() <= e {
+            let k = before.len() - 1;
+            let next = before[k] + self.table(k).total();
+            before.push(next);
+        }
+        before[e]
+    }
+
     /// From now on, element `e` is measured so that `u` has arc length `s`.
     fn set_anchor(&mut self, e: usize, u: f64, s: f64) {
-        self.anchor = self
-            .tables
-            .get(e)
-            .map(|t| (e, s, t.length_to(&self.toolpath.elements[e].curve, u)));
+        self.anchor =
+            (e < self.tables.len()).then(|| (e, s, self.table(e).length_to(&self.toolpath.elements[e].curve, u)));
     }
 
     /// Arc length of `p` in the measure of element `e` (negative before it).
     fn s(&self, p: &PathPoint, e: usize) -> f64 {
-        let own = self.tables[p.element].length_to(&self.toolpath.elements[p.element].curve, p.u);
+        let own = self
+            .table(p.element)
+            .length_to(&self.toolpath.elements[p.element].curve, p.u);
         if p.element == e {
             match self.anchor {
                 // Exactly the anchor's arc length at its parameter (the difference is 0 there).
@@ -677,7 +696,7 @@ impl<'a> ArcLengths<'a> {
             }
         } else {
             // An earlier element: minus the path length from `p` to the start of `e`.
-            (self.before[p.element] + own) - self.before[e]
+            (self.before(p.element) + own) - self.before(e)
         }
     }
 }
