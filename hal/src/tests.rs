@@ -1901,6 +1901,34 @@ mod blocks {
         block_job("butterfly.json");
     }
 
+    /// What a VPOp motion costs `nurbs-planner --planner vpop` before it starts (ignored in CI,
+    /// a measurement): the VPOp plan, then the stop checks at every block end, at lab set 1.
+    /// `cargo test --release -p nurbs-hal --features mock-hal vpop_start_cost -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn vpop_start_cost() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+        for name in ["trident.json", "butterfly.json"] {
+            let toolpath = read_toolpath(&dir.join(name)).unwrap();
+            let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
+            let t = std::time::Instant::now();
+            let plan = vpop_plan(&toolpath, &limits, None).unwrap();
+            let planned = t.elapsed().as_secs_f64();
+            let t = std::time::Instant::now();
+            let (_, blocks, choices) = block_geometry(&toolpath, &plan, None, 1.0).unwrap();
+            let checked = t.elapsed().as_secs_f64();
+            let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
+            println!(
+                "{name}: motion {:.3} s; VPOp plan {planned:.2} s; stop checks at {} block ends {checked:.2} s ({:.1} ms per block of {:.1} ms of motion); worst ratio {worst:.7}",
+                plan.motion_time,
+                blocks.len(),
+                1e3 * checked / blocks.len() as f64,
+                1e3 * plan.motion_time / blocks.len() as f64
+            );
+            assert!(worst <= 1.0 + nurbs_motion::planner::verify::SLACK);
+        }
+    }
+
     /// Every slot of a motion as `nurbs-planner` streams it, with its motion time, and the
     /// values appended to the arena behind the published geometry.
     fn drain(m: &mut Motion) -> (Vec<(Slot, f64, StopChoice)>, Vec<f64>) {
