@@ -54,24 +54,34 @@ fn bad_input_exits_non_zero_with_a_message() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `nurbs-plan plan program args --out csv --summary summary` must succeed; returns the summary.
+fn plan_with_summary(program: &Path, args: &[&str], csv: &Path, summary: &Path) -> serde_json::Value {
+    let out = bin()
+        .arg("plan")
+        .arg(program)
+        .args(args)
+        .arg("--out")
+        .arg(csv)
+        .arg("--summary")
+        .arg(summary)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{} {args:?}: {}",
+        program.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(summary).unwrap()).unwrap()
+}
+
 #[test]
 fn plan_then_verify_and_verify_catches_a_jump() {
     let dir = scratch_dir("nurbs-cli-plan");
     let csv = dir.join("trident.csv");
     let summary = dir.join("summary.json");
     let limits = LAB1;
-    let out = bin()
-        .arg("plan")
-        .arg(example("trident.json"))
-        .args(limits)
-        .arg("--out")
-        .arg(&csv)
-        .arg("--summary")
-        .arg(&summary)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let s = plan_with_summary(&example("trident.json"), &limits, &csv, &summary);
     for key in [
         "motion_time_s",
         "plan_time_s",
@@ -110,26 +120,15 @@ fn plan_then_verify_and_verify_catches_a_jump() {
 
 /// `plan --interp` (paper 000, Table I): `rk2pc` is the default output bit for bit; `sot`, `tot`
 /// and `fcp` give the same periods with positions computed their way, off the planned arc length
-/// (but near it); `--stream` plans the same motion on the trident; VPOp refuses both flags.
+/// (but near it); `--stream` plans a motion of the same length on the trident that passes
+/// `verify`; VPOp refuses both flags.
 #[test]
 fn plan_interpolation_methods_and_streaming() {
     let dir = scratch_dir("nurbs-cli-interp");
     let run = |name: &str, extra: &[&str]| -> (Vec<Vec<f64>>, serde_json::Value) {
         let csv = dir.join(format!("{name}.csv"));
-        let summary = dir.join(format!("{name}.json"));
-        let out = bin()
-            .arg("plan")
-            .arg(example("trident.json"))
-            .args(LAB1)
-            .args(extra)
-            .arg("--out")
-            .arg(&csv)
-            .arg("--summary")
-            .arg(&summary)
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
-        let s = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+        let args: Vec<&str> = LAB1.iter().chain(extra).copied().collect();
+        let s = plan_with_summary(&example("trident.json"), &args, &csv, &dir.join(format!("{name}.json")));
         (csv_columns(&csv, &["u", "x", "y"]), s)
     };
     let (default, _) = run("default", &[]);
@@ -152,6 +151,8 @@ fn plan_interpolation_methods_and_streaming() {
     assert_eq!(s["streamed"], true);
     assert!(s["first_segment_time_s"].as_f64().is_some_and(|t| t > 0.0));
     assert_eq!(streamed.len(), default.len());
+    // The streamed plan passes the same check as the whole-path one.
+    assert_verifies(&dir.join("stream.csv"), &example("trident.json"), &LAB1);
     for extra in [["--interp", "sot"], ["--stream", "--planner"]] {
         let mut args = extra.to_vec();
         if args[1] == "--planner" {

@@ -13,29 +13,17 @@ use std::sync::{mpsc, Arc};
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::{plan, Limits, PlanOptions};
 
 #[path = "../src/plan_geometry.rs"]
 #[allow(dead_code)]
 mod plan_geometry;
+#[path = "../src/test_paths.rs"]
+mod test_paths;
 use plan_geometry::{Next, Records};
 
 const LINES: usize = 200;
 const MARGIN: f64 = 2.0;
-
-fn zigzag() -> Toolpath {
-    let vertices: Vec<Vec<f64>> = (0..=LINES)
-        .map(|k| vec![2.0 * k as f64, 5.0 * (0.7 * k as f64).sin()])
-        .collect();
-    let mut knots = vec![0.0, 0.0];
-    knots.extend((1..LINES).map(|k| k as f64));
-    knots.extend([LINES as f64; 2]);
-    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &vertices, None).unwrap());
-    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
-        .unwrap()
-        .toolpath
-}
 
 /// Checks stops until `MARGIN` seconds of motion are ready (taking a streamed plan's events from
 /// `events` as they come); returns the records ready.
@@ -58,7 +46,7 @@ fn first_margin(records: &mut Records, events: Option<&mpsc::Receiver<plan_geome
 }
 
 fn bench_start(c: &mut Criterion) {
-    let toolpath = Arc::new(zigzag());
+    let toolpath = Arc::new(test_paths::g1_zigzag(LINES));
     let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
     let mut g = c.benchmark_group(format!("start/{LINES}-line G1 program"));
     g.sample_size(10);

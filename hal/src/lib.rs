@@ -35,4 +35,6 @@ extern crate self as nurbs_hal;
 #[cfg(test)]
 mod plan_geometry;
 #[cfg(test)]
+mod test_paths;
+#[cfg(test)]
 mod tests;

@@ -159,6 +159,21 @@ pub struct StopChoice {
     pub stored: usize,
 }
 
+impl StopChoice {
+    /// The module's tangential stop with jerk `fraction` and deceleration `accel_share` of the
+    /// tangential limits `(a_max, j_max)`, whose check gave `ratio`.
+    fn tangential((fraction, accel_share): (f64, f64), (a_max, j_max): (f64, f64), ratio: f64) -> Self {
+        StopChoice {
+            fraction,
+            accel_share,
+            accel: fraction * accel_share * a_max,
+            jerk: fraction * j_max,
+            ratio,
+            stored: 0,
+        }
+    }
+}
+
 /// Chooses the stop after each segment record, one record at a time in plan order, so that
 /// `nurbs-planner` can hand records out while it still checks later ones.
 ///
@@ -284,21 +299,18 @@ impl<'t> StopChooser<'t> {
         bound: f64,
     ) -> StopChoice {
         let limits = &self.limits;
-        let accel = fraction * accel_share * limits.min_accel();
-        let jerk = fraction * limits.min_jerk();
-        let mut stop = Some(underrun_stop(self.points_of(last.curve()), last, accel, jerk));
+        let untried = StopChoice::tangential((fraction, accel_share), (limits.min_accel(), limits.min_jerk()), 0.0);
+        let mut stop = Some(underrun_stop(
+            self.points_of(last.curve()),
+            last,
+            untried.accel,
+            untried.jerk,
+        ));
         let mut i = interp;
         let ratio = stop_ratio(limits, fd, bound, &mut || {
             i.step(&self.curves, limits.period, &mut || stop.take())
         });
-        StopChoice {
-            fraction,
-            accel_share,
-            accel,
-            jerk,
-            ratio,
-            stored: 0,
-        }
+        StopChoice { ratio, ..untried }
     }
 
     /// Takes the next record of the plan (the stop points of its curve set before).
@@ -312,14 +324,11 @@ impl<'t> StopChooser<'t> {
         }
         // The full stop with no trial: what the module falls back to (reported as exceeding)
         // if the interpolator refused the record (a plan's records never are).
-        let mut choice = StopChoice {
-            fraction: 1.0,
-            accel_share: 1.0,
-            accel: self.limits.min_accel(),
-            jerk: self.limits.min_jerk(),
-            ratio: f64::INFINITY,
-            stored: 0,
-        };
+        let mut choice = StopChoice::tangential(
+            (1.0, 1.0),
+            (self.limits.min_accel(), self.limits.min_jerk()),
+            f64::INFINITY,
+        );
         let Some(last) = self.interp.record().copied().filter(|r| r.seq == record.seq) else {
             self.pending.push_back(Pending {
                 record: *record,
@@ -785,10 +794,10 @@ pub fn choose_block_stops(
         // The module's stop with these limits, checked by finite differences; abandoned as soon
         // as it is worse than `bound` (it cannot be the choice then).
         let simulate = |fraction: f64, accel_share: f64, bound: f64| -> StopChoice {
-            let (accel, jerk) = (fraction * accel_share * a_max, fraction * j_max);
+            let untried = StopChoice::tangential((fraction, accel_share), (a_max, j_max), 0.0);
             let mut trial = *b;
-            trial.stop_accel = accel;
-            trial.stop_jerk = jerk;
+            trial.stop_accel = untried.accel;
+            trial.stop_jerk = untried.jerk;
             let (stop, a0) = block_stop(curve_points, &trial, dt);
             let mut interp = Interpolator::new();
             let started = interp.start_profile(&curves, stop, stop.profile().table_from(a0));
@@ -800,14 +809,7 @@ pub fn choose_block_stops(
                 }
             };
             let ratio = stop_ratio(limits, fd, bound, &mut step);
-            StopChoice {
-                fraction,
-                accel_share,
-                accel,
-                jerk,
-                ratio,
-                stored: 0,
-            }
+            StopChoice { ratio, ..untried }
         };
         let mut best: Option<StopChoice> = None;
         let mut previous = None;

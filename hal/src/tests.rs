@@ -17,6 +17,7 @@ use crate::mock::{self, Value};
 use crate::module::{rtapi_app_exit, rtapi_app_main, FaultCode};
 use crate::plan_geometry::StopChoice;
 use crate::sys;
+use crate::test_paths::g1_zigzag;
 use crate::user::{Component, GeometryBuilder, StreamReader, StreamValue};
 
 /// Counts this thread's allocations (thread-local, so parallel tests do not disturb each other).
@@ -1058,22 +1059,6 @@ fn long_g1_program_cost() {
     );
     drop(receiver);
     planner.join().unwrap();
-}
-
-/// A G1 program of `lines` 2 mm lines zigzagging up to 5 mm sideways, its corners rounded
-/// within 0.001 mm: `2 lines - 1` elements.
-fn g1_zigzag(lines: usize) -> Toolpath {
-    use nurbs_motion::geometry::{ElementKind, Nurbs};
-    let vertices: Vec<Vec<f64>> = (0..=lines)
-        .map(|k| vec![2.0 * k as f64, 5.0 * (0.7 * k as f64).sin()])
-        .collect();
-    let mut knots = vec![0.0, 0.0];
-    knots.extend((1..lines).map(|k| k as f64));
-    knots.extend([lines as f64; 2]);
-    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &vertices, None).unwrap());
-    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
-        .unwrap()
-        .toolpath
 }
 
 /// A G1 polyline of five segments (up to 90 mm) with its corners rounded within 0.001 mm:
