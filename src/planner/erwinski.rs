@@ -336,6 +336,19 @@ impl<'a> Planner<'a> {
         let nseg = self.bounds.len() - 1;
         let c = self.bounds[k].start_curve;
         let element = self.nodes.element(c);
+        let budget = self.work_budget.0 + self.work_budget.1 * self.states[k].samples as u64;
+        let out_of_work = PlanError::Infeasible {
+            curve: c,
+            u: self.bounds[k].start_u,
+            reason: format!(
+                "planning gave up after simulating {} servo periods of trial profiles for {} planned ones (its work budget)",
+                self.work.get(),
+                self.states[k].samples
+            ),
+        };
+        if self.work.get() > budget {
+            return Err(out_of_work);
+        }
         let ctx = SegmentContext {
             curves: &self.curves,
             limits: &self.check_limits,
@@ -349,19 +362,8 @@ impl<'a> Planner<'a> {
             accel: self.accel,
             jerk: self.jerk,
             work: &self.work,
+            work_budget: budget,
         };
-        let budget = self.work_budget.0 + self.work_budget.1 * self.states[k].samples as u64;
-        if self.work.get() > budget {
-            return Err(PlanError::Infeasible {
-                curve: c,
-                u: self.bounds[k].start_u,
-                reason: format!(
-                    "planning gave up after simulating {} servo periods of trial profiles for {} planned ones (its work budget)",
-                    self.work.get(),
-                    self.states[k].samples
-                ),
-            });
-        }
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
         if k > 0 && k == self.settled && matches!(outcome, Err(SegmentFailure::StartTooFast(_))) {
             // Back-tracking would revise a record handed out: this segment stops instead (the
@@ -371,6 +373,7 @@ impl<'a> Planner<'a> {
             }
         }
         match outcome {
+            Err(SegmentFailure::OutOfWork) => return Err(out_of_work),
             Ok((record, state)) => {
                 self.records.truncate(k);
                 self.records.push(record);
@@ -421,7 +424,7 @@ impl<'a> Planner<'a> {
             Err(failure) => {
                 let start_max = match failure {
                     SegmentFailure::StartTooFast(v) => v,
-                    SegmentFailure::Split { .. } => START_FEED_STEP * self.start_feeds[k],
+                    SegmentFailure::Split { .. } | SegmentFailure::OutOfWork => START_FEED_STEP * self.start_feeds[k],
                 };
                 // Below the feed one period of the nominal jerk gives from rest, passing the node
                 // gains about a period over stopping there, and each further step down would
@@ -494,6 +497,9 @@ enum SegmentFailure {
     StartTooFast(f64),
     /// A point inside must be passed at most at feed `cap`: make it a node.
     Split { u: f64, cap: f64 },
+    /// The plan's work budget is used up (checked before each attempt: one segment's
+    /// attempts can take long when the trials crawl).
+    OutOfWork,
 }
 
 /// Relative headroom of the planned feed below the programmed feed.
@@ -524,6 +530,8 @@ struct SegmentContext<'a> {
     accel: f64,
     jerk: f64,
     work: &'a Cell<u64>,
+    /// Periods the trials may have simulated in all before the plan is refused.
+    work_budget: u64,
 }
 
 /// One candidate profile, interpolated and measured.
@@ -545,6 +553,8 @@ struct Trial {
     acc_violation: f64,
     jerk_violation: f64,
     duration: f64,
+    /// Highest sampled path speed.
+    peak_feed: f64,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -612,7 +622,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     let mut chord_ratio: f64 = 0.0;
     let tip = ctx.limits.velocity.len();
     let mut prev: Option<nurbs_rtcore::executor::Sample> = from.last_sample;
-    let mut last_sample = from.last_sample;
+    let last_sample = Cell::new(from.last_sample);
     let eps = super::flf::CHORD_MARGIN * ctx.limits.chord_tolerance;
     let (period, feed) = (ctx.limits.period, ctx.limits.feed);
     let mut worst_speed = (0.0f64, ctx.node_start.start_u, 0.0, 0usize);
@@ -640,19 +650,41 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         }
         count += 1;
         prev = Some(*s);
-        last_sample = Some(*s);
+        last_sample.set(Some(*s));
     };
     let finished = run_segment(ctx.curves, ctx.limits, &mut state, record, sink);
-    ctx.work.set(ctx.work.get() + count as u64);
     if !finished {
+        ctx.work.set(ctx.work.get() + count as u64);
         return None;
     }
-    let check: &FiniteDifferences = &state.check;
+    // A segment ending at rest before the path end: the next record's first sample lands on the
+    // node (the interpolator waits there), and the step onto it is this segment's doing (its
+    // final approach); judge it here, where a lower jerk can cure it, not in the next segment,
+    // which cannot. The committed state is left as it is: the next segment takes that sample.
+    let mut check: FiniteDifferences = state.check;
+    let real_last = last_sample.get();
+    if state.interp.ends_at_rest() {
+        let node = ctx.node_end;
+        let view = ctx.curves.curve(node.start_curve)?;
+        let cursor = nurbs_rtcore::interp::PathCursor::at(&view, tip, node.start_u, node.start_s);
+        let at_node = nurbs_rtcore::executor::Sample {
+            curve: node.start_curve,
+            u: cursor.u,
+            s: cursor.s,
+            point: cursor.point,
+            feed: 0.0,
+            accel: 0.0,
+        };
+        check.push(&at_node.point[..tip], ctx.limits);
+        sink(&at_node);
+    }
+    ctx.work.set(ctx.work.get() + count as u64);
+    let check = &check;
     let ratio = check
         .worst_ratio(ctx.limits)
         .max(chord_ratio)
         .max(check.peaks.feed / feed);
-    state.last_sample = last_sample;
+    state.last_sample = real_last;
     let n = check.peaks.samples.max(1) as f64;
     Some(Trial {
         record,
@@ -669,6 +701,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         acc_violation: check.peaks.acc_violation / n,
         jerk_violation: check.peaks.jerk_violation / n,
         duration: profile.total_time(),
+        peak_feed: check.peaks.feed,
     })
 }
 
@@ -791,7 +824,15 @@ fn solve_segment(
     let mut local = *ctx;
     let ctx = &mut local;
     let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
+    // Highest sampled path speed and worst ratio of the latest nominal trial, and that ratio
+    // when the peak was last lowered.
+    let mut sampled_peak = ctx.peak_cap;
+    let mut nominal_ratio = f64::INFINITY;
+    let mut ratio_at_lowering = f64::INFINITY;
     for attempt in 0..40 {
+        if ctx.work.get() > ctx.work_budget {
+            return Err(SegmentFailure::OutOfWork);
+        }
         if attempt == CRAWL_CHECK_AT && v1 > 0.0 && v0 < CRAWL_FEED * ctx.limits.feed {
             // The first end feeds failed from a crawling start: if even a stop at the end fails,
             // the start is the problem (a lower end feed cannot help), so say so now rather
@@ -805,6 +846,7 @@ fn solve_segment(
         }
         let nominal = both(ctx.accel, ctx.jerk);
         if let Some(t) = trial(ctx, from, v0, v1, nominal, nominal) {
+            (sampled_peak, nominal_ratio) = (t.peak_feed, t.ratio);
             if t.ok() {
                 return Ok((t.record, t.state));
             }
@@ -817,6 +859,9 @@ fn solve_segment(
                 // falls within a period or two there: the cure is a lower peak, not end feed.
                 let near = |v: f64| v >= 0.5 * t.speed_at;
                 match t.speed_where {
+                    // The step onto a rest node (see `trial`): a gentler final approach, from
+                    // the searches of jerk and acceleration below, is the cure.
+                    Where::End if v1 == 0.0 && !ctx.last => {}
                     Where::Start if near(v0) => return Err(SegmentFailure::StartTooFast(v0 * factor)),
                     Where::End if near(v1) => v1 *= factor,
                     Where::Inside if t.speed_at < ctx.peak_cap * SPLIT_BELOW_PEAK => {
@@ -856,7 +901,11 @@ fn solve_segment(
         // The estimate was not enough: the same searches on exact trials, unless the estimate
         // already shows this end feed to be out of reach (they agree to about 1 %).
         if estimated_ratio > HOPELESS_ESTIMATE {
-            v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
+            if v1 > 0.0 {
+                v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
+            } else if !lower_peak_at_rest(ctx, v0, sampled_peak, nominal_ratio, &mut ratio_at_lowering) {
+                break;
+            }
             continue;
         }
         let by_jerk = golden(
@@ -879,13 +928,40 @@ fn solve_segment(
             }
         }
         // Step 8: a lower end feed.
-        if v1 <= 1e-6 {
+        if v1 > 1e-6 {
+            v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
+        } else if v1 > 0.0 || !lower_peak_at_rest(ctx, v0, sampled_peak, nominal_ratio, &mut ratio_at_lowering) {
             break;
         }
-        v1 = if v1 < 1e-3 { 0.0 } else { END_FEED_STEP * v1 };
     }
     Err(SegmentFailure::StartTooFast(START_FEED_STEP * v0))
 }
+
+/// Step 8 when the segment already starts and ends at rest, so that neither end feed can be
+/// lowered: a lower peak instead (END_FEED_STEP below the sampled one). What fails then is
+/// a term that grows with the feed, such as the centripetal acceleration or jerk of a bend
+/// sharper than the FLF's samples caught, which no lower tangential jerk or acceleration
+/// cures. `false` if the segment does not start at rest (the start feed is then the one to
+/// lower), or if the last lowering did not reduce the nominal trial's worst `ratio` (then the
+/// excess does not come from the feed: a hook of 1e-8 mm in the curve, whose axial jerk at a
+/// 0.17 ms period is the same at any feed, would only make the trials crawl).
+fn lower_peak_at_rest(
+    ctx: &mut SegmentContext,
+    v0: f64,
+    sampled_peak: f64,
+    ratio: f64,
+    ratio_at_lowering: &mut f64,
+) -> bool {
+    if v0 > REST_FEED * ctx.limits.feed || ratio >= PEAK_PROGRESS * *ratio_at_lowering {
+        return false;
+    }
+    *ratio_at_lowering = ratio;
+    ctx.peak_cap = END_FEED_STEP * ctx.peak_cap.min(sampled_peak);
+    true
+}
+
+/// A lowering of the peak must bring the worst ratio below this fraction of what it was.
+const PEAK_PROGRESS: f64 = 0.999;
 
 /// Start feeds below this fraction of the programmed feed crawl: see [`solve_segment`].
 const CRAWL_FEED: f64 = 1e-3;

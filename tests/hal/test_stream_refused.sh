@@ -1,6 +1,7 @@
 #!/bin/bash
-# A streamed plan that fails, in real LinuxCNC: nurbs-planner --stream on a curve the Erwinski
-# planner refuses at u = 0.28 (tests/hal/refused_stream.json), after its first record is final.
+# A streamed plan that fails, in real LinuxCNC: nurbs-planner --stream on a curve the streamed
+# Erwinski planner refuses at u = 0.85 (tests/hal/refused_stream.json, case 917 of the property
+# test), after records are final: a record handed out ends too fast for the segment after it.
 # The module is enabled on a running servo thread of the curve's period. nurbs-planner must
 # put nothing into the ring before the start rule holds, so the failure comes first: it exits
 # with the planner's error, and the module has taken no record (nothing moved).
@@ -8,8 +9,8 @@ here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
 toolpath="$here/refused_stream.json"
-PERIOD=0.00538114196157213
-LIMITS="--feed 3.278453699067344 --accel 8037.513512883214 --jerk 1369078.5969000382 --chord-tol 0.0009424850080402358"
+PERIOD=0.003883148472995906
+LIMITS="--feed 2256.621831466748 --accel 80318.24008344664 --jerk 80538.6767781366 --chord-tol 0.00010472580239299676"
 
 if nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --stream --out /dev/null 2>/dev/null; then
     echo "the curve is no longer refused: this test lost its subject"; exit 1
@@ -30,7 +31,7 @@ exit 0
 SH
 chmod 755 "$work/plan.sh" "$work/pins.sh"
 cat >"$work/refused.hal" <<HAL
-loadrt threads name1=servo period1=5381142
+loadrt threads name1=servo period1=3883148
 loadrt nurbs_interp
 addf nurbs_interp.update servo
 setp nurbs_interp.enable 1
