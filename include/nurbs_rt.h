@@ -47,6 +47,12 @@
 #define GEOMETRY_VALUES (1 << 22)
 
 /**
+ * Curve values (knots, coordinates, weights) the module validates per period of a newly
+ * published geometry (a few microseconds); at least one curve per period.
+ */
+#define VALIDATION_VALUES_PER_PERIOD 4096
+
+/**
  * Largest distance (mm) between where the machine stands and a resumed motion's first sample.
  * Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
  * re-published copy of the geometry that rounds differently.

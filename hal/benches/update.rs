@@ -4,7 +4,7 @@
 //! the Erwinski plans of the trident and the butterfly (segment records: RK2-PC every period)
 //! and the trident's VPOp plan (path blocks: a curve point every period); every measured call
 //! is one servo period of the running motion (a finished motion is restarted outside the
-//! measurement).
+//! measurement). Also what validating a newly published geometry costs per period.
 
 use std::time::{Duration, Instant};
 
@@ -20,6 +20,8 @@ use nurbs_motion::readers::read_toolpath;
 #[path = "../src/plan_geometry.rs"]
 #[allow(dead_code)]
 mod plan_geometry;
+#[path = "../src/test_paths.rs"]
+mod test_paths;
 
 const PERIOD_NS: i64 = 250_000;
 
@@ -92,5 +94,25 @@ fn bench_update(c: &mut Criterion) {
     }
 }
 
-criterion_group!(benches, bench_update);
+/// What the module spends on a newly published geometry: one period's slice of the checks
+/// (`VALIDATION_VALUES_PER_PERIOD` values), against the whole geometry of a 1,000-line G1
+/// program checked at once (as the module did before it sliced them).
+fn bench_validation(c: &mut Criterion) {
+    use nurbs_hal::channel::{validate_curves, validate_geometry, CurvesChecked};
+    use nurbs_hal::module::VALIDATION_VALUES_PER_PERIOD;
+    let toolpath = test_paths::g1_zigzag(1000);
+    let geometry = plan_geometry::curves_geometry(&toolpath).unwrap();
+    let layout = geometry.layout();
+    let curves = layout.header.curve_count;
+    let slice = validate_curves(&layout, 0, VALIDATION_VALUES_PER_PERIOD).unwrap();
+    assert!(matches!(slice, CurvesChecked::UpTo(_)), "the geometry fits one slice");
+    c.bench_function(&format!("validate/whole geometry ({curves} curves)"), |b| {
+        b.iter(|| validate_geometry(std::hint::black_box(&layout)).unwrap())
+    });
+    c.bench_function("validate/one period's slice", |b| {
+        b.iter(|| validate_curves(std::hint::black_box(&layout), 0, VALIDATION_VALUES_PER_PERIOD).unwrap())
+    });
+}
+
+criterion_group!(benches, bench_update, bench_validation);
 criterion_main!(benches);

@@ -378,19 +378,49 @@ fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
 }
 
 /// Checks the header and every curve of `g` (see [`valid_curve`]). Allocation-free and
-/// panic-free: the realtime module runs it once per published geometry; the planner runs it
-/// before publishing.
+/// panic-free: the planner runs it before publishing; the realtime module runs the same checks
+/// a slice per period ([`validate_header`], [`validate_curves`]).
 pub fn validate_geometry(g: &GeometryRef) -> Result<(), GeometryFault> {
+    validate_header(g)?;
+    (0..g.header.curve_count as usize).try_for_each(|curve| valid_curve(g, curve).map(|_| ()))
+}
+
+/// Checks the header of `g`: 1..=[`MAX_CURVES`] curves, 2 or 3 tip axes.
+pub fn validate_header(g: &GeometryRef) -> Result<(), GeometryFault> {
     let header = &g.header;
     let count = header.curve_count as usize;
     let tip = header.tip_axes as usize;
     if count == 0 || count > MAX_CURVES || count > g.curves.len() || !(2..=3).contains(&tip) {
         return Err(GeometryFault::Header);
     }
-    for curve in 0..count {
-        valid_curve(g, curve)?;
-    }
     Ok(())
+}
+
+/// How far [`validate_curves`] got.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CurvesChecked {
+    /// Every curve from the first one asked for is valid.
+    All,
+    /// The curves before this one are valid; the budget is spent.
+    UpTo(usize),
+}
+
+/// Checks the curves of `g` from `first` on ([`valid_curve`]) until their values (knots,
+/// coordinates, weights) add up to `budget`: at least one curve, so a curve larger than the
+/// budget is checked whole. The header must be valid ([`validate_header`]). O(budget plus one
+/// curve), allocation-free and panic-free.
+pub fn validate_curves(g: &GeometryRef, first: usize, budget: usize) -> Result<CurvesChecked, GeometryFault> {
+    let count = g.header.curve_count as usize;
+    let mut spent = 0usize;
+    for curve in first..count {
+        if spent >= budget && curve > first {
+            return Ok(CurvesChecked::UpTo(curve));
+        }
+        valid_curve(g, curve)?;
+        let d = &g.curves[curve];
+        spent = spent.saturating_add(d.knots_len as usize + d.points_len as usize + d.weights_len as usize);
+    }
+    Ok(CurvesChecked::All)
 }
 
 /// Curve `curve` of `g`, checked: its data within the arena, at least the tip axes, and a NURBS

@@ -75,8 +75,8 @@ use nurbs_rtcore::{CurveView, StopRun};
 use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
-    stop_points, valid_curve, validate_geometry, Channel, CurveDesc, GeometryHeader, GeometryRef, RecordStop,
-    StopPoint, CHANNEL_KEY,
+    stop_points, valid_curve, validate_curves, validate_header, Channel, CurveDesc, CurvesChecked, GeometryHeader,
+    GeometryRef, RecordStop, StopPoint, CHANNEL_KEY,
 };
 use crate::pins::Pin;
 use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
@@ -214,6 +214,10 @@ pub struct Held {
     pub point: [f64; 3],
 }
 
+/// Curve values (knots, coordinates, weights) the module validates per period of a newly
+/// published geometry (a few microseconds); at least one curve per period.
+pub const VALIDATION_VALUES_PER_PERIOD: usize = 4096;
+
 /// Largest distance (mm) between where the machine stands and a resumed motion's first sample.
 /// Evaluated by the same code on the same geometry the two are bit-equal; this only absorbs a
 /// re-published copy of the geometry that rounds differently.
@@ -225,6 +229,8 @@ pub struct Instance {
     pub pins: Pins,
     channel: *const Channel,
     geometry: RtGeometry,
+    /// A published geometry being validated: its generation and the next curve to check.
+    validating: Option<(u32, usize)>,
     interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
@@ -684,15 +690,25 @@ impl Instance {
             return;
         };
         self.geometry.generation = 0;
-        match validate_geometry(&g) {
-            Ok(()) if channel.geometry.unchanged(generation) => {
+        // A large geometry (a long G1 program is thousands of curves) is checked a slice per
+        // period, so that no period runs long; a rewrite in between starts it over.
+        let first = match self.validating {
+            Some((g_at, next)) if g_at == generation => Ok(next),
+            _ => validate_header(&g).map(|()| 0),
+        };
+        let checked = first.and_then(|first| validate_curves(&g, first, VALIDATION_VALUES_PER_PERIOD));
+        self.validating = None;
+        if !channel.geometry.unchanged(generation) {
+            return; // rewritten while validating: again next period
+        }
+        match checked {
+            Ok(CurvesChecked::All) => {
                 self.geometry.values = g.values;
                 self.geometry.curves = g.curves;
                 self.geometry.cache.set(None);
                 self.set_geometry(generation, &g.header);
             }
-            Ok(_) => {} // rewritten while validating: again next period
-            Err(_) if !channel.geometry.unchanged(generation) => {}
+            Ok(CurvesChecked::UpTo(next)) => self.validating = Some((generation, next)),
             Err(_) => self.fault = FaultCode::Geometry,
         }
     }
@@ -1313,6 +1329,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
 
     addr_of_mut!((*inst).channel).write(channel);
     addr_of_mut!((*inst).geometry).write(RtGeometry::empty());
+    addr_of_mut!((*inst).validating).write(None);
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
     addr_of_mut!((*inst).record_stop).write(RecordStop::default());

@@ -673,6 +673,101 @@ fn invalid_geometry_is_refused() {
     unsafe { rtapi_app_exit() };
 }
 
+/// A geometry of many curves (a 150-line G1 program: 299 elements) is validated a slice per
+/// period, so that no period runs long: at most about [`VALIDATION_VALUES_PER_PERIOD`] values
+/// per period. The motion starts in the period the last slice passes; a bad curve in the last
+/// slice faults only there, before anything moved; a geometry re-published half-way is
+/// validated again from its first curve.
+#[test]
+fn a_large_geometry_is_validated_a_slice_per_period() {
+    use crate::module::VALIDATION_VALUES_PER_PERIOD as BUDGET;
+    let _guard = lock_module();
+    let job = job_of(g1_zigzag(150));
+    let g = geometry(&job);
+    let sizes: Vec<usize> = g
+        .curves()
+        .iter()
+        .map(|d| (d.knots_len + d.points_len + d.weights_len) as usize)
+        .collect();
+    let total: usize = sizes.iter().sum();
+    let largest = sizes.iter().copied().max().unwrap();
+    // Every slice but the last checks at least the budget and at most the budget plus one curve.
+    let (fewest, most) = (total.div_ceil(BUDGET + largest - 1), total.div_ceil(BUDGET));
+    assert!(fewest >= 2, "{total} values: too few for this test");
+    let periods_to_first_record = |channel: &Channel| {
+        let update = mock::funct("nurbs_interp.update").unwrap();
+        fill(channel, &job.slots, 0);
+        (1..=most + 5)
+            .find(|_| {
+                unsafe { mock::call(update, PERIOD_NS as _) };
+                u32_pin("nurbs_interp.records") > 0
+            })
+            .unwrap()
+    };
+
+    let (_planner, channel) = load_enabled(&job);
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    let periods = periods_to_first_record(channel);
+    println!("{} curves, {total} values: validated in {periods} periods", sizes.len());
+    assert!(
+        (fewest..=most).contains(&periods),
+        "{periods} periods for {total} values"
+    );
+    // The motion that follows is the offline plan's.
+    let mut got = vec![sample_pins()];
+    for _ in 0..job.samples.len() + 10 {
+        fill(
+            channel,
+            &job.slots,
+            u32_pin("nurbs_interp.records") as usize + channel.segments.len(),
+        );
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        if bit("nurbs_interp.active") {
+            got.push(sample_pins());
+        }
+    }
+    assert!(!bit("nurbs_interp.fault") && bit("nurbs_interp.done"));
+    assert_eq!(got.len(), job.samples.len());
+    for (k, (row, want)) in got.iter().zip(&job.samples).enumerate() {
+        assert_eq!([row[0], row[1]], [want.point[0], want.point[1]], "sample {k}");
+    }
+    unsafe { rtapi_app_exit() };
+
+    // A bad weight in the last curve: found in the last slice, nothing taken before.
+    let mut values = g.values().to_vec();
+    values[g.curves().last().unwrap().weights_offset as usize] = 0.0;
+    let (_planner, channel) = load();
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    mock::set_pin("nurbs_interp.enable", Value::Bit(true));
+    channel.geometry.publish_unchecked(&crate::channel::GeometryRef {
+        values: &values,
+        ..g.layout()
+    });
+    fill(channel, &job.slots, 0);
+    let mut faulted_at = None;
+    for period in 1..=most + 5 {
+        unsafe { mock::call(update, PERIOD_NS as _) };
+        if bit("nurbs_interp.fault") {
+            faulted_at = Some(period);
+            break;
+        }
+    }
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::Geometry as u32);
+    assert_eq!(faulted_at, Some(periods), "the last slice finds it");
+    assert_eq!(u32_pin("nurbs_interp.records"), 0);
+    assert_eq!(float("nurbs_interp.pos-cmd-x"), 0.0);
+    unsafe { rtapi_app_exit() };
+
+    // Re-published after the first slice: validated from the start again.
+    let (_planner, channel) = load_enabled(&job);
+    let update = mock::funct("nurbs_interp.update").unwrap();
+    unsafe { mock::call(update, PERIOD_NS as _) };
+    assert_eq!(u32_pin("nurbs_interp.records"), 0);
+    g.publish(channel).unwrap();
+    assert_eq!(periods_to_first_record(channel), periods);
+    unsafe { rtapi_app_exit() };
+}
+
 #[test]
 fn stream_reader_reads_a_sampler_like_stream() {
     mock::reset();
@@ -1900,15 +1995,19 @@ mod blocks {
             let plan = vpop_plan(&toolpath, &limits, None).unwrap();
             let planned = t.elapsed().as_secs_f64();
             let t = std::time::Instant::now();
-            let (_, blocks, choices) = block_geometry(&toolpath, &plan, None, 1.0).unwrap();
+            let (geometry, blocks, choices) = block_geometry(&toolpath, &plan, None, 1.0).unwrap();
             let checked = t.elapsed().as_secs_f64();
             let worst = choices.iter().map(|c| c.ratio).fold(0.0, f64::max);
+            let stored = choices.iter().filter(|c| c.stored > 0).count();
+            let tangential: Vec<f64> = choices.iter().filter(|c| c.stored == 0).map(|c| c.fraction).collect();
             println!(
-                "{name}: motion {:.3} s; VPOp plan {planned:.2} s; stop checks at {} block ends {checked:.2} s ({:.1} ms per block of {:.1} ms of motion); worst ratio {worst:.7}",
+                "{name}: motion {:.3} s; VPOp plan {planned:.2} s; stop checks at {} block ends {checked:.2} s ({:.1} ms per block of {:.1} ms of motion); worst ratio {worst:.7}; {stored} stored stops, mean jerk fraction of the others {:.4}; {} arena values",
                 plan.motion_time,
                 blocks.len(),
                 1e3 * checked / blocks.len() as f64,
-                1e3 * plan.motion_time / blocks.len() as f64
+                1e3 * plan.motion_time / blocks.len() as f64,
+                tangential.iter().sum::<f64>() / tangential.len().max(1) as f64,
+                geometry.values().len()
             );
             assert!(worst <= 1.0 + nurbs_motion::planner::verify::SLACK);
         }
