@@ -172,6 +172,40 @@ fn plan_interpolation_methods_and_streaming() {
         assert!(!out.status.success(), "{args:?} accepted with vpop");
         assert!(String::from_utf8_lossy(&out.stderr).contains("erwinski planner"));
     }
+    // A streamed plan that fails says how much of it had already been handed out (on the
+    // machine, running): the property test's case 4669, refused at u = 0.50.
+    let refused = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hal/refused_stream.json");
+    let limits = [
+        "--feed",
+        "11.366381205569331",
+        "--accel",
+        "713.9459143953733",
+        "--jerk",
+        "428466.83921094495",
+        "--chord-tol",
+        "0.00018094343202521352",
+        "--period",
+        "0.004631443939417643",
+    ];
+    for (flags, told) in [(&["--stream"][..], true), (&[][..], false)] {
+        let out = bin()
+            .arg("plan")
+            .arg(&refused)
+            .args(limits)
+            .args(flags)
+            .arg("--out")
+            .arg(dir.join("refused.csv"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{flags:?}: {stderr}");
+        assert!(stderr.contains("no feed profile within the limits"), "{stderr}");
+        assert_eq!(
+            stderr.contains("2 records had been handed out: 0.207 s of motion"),
+            told,
+            "{flags:?}: {stderr}"
+        );
+    }
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -19,6 +19,7 @@ use nurbs_motion::planner::{plan, Limits, PlanOptions};
 #[allow(dead_code)]
 mod plan_geometry;
 #[path = "../src/test_paths.rs"]
+#[allow(dead_code)] // each benchmark uses some of the paths
 mod test_paths;
 use plan_geometry::{Next, Records};
 

@@ -21,6 +21,7 @@ use nurbs_motion::readers::read_toolpath;
 #[allow(dead_code)]
 mod plan_geometry;
 #[path = "../src/test_paths.rs"]
+#[allow(dead_code)] // each benchmark uses some of the paths
 mod test_paths;
 
 const PERIOD_NS: i64 = 250_000;

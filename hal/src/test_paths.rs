@@ -17,3 +17,17 @@ pub fn g1_zigzag(lines: usize) -> Toolpath {
         .unwrap()
         .toolpath
 }
+
+/// A G1 polyline of five segments (up to 90 mm) with its corners rounded within 0.001 mm:
+/// lines and corner splines, 9 elements.
+pub fn rounded_polyline() -> Toolpath {
+    let vertices = [[0.0, 0.0], [8.0, 0.0], [8.0, 6.0], [2.0, 9.0], [2.0, 3.0], [5.0, 3.0]];
+    let points: Vec<Vec<f64>> = vertices.iter().map(|v| vec![10.0 * v[0], 10.0 * v[1]]).collect();
+    let mut knots = vec![0.0, 0.0];
+    knots.extend((1..vertices.len() - 1).map(|k| k as f64));
+    knots.extend([(vertices.len() - 1) as f64; 2]);
+    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &points, None).unwrap());
+    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
+        .unwrap()
+        .toolpath
+}

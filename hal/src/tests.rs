@@ -17,7 +17,7 @@ use crate::mock::{self, Value};
 use crate::module::{rtapi_app_exit, rtapi_app_main, FaultCode};
 use crate::plan_geometry::StopChoice;
 use crate::sys;
-use crate::test_paths::g1_zigzag;
+use crate::test_paths::{g1_zigzag, rounded_polyline};
 use crate::user::{Component, GeometryBuilder, StreamReader, StreamValue};
 
 /// Counts this thread's allocations (thread-local, so parallel tests do not disturb each other).
@@ -359,16 +359,7 @@ fn multi_element_and_3d_paths_run_exactly_the_offline_setpoints() {
             assert_eq!(g.map(f64::to_bits), expected.map(f64::to_bits), "{name}: sample {k}");
         }
         // And what ran is within the limits (the project's check on the sampled positions).
-        let rows: Vec<nurbs_motion::planner::verify::Row> = got
-            .iter()
-            .enumerate()
-            .map(|(k, g)| nurbs_motion::planner::verify::Row {
-                t: k as f64 * PERIOD,
-                curve: g[5] as usize,
-                u: g[4],
-                q: g[..tip].to_vec(),
-            })
-            .collect();
+        let rows = verify_rows(&got, |g| (&g[..tip], g[4], g[5]));
         let report = nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows);
         assert!(report.violations.is_empty(), "{name}: {:?}", report.violations);
         assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
@@ -1156,34 +1147,28 @@ fn long_g1_program_cost() {
     planner.join().unwrap();
 }
 
-/// A G1 polyline of five segments (up to 90 mm) with its corners rounded within 0.001 mm:
-/// lines and corner splines, 9 elements.
-fn rounded_polyline() -> Toolpath {
-    use nurbs_motion::geometry::{ElementKind, Nurbs};
-    let vertices = [[0.0, 0.0], [8.0, 0.0], [8.0, 6.0], [2.0, 9.0], [2.0, 3.0], [5.0, 3.0]];
-    let points: Vec<Vec<f64>> = vertices.iter().map(|v| vec![10.0 * v[0], 10.0 * v[1]]).collect();
-    let mut knots = vec![0.0, 0.0];
-    knots.extend((1..vertices.len() - 1).map(|k| k as f64));
-    knots.extend([(vertices.len() - 1) as f64; 2]);
-    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &points, None).unwrap());
-    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
-        .unwrap()
-        .toolpath
-}
-
 /// Every period's setpoint (held periods included: the machine is at rest there) as `verify`
-/// rows, from the first sample to the end of the run.
-fn rows_of(samples: &[[f64; 5]]) -> Vec<nurbs_motion::planner::verify::Row> {
+/// rows, from the first sample to the end of the run: `fields` gives a sample's tip
+/// coordinates, parameter and curve.
+fn verify_rows<S>(samples: &[S], fields: impl Fn(&S) -> (&[f64], f64, f64)) -> Vec<nurbs_motion::planner::verify::Row> {
     samples
         .iter()
         .enumerate()
-        .map(|(k, s)| nurbs_motion::planner::verify::Row {
-            t: k as f64 * PERIOD,
-            curve: s[4] as usize,
-            u: s[3],
-            q: vec![s[0], s[1]],
+        .map(|(k, s)| {
+            let (q, u, curve) = fields(s);
+            nurbs_motion::planner::verify::Row {
+                t: k as f64 * PERIOD,
+                curve: curve as usize,
+                u,
+                q: q.to_vec(),
+            }
         })
         .collect()
+}
+
+/// [`verify_rows`] of the samples [`sample_pins`] reads (x, y, feed, u, curve).
+fn rows_of(samples: &[[f64; 5]]) -> Vec<nurbs_motion::planner::verify::Row> {
+    verify_rows(samples, |s| (&s[..2], s[3], s[4]))
 }
 
 /// Runs `job` with the whole plan queued, calling `control(period)` before each period;
@@ -2043,10 +2028,7 @@ mod blocks {
         use crate::record::{KIND_BLOCK, KIND_SEGMENT};
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
         let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, PERIOD);
-        for toolpath in [
-            read_toolpath(&dir.join("trident.json")).unwrap(),
-            super::rounded_polyline(),
-        ] {
+        for toolpath in [read_toolpath(&dir.join("trident.json")).unwrap(), rounded_polyline()] {
             let job = super::job_of(toolpath.clone());
             let mut e = motion(&toolpath, &limits, PlannerKind::Erwinski, None, 1.0).unwrap();
             let (slots, appended) = drain(&mut e);

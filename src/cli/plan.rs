@@ -98,7 +98,19 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         stream: args.stream,
         ..PlanOptions::default()
     };
-    let plan = plan(toolpath, &limits, &options, &mut |_| {})?;
+    // A streamed plan hands records out before it ends: on the machine they would be running.
+    let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
+    let plan = plan(toolpath, &limits, &options, &mut |r| {
+        handed_out += 1;
+        handed_out_time += r.profile().total_time();
+    })
+    .map_err(|e| match args.stream {
+        true => {
+            let plural = if handed_out == 1 { "" } else { "s" };
+            format!("{e} ({handed_out} record{plural} had been handed out: {handed_out_time:.3} s of motion)")
+        }
+        false => e.to_string(),
+    })?;
     let samples = setpoints_with(toolpath, &plan.limits, &plan.records, args.interp);
     let tip = toolpath.tip_dim();
     let names = ["x", "y", "z"];

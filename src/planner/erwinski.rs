@@ -33,9 +33,9 @@ pub struct PlanOptions {
     pub start: Option<PlanStart>,
     /// Hand each record out as soon as it is final ([`Planner`]), so motion can start before
     /// the plan ends. The price: a back-tracking cascade that would reach a record already
-    /// handed out makes a segment stop instead, and rarely (1 of the 256 random curves of the
-    /// property test) that fails where the batch plan succeeds. `false`: records are handed
-    /// out when the whole plan is done, with back-tracking unbounded (paper 000, step 9).
+    /// handed out makes a segment stop instead (a stop checked before the records behind it
+    /// were handed out), and settling costs an extra solve per segment. `false`: records are
+    /// handed out when the whole plan is done, with back-tracking unbounded (paper 000, step 9).
     pub stream: bool,
 }
 
@@ -120,19 +120,18 @@ impl From<LimitsError> for PlanError {
 /// most down to `settled`, the number of records final so far; a failure at the first
 /// unsettled segment is a refusal (as at the path start), never a revision.
 ///
-/// Records before segment `j` become final once `j` and the segment after it are accepted
-/// and [`can_absorb`] holds for `j`: from its start feed it could brake to any lower end feed
-/// within its own length. A cascade of back-tracking from further on then stops at `j`
-/// (re-planning it with a lower end feed) instead of passing through it to the records before.
-/// A segment that can reach the lower feed and still fails the axial check passes the cascade
-/// on; at a settled record it is planned to stop at its end instead (a stop the whole-path
-/// planner would not make), and only if that fails too, the plan is refused (1 of the 256
-/// random curves of the property test, none of the bundled curves). A segment starting at
-/// rest always qualifies; at the path end every record is final. Before the first record is
-/// handed out (the machine waits for it), `j` may also be the segment just accepted, if it
-/// plans with a stop at its end too: the stop that absorbs a cascade is then checked in
-/// advance, and the first record need not wait for the cascades of the next stretch (the
-/// trident at lab set 1: about half the time to the first record).
+/// Records before segment `j` become final once `j` and the segment after it are accepted,
+/// [`can_absorb`] holds for `j` (from its start feed it could brake to any lower end feed
+/// within its own length) and `j` plans with a stop at its end too (one extra solve). A
+/// cascade of back-tracking from further on then stops at `j` (re-planning it with a lower end
+/// feed) instead of passing through it to the records before; where a lower end feed still
+/// fails the axial check, `j` stops at its end instead (a stop the whole-path planner would not
+/// make), which was checked in advance. (Without that check, 3 of the first 2,000 random curves
+/// of the property test were refused when streamed, where the settled segment could not stop
+/// within the axis limits.) At the path end every record is final. Before the first record is
+/// handed out (the machine waits for it), `j` may also be the segment just accepted, and the
+/// first record need not wait for the cascades of the next stretch (the trident at lab set 1:
+/// about half the time to the first record).
 ///
 /// A fixed count of segments would not do: on a dense G1 polyline with rounded corners the
 /// cascades reach 39 short segments back.
@@ -330,6 +329,34 @@ impl<'a> Planner<'a> {
         self.k + 1 < self.bounds.len()
     }
 
+    /// What [`solve_segment`] needs of segment `k` (its nodes committed).
+    fn context(&self, k: usize, work_budget: u64) -> SegmentContext<'_> {
+        let element = self.nodes.element(self.bounds[k].start_curve);
+        SegmentContext {
+            curves: &self.curves,
+            limits: &self.check_limits,
+            node_start: self.bounds[k],
+            node_end: self.bounds[k + 1],
+            length: self.lengths[k],
+            peak_cap: self.peak_caps[k],
+            grid: &element.grid,
+            last: self.end_known && k + 2 == self.bounds.len(),
+            seq: k as u32,
+            accel: self.accel,
+            jerk: self.jerk,
+            work: &self.work,
+            work_budget,
+        }
+    }
+
+    /// Whether accepted segment `j` could also stop at its end from its start feed: then a
+    /// back-tracking cascade that reaches it once the records before it are final (and cannot
+    /// be revised) is absorbed there, by that stop at worst.
+    fn can_stop_at_end(&self, j: usize, work_budget: u64) -> bool {
+        let ctx = self.context(j, work_budget);
+        solve_segment(&ctx, self.start_feeds[j], 0.0, &self.states[j]).is_ok()
+    }
+
     /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.
     fn step(&mut self) -> Result<(), PlanError> {
         let k = self.k;
@@ -349,21 +376,7 @@ impl<'a> Planner<'a> {
         if self.work.get() > budget {
             return Err(out_of_work);
         }
-        let ctx = SegmentContext {
-            curves: &self.curves,
-            limits: &self.check_limits,
-            node_start: self.bounds[k],
-            node_end: self.bounds[k + 1],
-            length: self.lengths[k],
-            peak_cap: self.peak_caps[k],
-            grid: &element.grid,
-            last: self.end_known && k + 1 == nseg,
-            seq: k as u32,
-            accel: self.accel,
-            jerk: self.jerk,
-            work: &self.work,
-            work_budget: budget,
-        };
+        let ctx = self.context(k, budget);
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
         if k > 0 && k == self.settled && matches!(outcome, Err(SegmentFailure::StartTooFast(_))) {
             // Back-tracking would revise a record handed out: this segment stops instead (the
@@ -372,6 +385,7 @@ impl<'a> Planner<'a> {
                 outcome = Ok(stop);
             }
         }
+        let last = ctx.last;
         match outcome {
             Err(SegmentFailure::OutOfWork) => return Err(out_of_work),
             Ok((record, state)) => {
@@ -384,22 +398,27 @@ impl<'a> Planner<'a> {
                 let end_v = record.profile().table().end().v.max(0.0);
                 self.start_feeds.push(end_v);
                 self.k += 1;
-                if ctx.last {
+                // A segment absorbs a cascade if it could brake to any lower end feed within its
+                // length (nominal limits) and can in fact stop at its end within the axis limits
+                // (one extra solve, checked once per candidate): a record handed out is then never
+                // the reason for a refusal.
+                let absorbs = |this: &Self, j: usize| {
+                    can_absorb(this.start_feeds[j], this.lengths[j], this.accel, this.jerk)
+                        && this.can_stop_at_end(j, budget)
+                };
+                if last {
                     self.settled = self.k;
                 } else if self.stream && self.settled == 0 && k > 0 {
                     // The motion waits for the first record: settle one behind as below, else
-                    // at the accepted segment itself if it can also stop at its end (a cascade
-                    // reaching it is then absorbed by that stop; one extra solve).
-                    if k > 1 && can_absorb(self.start_feeds[k - 1], self.lengths[k - 1], self.accel, self.jerk) {
+                    // at the accepted segment itself.
+                    if k > 1 && absorbs(self, k - 1) {
                         self.settled = k - 1;
-                    } else if can_absorb(self.start_feeds[k], self.lengths[k], self.accel, self.jerk)
-                        && solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]).is_ok()
-                    {
+                    } else if absorbs(self, k) {
                         self.settled = k;
                     }
                 } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
-                    if can_absorb(self.start_feeds[j], self.lengths[j], self.accel, self.jerk) {
-                        self.settled = self.settled.max(j);
+                    if j > self.settled && absorbs(self, j) {
+                        self.settled = j;
                     }
                 }
             }
