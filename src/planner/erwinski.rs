@@ -567,8 +567,10 @@ struct Trial {
     speed_u: f64,
     /// Sampled path speed there.
     speed_at: f64,
-    /// Within the first or last periods of the segment, or between.
+    /// Within the first or last periods of the segment, or between; the sample's index (0: the
+    /// step from the previous segment's last sample).
     speed_where: Where,
+    speed_index: usize,
     acc_violation: f64,
     jerk_violation: f64,
     duration: f64,
@@ -712,6 +714,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         speed_ratio: worst_speed.0,
         speed_u: worst_speed.1,
         speed_at: worst_speed.2,
+        speed_index: worst_speed.3,
         speed_where: match worst_speed.3 {
             i if i <= 2 => Where::Start,
             i if i + 3 >= count => Where::End,
@@ -881,7 +884,12 @@ fn solve_segment(
                     // The step onto a rest node (see `trial`): a gentler final approach, from
                     // the searches of jerk and acceleration below, is the cure.
                     Where::End if v1 == 0.0 && !ctx.last => {}
-                    Where::Start if near(v0) => return Err(SegmentFailure::StartTooFast(v0 * factor)),
+                    // At the start: across the node, or at the start feed, the previous segment
+                    // must end slower. (A step above the start feed has already risen towards
+                    // the peak: the peak is the cure, below.)
+                    Where::Start if near(v0) && (t.speed_index == 0 || t.speed_at <= v0) => {
+                        return Err(SegmentFailure::StartTooFast(v0 * factor))
+                    }
                     Where::End if near(v1) => v1 *= factor,
                     Where::Inside if t.speed_at < ctx.peak_cap * SPLIT_BELOW_PEAK => {
                         let cap = (1.0 - 1e-3) * t.speed_at * factor;
