@@ -364,17 +364,18 @@ impl<'a> Planner<'a> {
         let c = self.bounds[k].start_curve;
         let element = self.nodes.element(c);
         let budget = self.work_budget.0 + self.work_budget.1 * self.states[k].samples as u64;
-        let out_of_work = PlanError::Infeasible {
+        let (u_start, planned) = (self.bounds[k].start_u, self.states[k].samples);
+        let out_of_work = |work: u64| {
+            PlanError::Infeasible {
             curve: c,
-            u: self.bounds[k].start_u,
+            u: u_start,
             reason: format!(
-                "planning gave up after simulating {} servo periods of trial profiles for {} planned ones (its work budget)",
-                self.work.get(),
-                self.states[k].samples
+                "planning gave up after simulating {work} servo periods of trial profiles for {planned} planned ones (its work budget)"
             ),
+        }
         };
         if self.work.get() > budget {
-            return Err(out_of_work);
+            return Err(out_of_work(self.work.get()));
         }
         let ctx = self.context(k, budget);
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
@@ -387,7 +388,7 @@ impl<'a> Planner<'a> {
         }
         let last = ctx.last;
         match outcome {
-            Err(SegmentFailure::OutOfWork) => return Err(out_of_work),
+            Err(SegmentFailure::OutOfWork) => return Err(out_of_work(self.work.get())),
             Ok((record, state)) => {
                 self.records.truncate(k);
                 self.records.push(record);
