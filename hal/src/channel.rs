@@ -417,8 +417,9 @@ pub fn validate_curves(g: &GeometryRef, first: usize, budget: usize) -> Result<C
             return Ok(CurvesChecked::UpTo(curve));
         }
         valid_curve(g, curve)?;
-        let d = &g.curves[curve];
-        spent = spent.saturating_add(d.knots_len as usize + d.points_len as usize + d.weights_len as usize);
+        if let Some(d) = g.curves.get(curve) {
+            spent = spent.saturating_add(d.knots_len as usize + d.points_len as usize + d.weights_len as usize);
+        }
     }
     Ok(CurvesChecked::All)
 }
