@@ -173,19 +173,19 @@ fn plan_interpolation_methods_and_streaming() {
         assert!(String::from_utf8_lossy(&out.stderr).contains("erwinski planner"));
     }
     // A streamed plan that fails says how much of it had already been handed out (on the
-    // machine, running): the property test's case 4669, refused at u = 0.50.
+    // machine, running): the property test's case 7406, refused at u = 0, before any.
     let refused = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hal/refused_stream.json");
     let limits = [
         "--feed",
-        "11.366381205569331",
+        "24.24882720254371",
         "--accel",
-        "713.9459143953733",
+        "4507.070773350196",
         "--jerk",
-        "428466.83921094495",
+        "37972.652894721876",
         "--chord-tol",
-        "0.00018094343202521352",
+        "0.0014276564634430637",
         "--period",
-        "0.004631443939417643",
+        "0.00023172696957658322",
     ];
     for (flags, told) in [(&["--stream"][..], true), (&[][..], false)] {
         let out = bin()
@@ -201,7 +201,7 @@ fn plan_interpolation_methods_and_streaming() {
         assert!(!out.status.success(), "{flags:?}: {stderr}");
         assert!(stderr.contains("no feed profile within the limits"), "{stderr}");
         assert_eq!(
-            stderr.contains("2 records had been handed out: 0.207 s of motion"),
+            stderr.contains("0 records had been handed out: 0.000 s of motion"),
             told,
             "{flags:?}: {stderr}"
         );

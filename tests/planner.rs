@@ -219,12 +219,12 @@ fn cases_once_refused_at_rest_are_planned() {
 /// Cases of seed 20261122 once refused "even from its lowest start feed". A speed excess a
 /// sample or two into a segment, where the profile has already risen above its start feed, was
 /// taken for the start feed's fault: the previous segment was asked, round after round, to end a
-/// few millionths slower (traced on case 4669). The peak is lowered there now, which plans these
-/// two; 4669 itself is still refused (its excess, the chord tolerance in a tight bend, does not
-/// shrink as the feed comes down).
+/// few millionths slower (traced on case 4669). The peak is lowered there now (4271, 8049), and
+/// where that asks for a lower start feed too, the segment keeps the lower peak cap for its next
+/// attempts (4669, 9761: each attempt rose to the old peak again).
 #[test]
 fn cases_once_refused_from_their_lowest_start_feed_are_planned() {
-    assert_planned_and_verified(&[4271, 8049]);
+    assert_planned_and_verified(&[4271, 4669, 8049, 9761]);
 }
 
 /// Each of `cases` of seed 20261122 plans and passes the checker.

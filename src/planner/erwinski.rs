@@ -379,7 +379,13 @@ impl<'a> Planner<'a> {
         }
         let ctx = self.context(k, budget);
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
-        if k > 0 && k == self.settled && matches!(outcome, Err(SegmentFailure::StartTooFast(_))) {
+        if k > 0
+            && k == self.settled
+            && matches!(
+                outcome,
+                Err(SegmentFailure::StartTooFast(_) | SegmentFailure::PeakTooHigh(_))
+            )
+        {
             // Back-tracking would revise a record handed out: this segment stops instead (the
             // step-8 lowering of the end feed gives up before it reaches rest).
             if let Ok(stop) = solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]) {
@@ -444,6 +450,13 @@ impl<'a> Planner<'a> {
             Err(failure) => {
                 let start_max = match failure {
                     SegmentFailure::StartTooFast(v) => v,
+                    SegmentFailure::PeakTooHigh(peak) => {
+                        // Kept for the next attempts at this segment: otherwise each one rises to
+                        // the old peak again, and the start feed comes down a few millionths per
+                        // round until the back-tracking count runs out.
+                        self.peak_caps[k] = self.peak_caps[k].min(peak);
+                        peak
+                    }
                     SegmentFailure::Split { .. } | SegmentFailure::OutOfWork => START_FEED_STEP * self.start_feeds[k],
                 };
                 // Below the feed one period of the nominal jerk gives from rest, passing the node
@@ -515,6 +528,9 @@ const WORK_PER_PLANNED_PERIOD: u64 = 200;
 enum SegmentFailure {
     /// Not from this start feed: retry with the previous segment ending at most this fast.
     StartTooFast(f64),
+    /// The peak must come down to this feed (a speed cap exceeded near it), below the start
+    /// feed: as `StartTooFast`, and the segment keeps the lower peak cap.
+    PeakTooHigh(f64),
     /// A point inside must be passed at most at feed `cap`: make it a node.
     Split { u: f64, cap: f64 },
     /// The plan's work budget is used up (checked before each attempt: one segment's
@@ -863,7 +879,9 @@ fn solve_segment(
             // trials that crawl (a tiny segment in a sharp G1 corner entered at 0.1 mm/s: 400
             // ms). Not at higher start feeds: there a stop at the end can fail where a lower end
             // feed passes, and the plans would be slower.
-            if let Err(failure @ SegmentFailure::StartTooFast(_)) = solve_segment(ctx, v0, 0.0, from) {
+            if let Err(failure @ (SegmentFailure::StartTooFast(_) | SegmentFailure::PeakTooHigh(_))) =
+                solve_segment(ctx, v0, 0.0, from)
+            {
                 return Err(failure);
             }
         }
@@ -899,7 +917,7 @@ fn solve_segment(
                     _ => {
                         ctx.peak_cap = ctx.peak_cap.min(t.speed_at) * factor;
                         if v0 > ctx.peak_cap {
-                            return Err(SegmentFailure::StartTooFast(ctx.peak_cap));
+                            return Err(SegmentFailure::PeakTooHigh(ctx.peak_cap));
                         }
                         v1 = v1.min(ctx.peak_cap);
                     }
