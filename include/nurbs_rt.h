@@ -40,7 +40,7 @@
  * together, then their stop points and the stored stop sequences): 32 MiB. The curves need
  * little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
  * 208); a stored stop sequence needs two values per period and three per element it runs on.
- * The butterfly's VPOp blocks at lab set 1 need 695,601 values in all; a 1,000-line G1 program
+ * The butterfly's VPOp blocks at lab set 1 need 766,256 values in all; a 1,000-line G1 program
  * with the Erwinski planner 631,844 (3,038 of its 3,958 boundaries, most at element joins, have
  * a stored stop): this capacity holds some 6,000 such lines.
  */

@@ -350,11 +350,7 @@ impl<'t> StopChooser<'t> {
             && last.profile().table().end().v > 0.0;
         if !no_room {
             let mut best: Option<StopChoice> = None;
-            for trial in self
-                .fractions
-                .iter()
-                .flat_map(|&f| [1.0, 0.5, 0.25, 0.1].map(|share| (f, share)))
-            {
+            for trial in self.fractions.iter().flat_map(|&f| SHARES.map(|share| (f, share))) {
                 let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
                 let c = self.tangential(state, trial, bound);
                 if best.is_none_or(|b| c.ratio < b.ratio) {
@@ -918,7 +914,8 @@ pub fn choose_block_stops(
     (choices, sequences)
 }
 
-/// Deceleration shares of the module's stop tried at each jerk fraction, largest first.
+/// Deceleration shares of the module's stop tried at each jerk fraction, largest first (for
+/// segment records and path blocks alike).
 const SHARES: [f64; 4] = [1.0, 0.5, 0.25, 0.1];
 
 /// The search for a block end's stop: `simulate(fraction, share, bound)` checks one (see

@@ -722,6 +722,8 @@ fn a_large_geometry_is_validated_a_slice_per_period() {
     for (k, (row, want)) in got.iter().zip(&job.samples).enumerate() {
         assert_eq!([row[0], row[1]], [want.point[0], want.point[1]], "sample {k}");
     }
+    let report = nurbs_motion::planner::verify::verify(&PathCurves::new(&job.toolpath), &job.limits, &rows_of(&got));
+    assert!(report.violations.is_empty(), "{:?}", report.violations);
     unsafe { rtapi_app_exit() };
 
     // A bad weight in the last curve: found in the last slice, nothing taken before.
