@@ -47,8 +47,9 @@
 #define GEOMETRY_VALUES (1 << 22)
 
 /**
- * Curve values (knots, coordinates, weights) the module validates per period of a newly
- * published geometry (a few microseconds); at least one curve per period.
+ * Checks of curve values (knots, coordinates and weights once, interior knots once more) the
+ * module runs per period on a newly published geometry (a few microseconds), within a curve
+ * if it is larger ([`validate_curves`]).
  */
 #define VALIDATION_VALUES_PER_PERIOD 4096
 

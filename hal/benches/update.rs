@@ -99,19 +99,39 @@ fn bench_update(c: &mut Criterion) {
 /// (`VALIDATION_VALUES_PER_PERIOD` values), against the whole geometry of a 1,000-line G1
 /// program checked at once (as the module did before it sliced them).
 fn bench_validation(c: &mut Criterion) {
-    use nurbs_hal::channel::{validate_curves, validate_geometry, CurvesChecked};
+    use nurbs_hal::channel::{validate_curves, validate_geometry, CurvesChecked, CurvesCursor};
     use nurbs_hal::module::VALIDATION_VALUES_PER_PERIOD;
     let toolpath = test_paths::g1_zigzag(1000);
     let geometry = plan_geometry::curves_geometry(&toolpath).unwrap();
     let layout = geometry.layout();
     let curves = layout.header.curve_count;
-    let slice = validate_curves(&layout, 0, VALIDATION_VALUES_PER_PERIOD).unwrap();
-    assert!(matches!(slice, CurvesChecked::UpTo(_)), "the geometry fits one slice");
+    let slice = validate_curves(&layout, CurvesCursor::default(), VALIDATION_VALUES_PER_PERIOD).unwrap();
+    assert!(
+        matches!(slice, CurvesChecked::UpTo(_)),
+        "the geometry needs more than one slice"
+    );
     c.bench_function(&format!("validate/whole geometry ({curves} curves)"), |b| {
         b.iter(|| validate_geometry(std::hint::black_box(&layout)).unwrap())
     });
     c.bench_function("validate/one period's slice", |b| {
-        b.iter(|| validate_curves(std::hint::black_box(&layout), 0, VALIDATION_VALUES_PER_PERIOD).unwrap())
+        b.iter(|| {
+            validate_curves(
+                std::hint::black_box(&layout),
+                CurvesCursor::default(),
+                VALIDATION_VALUES_PER_PERIOD,
+            )
+            .unwrap()
+        })
+    });
+    // A curve change on the servo thread: the view of a 3,000-point curve, trusted (as the
+    // module takes it) against checked again in full (as it did before).
+    let long = plan_geometry::curves_geometry(&test_paths::long_spline(3_000)).unwrap();
+    let long = long.layout();
+    c.bench_function("validate/curve view, checked in full (3,000 points)", |b| {
+        b.iter(|| nurbs_hal::channel::valid_curve(std::hint::black_box(&long), 0).unwrap())
+    });
+    c.bench_function("validate/curve view, trusted (3,000 points)", |b| {
+        b.iter(|| nurbs_hal::channel::trusted_curve(std::hint::black_box(&long), 0).unwrap())
     });
 }
 

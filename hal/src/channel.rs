@@ -11,8 +11,8 @@
 //! After the ring comes the [`GeometryArea`]: the curves (knots, control points, weights) the
 //! records refer to, in one fixed-capacity arena of `f64` published seqlock-style (a generation
 //! counter, odd while the planner writes, even and non-zero once published, stored last). The
-//! module validates a published geometry with `CurveView::new` before it runs a single record
-//! on it and refuses (fault, hold) anything that does not validate. Behind the published curves
+//! module validates a published geometry with `CurveView`'s checks (a slice of values per
+//! period) before it runs a single record on it and refuses (fault, hold) anything that does not validate. Behind the published curves
 //! the planner appends the curves' stop points and the stored stop sequences while the motion
 //! runs ([`GeometryArea::append`]), each before the first record that refers to it: the ring's
 //! release/acquire pair orders them, so the planner can hand records out while it still
@@ -27,7 +27,7 @@
 use core::cell::UnsafeCell;
 use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
-use nurbs_rtcore::CurveView;
+use nurbs_rtcore::{CurveView, ValuesChecked};
 
 pub use crate::record::{PathBlock, Record, RecordStop, SegmentRecord, SegmentSlot, Slot};
 
@@ -396,29 +396,57 @@ pub fn validate_header(g: &GeometryRef) -> Result<(), GeometryFault> {
     Ok(())
 }
 
+/// Where [`validate_curves`] stands: a curve, and a value of it (in the order of
+/// [`CurveView::check_values`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CurvesCursor {
+    pub curve: usize,
+    pub value: usize,
+}
+
 /// How far [`validate_curves`] got.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum CurvesChecked {
-    /// Every curve from the first one asked for is valid.
+    /// Every curve from where it started is valid.
     All,
-    /// The curves before this one are valid; the budget is spent.
-    UpTo(usize),
+    /// Everything before this point is valid; the budget is spent.
+    UpTo(CurvesCursor),
 }
 
-/// Checks the curves of `g` from `first` on ([`valid_curve`]) until their values (knots,
-/// coordinates, weights) add up to `budget`: at least one curve, so a curve larger than the
-/// budget is checked whole. The header must be valid ([`validate_header`]). O(budget plus one
-/// curve), allocation-free and panic-free.
-pub fn validate_curves(g: &GeometryRef, first: usize, budget: usize) -> Result<CurvesChecked, GeometryFault> {
+/// Checks the curves of `g` from `from` on ([`valid_curve`]'s checks) until `budget` values
+/// (knots, coordinates, weights) are checked, within a curve if need be: a curve of a million
+/// control points is checked over many calls. The header must be valid ([`validate_header`]).
+/// O(budget), allocation-free and panic-free.
+pub fn validate_curves(g: &GeometryRef, from: CurvesCursor, budget: usize) -> Result<CurvesChecked, GeometryFault> {
     let count = g.header.curve_count as usize;
-    let mut spent = 0usize;
-    for curve in first..count {
-        if spent >= budget && curve > first {
-            return Ok(CurvesChecked::UpTo(curve));
-        }
-        valid_curve(g, curve)?;
-        if let Some(d) = g.curves.get(curve) {
-            spent = spent.saturating_add(d.knots_len as usize + d.points_len as usize + d.weights_len as usize);
+    let mut at = from;
+    let mut left = budget;
+    while at.curve < count {
+        let (desc, knots, points, weights) = curve_data(g, at.curve)?;
+        let curve = at.curve;
+        match CurveView::check_values(
+            desc.degree as usize,
+            desc.dim as usize,
+            knots,
+            points,
+            weights,
+            at.value,
+            left,
+        )
+        .map_err(|error| GeometryFault::Curve { curve, error })?
+        {
+            ValuesChecked::UpTo(value) => return Ok(CurvesChecked::UpTo(CurvesCursor { curve, value })),
+            ValuesChecked::All => {
+                let total = knots.len() + points.len() + weights.len();
+                left = left.saturating_sub(total.saturating_sub(at.value).max(1));
+                at = CurvesCursor {
+                    curve: curve + 1,
+                    value: 0,
+                };
+                if left == 0 && at.curve < count {
+                    return Ok(CurvesChecked::UpTo(at));
+                }
+            }
         }
     }
     Ok(CurvesChecked::All)
@@ -427,6 +455,24 @@ pub fn validate_curves(g: &GeometryRef, first: usize, budget: usize) -> Result<C
 /// Curve `curve` of `g`, checked: its data within the arena, at least the tip axes, and a NURBS
 /// `CurveView::new` accepts (O(size of the curve)). Allocation-free and panic-free.
 pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a>, GeometryFault> {
+    let (desc, knots, points, weights) = curve_data(g, curve)?;
+    CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
+        .map_err(|error| GeometryFault::Curve { curve, error })
+}
+
+/// Curve `curve` of a geometry whose curves [`validate_curves`] has passed and which has not
+/// been rewritten since (its generation unchanged): O(1) ([`CurveView::trusted`]).
+pub fn trusted_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a>, GeometryFault> {
+    let (desc, knots, points, weights) = curve_data(g, curve)?;
+    CurveView::trusted(desc.degree as usize, desc.dim as usize, knots, points, weights)
+        .map_err(|error| GeometryFault::Curve { curve, error })
+}
+
+type CurveData<'a> = (&'a CurveDesc, &'a [f64], &'a [f64], &'a [f64]);
+
+/// The descriptor and the knots, coordinates and weights of curve `curve`, within the arena and
+/// with at least the tip axes (O(1)).
+fn curve_data<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveData<'a>, GeometryFault> {
     let header = &g.header;
     let desc = g
         .curves
@@ -444,8 +490,7 @@ pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a
     if (desc.dim as usize) < header.tip_axes as usize {
         return Err(GeometryFault::Dimension { curve });
     }
-    CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
-        .map_err(|error| GeometryFault::Curve { curve, error })
+    Ok((desc, knots, points, weights))
 }
 
 /// The stop points a record or block refers to: `pairs` `(s, feed cap)` pairs in `values` from

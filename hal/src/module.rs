@@ -4,7 +4,8 @@
 //! `rtapi_app_main` creates the component, its pins (all instance state lives in `hal_malloc`'d
 //! memory, as in C components), the shared-memory [`Channel`] the planner writes to, and exports
 //! `nurbs_interp.update`. [`Instance::update`] runs every servo period: it takes the curve
-//! geometry once the planner has published it (validated with `CurveView::new`), drives the
+//! geometry once the planner has published it (validated with `CurveView`'s checks, a slice of
+//! values per period), drives the
 //! `nurbs_rtcore` [`Interpolator`] with the segment records it pops from the channel (S-curve
 //! feed, RK2 predictor-corrector step of the curve parameter, NURBS evaluation) and writes the
 //! output pins. It never allocates, locks, calls the OS or panics (no indexing that can fail);
@@ -75,8 +76,8 @@ use nurbs_rtcore::{CurveView, StopRun};
 use nurbs_rtcore::scurve::{stop_from, SCurveTable};
 
 use crate::channel::{
-    stop_points, valid_curve, validate_curves, validate_header, Channel, CurveDesc, CurvesChecked, GeometryHeader,
-    GeometryRef, RecordStop, StopPoint, CHANNEL_KEY,
+    stop_points, trusted_curve, validate_curves, validate_header, Channel, CurveDesc, CurvesChecked, CurvesCursor,
+    GeometryHeader, GeometryRef, RecordStop, StopPoint, CHANNEL_KEY,
 };
 use crate::pins::Pin;
 use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
@@ -174,7 +175,8 @@ impl RtGeometry {
         }
     }
 
-    /// Curve `index`, if the geometry has it.
+    /// Curve `index`, if the geometry has it. O(1): the curves were checked when the geometry
+    /// was accepted, and a rewrite (a new generation) is never used unchecked.
     fn valid(&self, index: usize) -> Option<CurveView<'static>> {
         if let Some((i, c)) = self.cache.get() {
             if i == index {
@@ -186,7 +188,7 @@ impl RtGeometry {
             curves: self.curves,
             values: self.values,
         };
-        let c = valid_curve(&g, index).ok()?;
+        let c = trusted_curve(&g, index).ok()?;
         self.cache.set(Some((index, c)));
         Some(c)
     }
@@ -214,8 +216,9 @@ pub struct Held {
     pub point: [f64; 3],
 }
 
-/// Curve values (knots, coordinates, weights) the module validates per period of a newly
-/// published geometry (a few microseconds); at least one curve per period.
+/// Checks of curve values (knots, coordinates and weights once, interior knots once more) the
+/// module runs per period on a newly published geometry (a few microseconds), within a curve
+/// if it is larger ([`validate_curves`]).
 pub const VALIDATION_VALUES_PER_PERIOD: usize = 4096;
 
 /// Largest distance (mm) between where the machine stands and a resumed motion's first sample.
@@ -229,8 +232,8 @@ pub struct Instance {
     pub pins: Pins,
     channel: *const Channel,
     geometry: RtGeometry,
-    /// A published geometry being validated: its generation and the next curve to check.
-    validating: Option<(u32, usize)>,
+    /// A published geometry being validated: its generation and where the check stands.
+    validating: Option<(u32, CurvesCursor)>,
     interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
@@ -694,7 +697,7 @@ impl Instance {
         // period, so that no period runs long; a rewrite in between starts it over.
         let first = match self.validating {
             Some((g_at, next)) if g_at == generation => Ok(next),
-            _ => validate_header(&g).map(|()| 0),
+            _ => validate_header(&g).map(|()| CurvesCursor::default()),
         };
         let checked = first.and_then(|first| validate_curves(&g, first, VALIDATION_VALUES_PER_PERIOD));
         self.validating = None;

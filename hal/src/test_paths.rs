@@ -18,6 +18,18 @@ pub fn g1_zigzag(lines: usize) -> Toolpath {
         .toolpath
 }
 
+/// One cubic B-spline of `points` control points 0.1 mm apart along x, waving in y
+/// (0.5 sin(0.05 k)): a single curve of some 4 `points` values.
+pub fn long_spline(points: usize) -> Toolpath {
+    let control: Vec<Vec<f64>> = (0..points)
+        .map(|k| vec![0.1 * k as f64, 0.5 * (0.05 * k as f64).sin()])
+        .collect();
+    let mut knots = vec![0.0; 4];
+    knots.extend((1..points - 3).map(|k| k as f64));
+    knots.extend([(points - 3) as f64; 4]);
+    Toolpath::single(ElementKind::Nurbs, Nurbs::new(3, knots, &control, None).unwrap())
+}
+
 /// A G1 polyline of five segments (up to 90 mm) with its corners rounded within 0.001 mm:
 /// lines and corner splines, 9 elements.
 pub fn rounded_polyline() -> Toolpath {

@@ -17,7 +17,7 @@ use crate::mock::{self, Value};
 use crate::module::{rtapi_app_exit, rtapi_app_main, FaultCode};
 use crate::plan_geometry::StopChoice;
 use crate::sys;
-use crate::test_paths::{g1_zigzag, rounded_polyline};
+use crate::test_paths::{g1_zigzag, long_spline, rounded_polyline};
 use crate::user::{Component, GeometryBuilder, StreamReader, StreamValue};
 
 /// Counts this thread's allocations (thread-local, so parallel tests do not disturb each other).
@@ -665,30 +665,41 @@ fn invalid_geometry_is_refused() {
 }
 
 /// A geometry of many curves (a 150-line G1 program: 299 elements) is validated a slice per
-/// period, so that no period runs long: at most about [`VALIDATION_VALUES_PER_PERIOD`] values
-/// per period. The motion starts in the period the last slice passes; a bad curve in the last
-/// slice faults only there, before anything moved; a geometry re-published half-way is
-/// validated again from its first curve.
+/// period, so that no period runs long: [`VALIDATION_VALUES_PER_PERIOD`] value checks per
+/// period.
+/// The motion starts in the period the last slice passes; a bad curve in the last slice faults
+/// only there, before anything moved; a geometry re-published half-way is validated again from
+/// its first curve.
 #[test]
 fn a_large_geometry_is_validated_a_slice_per_period() {
+    validated_a_slice_per_period(&job_of(g1_zigzag(150)));
+}
+
+/// One curve larger than a period's slice (3,000 control points) is validated over several
+/// periods as well, a slice of its values at a time.
+#[test]
+fn a_single_large_curve_is_validated_a_slice_per_period() {
+    let job = job_of(long_spline(3_000));
+    assert_eq!(job.geometry.curves().len(), 1);
+    validated_a_slice_per_period(&job);
+}
+
+fn validated_a_slice_per_period(job: &Job) {
     use crate::module::VALIDATION_VALUES_PER_PERIOD as BUDGET;
     let _guard = lock_module();
-    let job = job_of(g1_zigzag(150));
-    let g = geometry(&job);
-    let sizes: Vec<usize> = g
+    let g = geometry(job);
+    // Every value is checked once, and the interior knots once more (their multiplicity).
+    let total: usize = g
         .curves()
         .iter()
-        .map(|d| (d.knots_len + d.points_len + d.weights_len) as usize)
-        .collect();
-    let total: usize = sizes.iter().sum();
-    let largest = sizes.iter().copied().max().unwrap();
-    // Every slice but the last checks at least the budget and at most the budget plus one curve.
-    let (fewest, most) = (total.div_ceil(BUDGET + largest - 1), total.div_ceil(BUDGET));
-    assert!(fewest >= 2, "{total} values: too few for this test");
+        .map(|d| (d.knots_len + d.points_len + 2 * d.weights_len - d.degree - 1) as usize)
+        .sum();
+    let periods = total.div_ceil(BUDGET);
+    assert!(periods >= 2, "{total} values: too few for this test");
     let periods_to_first_record = |channel: &Channel| {
         let update = mock::funct("nurbs_interp.update").unwrap();
         fill(channel, &job.slots, 0);
-        (1..=most + 5)
+        (1..=periods + 5)
             .find(|_| {
                 unsafe { mock::call(update, PERIOD_NS as _) };
                 u32_pin("nurbs_interp.records") > 0
@@ -696,14 +707,9 @@ fn a_large_geometry_is_validated_a_slice_per_period() {
             .unwrap()
     };
 
-    let (_planner, channel) = load_enabled(&job);
+    let (_planner, channel) = load_enabled(job);
     let update = mock::funct("nurbs_interp.update").unwrap();
-    let periods = periods_to_first_record(channel);
-    println!("{} curves, {total} values: validated in {periods} periods", sizes.len());
-    assert!(
-        (fewest..=most).contains(&periods),
-        "{periods} periods for {total} values"
-    );
+    assert_eq!(periods_to_first_record(channel), periods, "{total} values");
     // The motion that follows is the offline plan's.
     let mut got = vec![sample_pins()];
     for _ in 0..job.samples.len() + 10 {
@@ -726,9 +732,10 @@ fn a_large_geometry_is_validated_a_slice_per_period() {
     assert!(report.violations.is_empty(), "{:?}", report.violations);
     unsafe { rtapi_app_exit() };
 
-    // A bad weight in the last curve: found in the last slice, nothing taken before.
+    // A bad last weight (the last value checked): found in the last slice, nothing taken before.
     let mut values = g.values().to_vec();
-    values[g.curves().last().unwrap().weights_offset as usize] = 0.0;
+    let last = g.curves().last().unwrap();
+    values[(last.weights_offset + last.weights_len - 1) as usize] = 0.0;
     let (_planner, channel) = load();
     let update = mock::funct("nurbs_interp.update").unwrap();
     mock::set_pin("nurbs_interp.enable", Value::Bit(true));
@@ -738,7 +745,7 @@ fn a_large_geometry_is_validated_a_slice_per_period() {
     });
     fill(channel, &job.slots, 0);
     let mut faulted_at = None;
-    for period in 1..=most + 5 {
+    for period in 1..=periods + 5 {
         unsafe { mock::call(update, PERIOD_NS as _) };
         if bit("nurbs_interp.fault") {
             faulted_at = Some(period);
@@ -752,7 +759,7 @@ fn a_large_geometry_is_validated_a_slice_per_period() {
     unsafe { rtapi_app_exit() };
 
     // Re-published after the first slice: validated from the start again.
-    let (_planner, channel) = load_enabled(&job);
+    let (_planner, channel) = load_enabled(job);
     let update = mock::funct("nurbs_interp.update").unwrap();
     unsafe { mock::call(update, PERIOD_NS as _) };
     assert_eq!(u32_pin("nurbs_interp.records"), 0);

@@ -92,11 +92,62 @@ impl core::fmt::Display for GeometryError {
     }
 }
 
+/// How far [`CurveView::check_values`] got.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ValuesChecked {
+    /// Every value from the first one asked for is valid.
+    All,
+    /// The values before this one are valid; the budget is spent.
+    UpTo(usize),
+}
+
+/// Degree, dimension and the lengths of the three arrays (O(1)).
+fn check_counts(
+    degree: usize,
+    dim: usize,
+    knots: &[f64],
+    points: &[f64],
+    weights: &[f64],
+) -> Result<(), GeometryError> {
+    if !(1..=MAX_DEGREE).contains(&degree) {
+        return Err(GeometryError::DegreeOutOfRange { degree });
+    }
+    if !(2..=MAX_DIM).contains(&dim) {
+        return Err(GeometryError::DimensionOutOfRange { dim });
+    }
+    if !points.len().is_multiple_of(dim) {
+        return Err(GeometryError::PointDataMismatch {
+            values: points.len(),
+            dim,
+        });
+    }
+    let count = points.len() / dim;
+    if count < degree + 1 {
+        return Err(GeometryError::TooFewControlPoints {
+            count,
+            needed: degree + 1,
+        });
+    }
+    if weights.len() != count {
+        return Err(GeometryError::WeightCountMismatch {
+            weights: weights.len(),
+            points: count,
+        });
+    }
+    if knots.len() != count + degree + 1 {
+        return Err(GeometryError::KnotCountMismatch {
+            expected: count + degree + 1,
+            found: knots.len(),
+        });
+    }
+    Ok(())
+}
+
 /// A validated NURBS curve borrowed from flat arrays.
 ///
 /// `points` holds the control points one after another (`dim` values each); `weights` one
-/// weight per point. Constructed only through [`CurveView::new`], so every evaluation may rely on
-/// a well-formed, clamped knot vector.
+/// weight per point. Constructed through [`CurveView::new`] (or [`CurveView::trusted`] on data
+/// checked before), so every evaluation may rely on a well-formed, clamped knot vector.
 #[derive(Clone, Copy, Debug)]
 pub struct CurveView<'a> {
     degree: usize,
@@ -111,7 +162,8 @@ pub type Derivatives = [Vector; MAX_DERIV + 1];
 
 impl<'a> CurveView<'a> {
     /// Validates the data (degree, dimension, clamped non-decreasing finite knots, finite
-    /// coordinates, positive weights) and returns a view that can be evaluated.
+    /// coordinates, positive weights) and returns a view that can be evaluated. O(size of the
+    /// data); [`CurveView::check_values`] does the same checks a slice at a time.
     pub fn new(
         degree: usize,
         dim: usize,
@@ -119,85 +171,107 @@ impl<'a> CurveView<'a> {
         points: &'a [f64],
         weights: &'a [f64],
     ) -> Result<Self, GeometryError> {
-        if !(1..=MAX_DEGREE).contains(&degree) {
-            return Err(GeometryError::DegreeOutOfRange { degree });
-        }
-        if !(2..=MAX_DIM).contains(&dim) {
-            return Err(GeometryError::DimensionOutOfRange { dim });
-        }
-        if !points.len().is_multiple_of(dim) {
-            return Err(GeometryError::PointDataMismatch {
-                values: points.len(),
-                dim,
-            });
-        }
-        let count = points.len() / dim;
-        if count < degree + 1 {
-            return Err(GeometryError::TooFewControlPoints {
-                count,
-                needed: degree + 1,
-            });
-        }
-        if weights.len() != count {
-            return Err(GeometryError::WeightCountMismatch {
-                weights: weights.len(),
-                points: count,
-            });
-        }
-        if knots.len() != count + degree + 1 {
-            return Err(GeometryError::KnotCountMismatch {
-                expected: count + degree + 1,
-                found: knots.len(),
-            });
-        }
-        for (index, k) in knots.iter().enumerate() {
-            if !k.is_finite() {
-                return Err(GeometryError::NonFiniteKnot { index });
-            }
-            if index > 0 && *k < knots[index - 1] {
-                return Err(GeometryError::KnotsDecreasing { index });
-            }
-        }
-        let first = knots[0];
-        let last = knots[knots.len() - 1];
-        if knots[..=degree].iter().any(|k| *k != first) || knots[knots.len() - degree - 1..].iter().any(|k| *k != last)
-        {
-            return Err(GeometryError::NotClamped);
-        }
-        if last <= first {
-            return Err(GeometryError::EmptyDomain);
-        }
-        // Interior knots: multiplicity above the degree disconnects the curve.
-        let mut index = degree + 1;
-        while index < count {
-            let mut multiplicity = 1;
-            while index + multiplicity < count && knots[index + multiplicity] == knots[index] {
-                multiplicity += 1;
-            }
-            if multiplicity > degree {
-                return Err(GeometryError::InteriorKnotMultiplicity { index, multiplicity });
-            }
-            index += multiplicity;
-        }
-        for (i, c) in points.iter().enumerate() {
-            if !c.is_finite() {
-                return Err(GeometryError::NonFiniteCoordinate {
-                    point: i / dim,
-                    axis: i % dim,
-                });
-            }
-        }
-        for (index, w) in weights.iter().enumerate() {
-            if !(w.is_finite() && *w > 0.0) {
-                return Err(GeometryError::NonPositiveWeight { index, value: *w });
-            }
-        }
+        Self::check_values(degree, dim, knots, points, weights, 0, usize::MAX)?;
+        Self::trusted(degree, dim, knots, points, weights)
+    }
+
+    /// A view of data that [`CurveView::check_values`] has passed in full and that has not
+    /// changed since: only the counts are checked (O(1)). Should the data have changed after
+    /// all, evaluation still cannot panic or hang (every index is within the slices and the span
+    /// search is bounded), but the points are meaningless.
+    pub fn trusted(
+        degree: usize,
+        dim: usize,
+        knots: &'a [f64],
+        points: &'a [f64],
+        weights: &'a [f64],
+    ) -> Result<Self, GeometryError> {
+        check_counts(degree, dim, knots, points, weights)?;
         Ok(Self {
             degree,
             dim,
             knots,
             points,
             weights,
+        })
+    }
+
+    /// The checks of [`CurveView::new`] on at most `budget` of the curve's values from value
+    /// `from` on, counting the knots, then the interior knots again (their multiplicity, once
+    /// the whole knot vector is known to be clamped and non-decreasing), then the coordinates,
+    /// then the weights; the counts are checked on every call. Reports the same error as `new`
+    /// for the same data, whatever the slices. O(1 + budget), allocation-free and panic-free.
+    pub fn check_values(
+        degree: usize,
+        dim: usize,
+        knots: &[f64],
+        points: &[f64],
+        weights: &[f64],
+        from: usize,
+        budget: usize,
+    ) -> Result<ValuesChecked, GeometryError> {
+        check_counts(degree, dim, knots, points, weights)?;
+        let count = weights.len();
+        // Interior knots whose multiplicity is checked: degree + 1 .. count.
+        let interior = count - degree - 1;
+        let total = knots.len() + interior + points.len() + weights.len();
+        let end = from.saturating_add(budget).min(total);
+        // The four stretches in turn, each a plain loop over its part of `from..end`.
+        let (knots_end, interior_end) = (knots.len(), knots.len() + interior);
+        let points_end = interior_end + points.len();
+        for index in from.min(knots_end)..end.min(knots_end) {
+            let k = knots[index];
+            if !k.is_finite() {
+                return Err(GeometryError::NonFiniteKnot { index });
+            }
+            if index > 0 && k < knots[index - 1] {
+                return Err(GeometryError::KnotsDecreasing { index });
+            }
+        }
+        if from < knots_end && end >= knots_end {
+            let (first, last) = (knots[0], knots[knots_end - 1]);
+            if knots[..=degree].iter().any(|k| *k != first)
+                || knots[knots_end - degree - 1..].iter().any(|k| *k != last)
+            {
+                return Err(GeometryError::NotClamped);
+            }
+            if last <= first {
+                return Err(GeometryError::EmptyDomain);
+            }
+        }
+        for index in from.clamp(knots_end, interior_end)..end.clamp(knots_end, interior_end) {
+            // Knots are non-decreasing here, so a run of more than `degree` equal knots
+            // starting at `i` shows in its first and (degree + 1)-th knot.
+            let i = degree + 1 + (index - knots_end);
+            let run_start = i == degree + 1 || knots[i - 1] != knots[i];
+            if run_start && i + degree < count && knots[i + degree] == knots[i] {
+                let mut multiplicity = degree + 1;
+                while i + multiplicity < count && knots[i + multiplicity] == knots[i] {
+                    multiplicity += 1;
+                }
+                return Err(GeometryError::InteriorKnotMultiplicity { index: i, multiplicity });
+            }
+        }
+        for index in from.clamp(interior_end, points_end)..end.clamp(interior_end, points_end) {
+            let i = index - interior_end;
+            if !points[i].is_finite() {
+                return Err(GeometryError::NonFiniteCoordinate {
+                    point: i / dim,
+                    axis: i % dim,
+                });
+            }
+        }
+        for index in from.clamp(points_end, total)..end.clamp(points_end, total) {
+            let i = index - points_end;
+            let w = weights[i];
+            if !(w.is_finite() && w > 0.0) {
+                return Err(GeometryError::NonPositiveWeight { index: i, value: w });
+            }
+        }
+        Ok(if end >= total {
+            ValuesChecked::All
+        } else {
+            ValuesChecked::UpTo(end)
         })
     }
 
@@ -249,7 +323,12 @@ impl<'a> CurveView<'a> {
         }
         let (mut low, mut high) = (self.degree, n + 1);
         let mut mid = (low + high) / 2;
-        while u < self.knots[mid] || u >= self.knots[mid + 1] {
+        // Halving ends within log2(n) + 1 rounds on valid knots; the bound keeps a period
+        // finite should the data have changed under a trusted view.
+        for _ in 0..usize::BITS {
+            if !(u < self.knots[mid] || u >= self.knots[mid + 1]) {
+                break;
+            }
             if u < self.knots[mid] {
                 high = mid;
             } else {
@@ -442,6 +521,76 @@ pub fn basis_functions(knots: &[f64], span: usize, degree: usize, u: f64) -> [f6
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Checking a curve's values a slice at a time reports what one whole check reports, for
+    /// every slice size: valid data, and one fault of each kind placed early and late.
+    #[test]
+    fn sliced_checks_report_what_the_whole_check_reports() {
+        let degree = 3;
+        let knots = [0.0, 0.0, 0.0, 0.0, 0.2, 0.5, 0.5, 0.8, 1.0, 1.0, 1.0, 1.0];
+        let points: Vec<f64> = (0..16).map(|i| i as f64 * 0.7).collect();
+        let weights = [1.0, 0.5, 2.0, 1.0, 1.0, 3.0, 1.0, 1.0];
+        type Corrupt = fn(&mut [f64; 12], &mut Vec<f64>, &mut [f64; 8]);
+        let cases: [(Corrupt, Option<GeometryError>); 10] = [
+            (|_, _, _| {}, None),
+            (
+                |k, _, _| k[1] = f64::NAN,
+                Some(GeometryError::NonFiniteKnot { index: 1 }),
+            ),
+            (
+                |k, _, _| k[9] = f64::INFINITY,
+                Some(GeometryError::NonFiniteKnot { index: 9 }),
+            ),
+            (|k, _, _| k[7] = 0.4, Some(GeometryError::KnotsDecreasing { index: 7 })),
+            (|k, _, _| k[11] = 1.5, Some(GeometryError::NotClamped)),
+            (
+                |k, _, _| k[4..8].copy_from_slice(&[0.5; 4]),
+                Some(GeometryError::InteriorKnotMultiplicity {
+                    index: 4,
+                    multiplicity: 4,
+                }),
+            ),
+            (
+                |_, p, _| p[0] = f64::NAN,
+                Some(GeometryError::NonFiniteCoordinate { point: 0, axis: 0 }),
+            ),
+            (
+                |_, p, _| p[13] = f64::NEG_INFINITY,
+                Some(GeometryError::NonFiniteCoordinate { point: 6, axis: 1 }),
+            ),
+            (
+                |_, _, w| w[7] = 0.0,
+                Some(GeometryError::NonPositiveWeight { index: 7, value: 0.0 }),
+            ),
+            (
+                |k, _, w| {
+                    k[3] = f64::NAN;
+                    w[0] = -1.0
+                },
+                Some(GeometryError::NonFiniteKnot { index: 3 }),
+            ),
+        ];
+        for (corrupt, expected) in cases {
+            let (mut k, mut p, mut w) = (knots, points.clone(), weights);
+            corrupt(&mut k, &mut p, &mut w);
+            let whole = CurveView::new(degree, 2, &k, &p, &w).map(|_| ());
+            assert_eq!(whole.err(), expected);
+            for budget in 1..40 {
+                let mut from = 0;
+                let sliced = loop {
+                    match CurveView::check_values(degree, 2, &k, &p, &w, from, budget) {
+                        Ok(ValuesChecked::UpTo(next)) => {
+                            assert_eq!(next, from + budget, "a slice checks its whole budget");
+                            from = next;
+                        }
+                        Ok(ValuesChecked::All) => break Ok(()),
+                        Err(e) => break Err(e),
+                    }
+                };
+                assert_eq!(sliced.err(), expected, "budget {budget}");
+            }
+        }
+    }
 
     /// `point` is `derivatives(u, 0)[0]` bit for bit: every degree and dimension, rational
     /// weights, a double interior knot, at the ends, at knots and between.
