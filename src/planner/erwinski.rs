@@ -868,17 +868,24 @@ fn solve_segment(
     let mut sampled_peak = ctx.peak_cap;
     let mut nominal_ratio = f64::INFINITY;
     let mut ratio_at_lowering = f64::INFINITY;
+    // Attempts in a row whose nominal trial was no better than the one before, and whether a
+    // stop at the end has been tried.
+    let (mut stalled, mut stop_tried) = (0usize, false);
     for attempt in 0..40 {
         if ctx.work.get() > ctx.work_budget {
             return Err(SegmentFailure::OutOfWork);
         }
-        if attempt == CRAWL_CHECK_AT && v1 > 0.0 && v0 < CRAWL_FEED * ctx.limits.feed {
-            // The first end feeds failed from a crawling start: if even a stop at the end fails,
-            // the start is the problem (a lower end feed cannot help), so say so now rather
-            // than after 36 more end feeds, each with two golden-section searches of exact
-            // trials that crawl (a tiny segment in a sharp G1 corner entered at 0.1 mm/s: 400
-            // ms). Not at higher start feeds: there a stop at the end can fail where a lower end
-            // feed passes, and the plans would be slower.
+        let crawling = attempt == CRAWL_CHECK_AT && v0 < CRAWL_FEED * ctx.limits.feed;
+        if v1 > 0.0 && (crawling || (stalled >= STALLED_ATTEMPTS && !stop_tried)) {
+            // The first end feeds failed from a crawling start, or lowering the end feed has
+            // stopped making the nominal trial any better (the excess is at the start, e.g. the
+            // step across the node): if even a stop at the end fails, the start is the problem
+            // (a lower end feed cannot help), so say so now rather than after some 36 more end
+            // feeds, each with two golden-section searches of exact trials (a tiny segment in a
+            // sharp G1 corner entered at 0.1 mm/s: 400 ms; the trident at the VPOp limits: 70
+            // ms of its 73). Not on the first failures at higher start feeds: there a stop at
+            // the end can fail where a lower end feed passes, and the plans would be slower.
+            stop_tried = true;
             if let Err(failure @ (SegmentFailure::StartTooFast(_) | SegmentFailure::PeakTooHigh(_))) =
                 solve_segment(ctx, v0, 0.0, from)
             {
@@ -887,6 +894,11 @@ fn solve_segment(
         }
         let nominal = both(ctx.accel, ctx.jerk);
         if let Some(t) = trial(ctx, from, v0, v1, nominal, nominal) {
+            stalled = if t.ratio >= STALL_PROGRESS * nominal_ratio {
+                stalled + 1
+            } else {
+                0
+            };
             (sampled_peak, nominal_ratio) = (t.peak_feed, t.ratio);
             if t.ok() {
                 return Ok((t.record, t.state));
@@ -1013,6 +1025,11 @@ const PEAK_PROGRESS: f64 = 0.999;
 const CRAWL_FEED: f64 = 1e-3;
 /// The end-feed attempt before which a crawling segment tries a stop at its end.
 const CRAWL_CHECK_AT: usize = 3;
+
+/// End-feed attempts in a row whose nominal trial's worst ratio improved by less than
+/// `STALL_PROGRESS` before a segment tries a stop at its end (see [`solve_segment`]).
+const STALLED_ATTEMPTS: usize = 3;
+const STALL_PROGRESS: f64 = 0.999;
 
 /// A speed excess inside a segment is split off as a node when the profile there is below this
 /// fraction of the peak (at the peak, lowering the peak is the cure).
