@@ -173,19 +173,19 @@ fn plan_interpolation_methods_and_streaming() {
         assert!(String::from_utf8_lossy(&out.stderr).contains("erwinski planner"));
     }
     // A streamed plan that fails says how much of it had already been handed out (on the
-    // machine, running): the property test's case 7406, refused at u = 0, before any.
+    // machine, running): the property test's case 1246, refused at u = 0, before any.
     let refused = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hal/refused_stream.json");
     let limits = [
         "--feed",
-        "24.24882720254371",
+        "4191.755008993316",
         "--accel",
-        "4507.070773350196",
+        "1462.5546584086417",
         "--jerk",
-        "37972.652894721876",
+        "1654.3689664315684",
         "--chord-tol",
-        "0.0014276564634430637",
+        "0.00153557848570954",
         "--period",
-        "0.00023172696957658322",
+        "0.00016582130356203076",
     ];
     for (flags, told) in [(&["--stream"][..], true), (&[][..], false)] {
         let out = bin()

@@ -227,6 +227,16 @@ fn cases_once_refused_from_their_lowest_start_feed_are_planned() {
     assert_planned_and_verified(&[4271, 4669, 8049, 9761]);
 }
 
+/// Cases refused at the path start, from rest, with nothing left to lower: the excess shrank
+/// with the jerk, but only below the golden-section search's resolution (0.1 % of the range).
+/// Case 7406 turns 57° within its first micrometre of arc and needs 0.03 % of the jerk limit
+/// there. A segment from rest now searches the lowest cell again, finer, before it is refused
+/// (`crawl_search`).
+#[test]
+fn cases_refused_at_the_path_start_for_a_crawl_are_planned() {
+    assert_planned_and_verified(&[2228, 7406, 9779]);
+}
+
 /// Each of `cases` of seed 20261122 plans and passes the checker.
 fn assert_planned_and_verified(cases: &[u64]) {
     for &case in cases {

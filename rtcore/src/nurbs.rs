@@ -175,10 +175,12 @@ impl<'a> CurveView<'a> {
         Self::trusted(degree, dim, knots, points, weights)
     }
 
-    /// A view of data that [`CurveView::check_values`] has passed in full and that has not
-    /// changed since: only the counts are checked (O(1)). Should the data have changed after
-    /// all, evaluation still cannot panic or hang (every index is within the slices and the span
-    /// search is bounded), but the points are meaningless.
+    /// A view of data that [`CurveView::check_values`] has passed in full and that does not
+    /// change while the view is used: only the counts are checked (O(1)). The realtime module
+    /// takes its views this way once a published geometry is validated (a new geometry is a new
+    /// generation, validated anew). Evaluation relies on the checked data: its indices stay
+    /// within the slices whatever the values, and the span search is bounded, but changed knots
+    /// give meaningless points (and NaN bounds would trip `f64::clamp`).
     pub fn trusted(
         degree: usize,
         dim: usize,
@@ -239,7 +241,7 @@ impl<'a> CurveView<'a> {
                 return Err(GeometryError::EmptyDomain);
             }
         }
-        for index in from.clamp(knots_end, interior_end)..end.clamp(knots_end, interior_end) {
+        for index in from.max(knots_end).min(interior_end)..end.max(knots_end).min(interior_end) {
             // Knots are non-decreasing here, so a run of more than `degree` equal knots
             // starting at `i` shows in its first and (degree + 1)-th knot.
             let i = degree + 1 + (index - knots_end);
@@ -252,7 +254,7 @@ impl<'a> CurveView<'a> {
                 return Err(GeometryError::InteriorKnotMultiplicity { index: i, multiplicity });
             }
         }
-        for index in from.clamp(interior_end, points_end)..end.clamp(interior_end, points_end) {
+        for index in from.max(interior_end).min(points_end)..end.max(interior_end).min(points_end) {
             let i = index - interior_end;
             if !points[i].is_finite() {
                 return Err(GeometryError::NonFiniteCoordinate {
@@ -261,7 +263,7 @@ impl<'a> CurveView<'a> {
                 });
             }
         }
-        for index in from.clamp(points_end, total)..end.clamp(points_end, total) {
+        for index in from.max(points_end).min(total)..end.max(points_end).min(total) {
             let i = index - points_end;
             let w = weights[i];
             if !(w.is_finite() && w > 0.0) {
