@@ -12,7 +12,8 @@
 //! records refer to, in one fixed-capacity arena of `f64` published seqlock-style (a generation
 //! counter, odd while the planner writes, even and non-zero once published, stored last). The
 //! module validates a published geometry with `CurveView`'s checks (a slice of values per
-//! period) before it runs a single record on it and refuses (fault, hold) anything that does not validate. Behind the published curves
+//! period) before it runs a single record on it and refuses (fault, hold) anything that does
+//! not validate. Behind the published curves
 //! the planner appends the curves' stop points and the stored stop sequences while the motion
 //! runs ([`GeometryArea::append`]), each before the first record that refers to it: the ring's
 //! release/acquire pair orders them, so the planner can hand records out while it still
@@ -413,9 +414,10 @@ pub enum CurvesChecked {
     UpTo(CurvesCursor),
 }
 
-/// Checks the curves of `g` from `from` on ([`valid_curve`]'s checks) until `budget` values
-/// (knots, coordinates, weights) are checked, within a curve if need be: a curve of a million
-/// control points is checked over many calls. The header must be valid ([`validate_header`]).
+/// Checks the curves of `g` from `from` on ([`valid_curve`]'s checks) until `budget` value
+/// checks are run ([`CurveView::value_checks`]: knots, coordinates and weights once, interior
+/// knots once more), within a curve if need be: a curve of a million control points is checked
+/// over many calls. The header must be valid ([`validate_header`]).
 /// O(budget), allocation-free and panic-free.
 pub fn validate_curves(g: &GeometryRef, from: CurvesCursor, budget: usize) -> Result<CurvesChecked, GeometryFault> {
     let count = g.header.curve_count as usize;
@@ -437,7 +439,7 @@ pub fn validate_curves(g: &GeometryRef, from: CurvesCursor, budget: usize) -> Re
         {
             ValuesChecked::UpTo(value) => return Ok(CurvesChecked::UpTo(CurvesCursor { curve, value })),
             ValuesChecked::All => {
-                let total = knots.len() + points.len() + weights.len();
+                let total = CurveView::value_checks(desc.degree as usize, knots, points, weights);
                 left = left.saturating_sub(total.saturating_sub(at.value).max(1));
                 at = CurvesCursor {
                     curve: curve + 1,
@@ -792,6 +794,28 @@ mod tests {
         assert_eq!(c.geometry.append(usize::MAX, &[0.0]), Err(PublishError::TooLarge));
         assert_eq!(c.geometry.publish(&g), Ok(4));
         assert!(!c.geometry.unchanged(gen));
+    }
+
+    /// Any budget: each call runs exactly that many value checks (the last one what is left),
+    /// across curve boundaries, and the calls cover every check of every curve once.
+    #[test]
+    fn curves_are_validated_a_budget_at_a_time() {
+        let (mut header, one, values) = trident();
+        header.curve_count = 3;
+        let curves = [one[0]; 3];
+        let g = geometry(header, &curves, &values);
+        let (k, p, w) = (&values[..11], &values[11..25], &values[25..]);
+        let per_curve = CurveView::value_checks(3, k, p, w);
+        assert_eq!(per_curve, 11 + 3 + 14 + 7);
+        for budget in 1..=2 * per_curve + 1 {
+            let (mut at, mut calls) = (CurvesCursor::default(), 0);
+            while let CurvesChecked::UpTo(next) = validate_curves(&g, at, budget).unwrap() {
+                let checks = |c: CurvesCursor| c.curve * per_curve + c.value;
+                assert_eq!(checks(next) - checks(at), budget, "budget {budget}");
+                (at, calls) = (next, calls + 1);
+            }
+            assert_eq!(calls + 1, (3 * per_curve).div_ceil(budget), "budget {budget}");
+        }
     }
 
     #[test]

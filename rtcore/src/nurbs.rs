@@ -198,6 +198,12 @@ impl<'a> CurveView<'a> {
         })
     }
 
+    /// How many checks [`CurveView::check_values`] runs on the whole of valid counts: every
+    /// value once, the interior knots twice.
+    pub fn value_checks(degree: usize, knots: &[f64], points: &[f64], weights: &[f64]) -> usize {
+        knots.len() + weights.len().saturating_sub(degree + 1) + points.len() + weights.len()
+    }
+
     /// The checks of [`CurveView::new`] on at most `budget` of the curve's values from value
     /// `from` on, counting the knots, then the interior knots again (their multiplicity, once
     /// the whole knot vector is known to be clamped and non-decreasing), then the coordinates,
@@ -216,7 +222,7 @@ impl<'a> CurveView<'a> {
         let count = weights.len();
         // Interior knots whose multiplicity is checked: degree + 1 .. count.
         let interior = count - degree - 1;
-        let total = knots.len() + interior + points.len() + weights.len();
+        let total = Self::value_checks(degree, knots, points, weights);
         let end = from.saturating_add(budget).min(total);
         // The four stretches in turn, each a plain loop over its part of `from..end`.
         let (knots_end, interior_end) = (knots.len(), knots.len() + interior);
