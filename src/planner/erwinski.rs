@@ -131,7 +131,9 @@ impl From<LimitsError> for PlanError {
 /// within the axis limits.) At the path end every record is final. Before the first record is
 /// handed out (the machine waits for it), `j` may also be the segment just accepted, and the
 /// first record need not wait for the cascades of the next stretch (the trident at lab set 1:
-/// about half the time to the first record).
+/// about half the time to the first record); right after the first segment, `j` may be the
+/// next one, before its own solve, if it can stop at its end from where the first leaves it
+/// (the butterfly: 6.1 instead of 9.6 ms).
 ///
 /// A fixed count of segments would not do: on a dense G1 polyline with rounded corners the
 /// cascades reach 39 short segments back.
@@ -173,6 +175,8 @@ pub struct Planner<'a> {
     emitted: usize,
     /// [`PlanOptions::stream`]: settle records before the path end.
     stream: bool,
+    /// The first record for which segment 1 could not stop at its end (checked once).
+    first_absorber_failed: Option<SegmentRecord>,
     failed: bool,
     started: Instant,
     first_record_time: Option<f64>,
@@ -246,6 +250,7 @@ impl<'a> Planner<'a> {
             work: Cell::new(0),
             work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
             settled: 0,
+            first_absorber_failed: None,
             emitted: 0,
             stream: options.stream,
             failed: false,
@@ -415,13 +420,25 @@ impl<'a> Planner<'a> {
                 };
                 if last {
                     self.settled = self.k;
-                } else if self.stream && self.settled == 0 && k > 0 {
+                } else if self.stream && self.settled == 0 {
                     // The motion waits for the first record: settle one behind as below, else
-                    // at the accepted segment itself.
+                    // at the accepted segment itself; right after the first segment, at the next
+                    // one if it can stop at its end from where the first leaves it, so that the
+                    // first record need not wait for the next segment's own solve (checked once
+                    // for the same first record).
                     if k > 1 && absorbs(self, k - 1) {
                         self.settled = k - 1;
-                    } else if absorbs(self, k) {
+                    } else if k > 0
+                        && !(k == 1 && self.first_absorber_failed == Some(self.records[0]))
+                        && absorbs(self, k)
+                    {
                         self.settled = k;
+                    } else if k == 0 && self.commit_nodes() {
+                        if absorbs(self, 1) {
+                            self.settled = 1;
+                        } else {
+                            self.first_absorber_failed = Some(self.records[0]);
+                        }
                     }
                 } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
                     if j > self.settled && absorbs(self, j) {
