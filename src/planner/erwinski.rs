@@ -175,8 +175,9 @@ pub struct Planner<'a> {
     emitted: usize,
     /// [`PlanOptions::stream`]: settle records before the path end.
     stream: bool,
-    /// The first record for which segment 1 could not stop at its end (checked once).
-    first_absorber_failed: Option<SegmentRecord>,
+    /// The first record, and segment 1's length, for which segment 1 could not stop at its end
+    /// (checked once; a split of segment 1 makes it another segment).
+    first_absorber_failed: Option<(SegmentRecord, f64)>,
     failed: bool,
     started: Instant,
     first_record_time: Option<f64>,
@@ -429,7 +430,7 @@ impl<'a> Planner<'a> {
                     if k > 1 && absorbs(self, k - 1) {
                         self.settled = k - 1;
                     } else if k > 0
-                        && !(k == 1 && self.first_absorber_failed == Some(self.records[0]))
+                        && !(k == 1 && self.first_absorber_failed == Some((self.records[0], self.lengths[1])))
                         && absorbs(self, k)
                     {
                         self.settled = k;
@@ -437,7 +438,7 @@ impl<'a> Planner<'a> {
                         if absorbs(self, 1) {
                             self.settled = 1;
                         } else {
-                            self.first_absorber_failed = Some(self.records[0]);
+                            self.first_absorber_failed = Some((self.records[0], self.lengths[1]));
                         }
                     }
                 } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
@@ -983,11 +984,7 @@ fn solve_segment(
             }
             continue;
         }
-        let by_jerk = golden(
-            ctx.jerk,
-            &|j| trial(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j)),
-            &|t| t.jerk_violation + t.acc_violation,
-        );
+        let by_jerk = exact_jerk_search(ctx, from, v0, v1, ctx.jerk);
         let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
         if let Some((_, t)) = by_jerk {
             if t.ok() {
@@ -1024,12 +1021,8 @@ fn solve_segment(
 /// finer. A bend of a few micrometres met from rest needs a crawl (case 7406 of the property
 /// test: 0.03 % of the jerk limit), which neither end feed nor peak can give it.
 fn crawl_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Option<(f64, Trial)> {
-    let both = |j: f64| Ramp {
-        accel: ctx.accel,
-        jerk: j,
-    };
     let violation = |t: &Trial| t.jerk_violation + t.acc_violation;
-    let search = |upper: f64| golden(upper, &|j| trial(ctx, from, v0, v1, both(j), both(j)), &violation);
+    let search = |upper: f64| exact_jerk_search(ctx, from, v0, v1, upper);
     let mut upper = ctx.jerk;
     let mut best = search(upper);
     for _ in 0..FINER_JERK_SEARCHES {
@@ -1047,6 +1040,18 @@ fn crawl_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Opti
         }
     }
     best
+}
+
+/// The golden-section search of the jerk over `(0, upper]` on exact trials, the acceleration
+/// nominal (steps 5-6).
+fn exact_jerk_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, upper: f64) -> Option<(f64, Trial)> {
+    let at = |j: f64| Ramp {
+        accel: ctx.accel,
+        jerk: j,
+    };
+    golden(upper, &|j| trial(ctx, from, v0, v1, at(j), at(j)), &|t| {
+        t.jerk_violation + t.acc_violation
+    })
 }
 
 /// Finer jerk searches of [`crawl_search`], each over this fraction of the range of the one
