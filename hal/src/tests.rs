@@ -1911,7 +1911,9 @@ mod blocks {
                 "nurbs_interp.hold"
             };
             let mut stop = None;
-            for k in 0..job.plan.points.len() {
+            // The stop may outlast the rest of the plan (it brakes at the block's end): room
+            // for it beyond the plan's periods.
+            for k in 0..2 * job.plan.points.len() {
                 sent = push_blocks(channel, &job.blocks, sent);
                 if k == 1234 {
                     mock::set_pin(pin, Value::Bit(true)); // mid-block (1234 = 77 * 16 + 2)
