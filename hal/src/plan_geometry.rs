@@ -11,7 +11,7 @@
 //! ([`StopChooser`]).
 
 use std::cell::{OnceCell, RefCell};
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 
 use nurbs_hal::channel::{RecordStop, Slot, StopPoint, GEOMETRY_VALUES};
 use nurbs_hal::module::{block_stop, underrun_stop};
@@ -659,7 +659,16 @@ struct ArcLengths<'a> {
     before: RefCell<Vec<f64>>,
     /// The anchor's element, arc length, and Gauss-Legendre length to its parameter.
     anchor: Option<(usize, f64, f64)>,
+    /// Lengths of elements to parameters asked for lately, by element and the parameter's
+    /// bits (the newer and the older of two generations of at most `LENGTHS_KEPT` each): the
+    /// stored stops of nearby block ends share many points (the same planned positions, often
+    /// the same deceleration), and each length is an adaptive quadrature of some hundred curve
+    /// evaluations.
+    lengths: RefCell<[HashMap<(usize, u64), f64>; 2]>,
 }
+
+/// Lengths each generation of [`ArcLengths`]'s memory keeps (some 2 MB).
+const LENGTHS_KEPT: usize = 1 << 16;
 
 impl<'a> ArcLengths<'a> {
     fn new(toolpath: &'a Toolpath) -> Self {
@@ -668,6 +677,7 @@ impl<'a> ArcLengths<'a> {
             tables: toolpath.elements.iter().map(|_| OnceCell::new()).collect(),
             before: RefCell::new(vec![0.0]),
             anchor: None,
+            lengths: RefCell::new([HashMap::new(), HashMap::new()]),
         }
     }
 
@@ -688,15 +698,27 @@ impl<'a> ArcLengths<'a> {
 
     /// From now on, element `e` is measured so that `u` has arc length `s`.
     fn set_anchor(&mut self, e: usize, u: f64, s: f64) {
-        self.anchor =
-            (e < self.tables.len()).then(|| (e, s, self.table(e).length_to(&self.toolpath.elements[e].curve, u)));
+        self.anchor = (e < self.tables.len()).then(|| (e, s, self.length_to(e, u)));
+    }
+
+    /// Length of element `e` from its start to parameter `u`.
+    fn length_to(&self, e: usize, u: f64) -> f64 {
+        let key = (e, u.to_bits());
+        let mut lengths = self.lengths.borrow_mut();
+        if let Some(&length) = lengths[0].get(&key).or_else(|| lengths[1].get(&key)) {
+            return length;
+        }
+        let length = self.table(e).length_to(&self.toolpath.elements[e].curve, u);
+        if lengths[0].len() >= LENGTHS_KEPT {
+            lengths[1] = std::mem::take(&mut lengths[0]);
+        }
+        lengths[0].insert(key, length);
+        length
     }
 
     /// Arc length of `p` in the measure of element `e` (negative before it).
     fn s(&self, p: &PathPoint, e: usize) -> f64 {
-        let own = self
-            .table(p.element)
-            .length_to(&self.toolpath.elements[p.element].curve, p.u);
+        let own = self.length_to(p.element, p.u);
         if p.element == e {
             match self.anchor {
                 // Exactly the anchor's arc length at its parameter (the difference is 0 there).
