@@ -302,8 +302,9 @@ impl Search<'_, '_, '_> {
         (w, full)
     }
 
-    /// The positions of the deceleration sequence of [`Self::brakes`] from `h`, to rest (the
-    /// machine stays at the last one), or `None` where it does not reach rest.
+    /// The positions of the deceleration sequence from `h` of the first setting that reaches
+    /// rest (as [`Self::brakes`] finds it), to rest (the machine stays at the last one), or
+    /// `None` where none does.
     pub fn brake_points(&mut self, h: History) -> Option<Vec<PathPoint>> {
         (0..self.options.brakes.len()).find_map(|b| self.brake_points_with(h, b))
     }
@@ -330,15 +331,16 @@ impl Search<'_, '_, '_> {
         None
     }
 
+    /// [`Self::brakes`] from `h` continued by `p`.
     fn brakes_after(&mut self, h: &History, p: PathPoint) -> Option<usize> {
         let mut n = *h;
         n.push(p);
         self.brakes(n)
     }
 
-    /// Largest point up to `hi` after which the deceleration sequence reaches rest, searched
-    /// between the deceleration sequence's own next point (safe when `h` is) and `hi`; also
-    /// says whether that is `hi` itself.
+    /// Largest point up to `hi` after which a deceleration sequence reaches rest, searched
+    /// between the next point of the sequence that makes `h` safe and `hi`; also says whether
+    /// that is `hi` itself, and which setting's sequence makes the point safe.
     fn largest_safe(&mut self, h: &History, hi: PathPoint, cap_scale: f64) -> Option<(PathPoint, bool, usize)> {
         let resolution = 0.5f64.powi(self.options.bisections as i32);
         // Mostly the deceleration sequence itself is the largest safe choice, step after step:
@@ -351,8 +353,8 @@ impl Search<'_, '_, '_> {
             return Some((base, false, self.safe_brake));
         }
         if self.chord_ok(h.current(), &hi) {
-            if let Some(v) = self.brakes_after(h, hi) {
-                return Some((hi, true, v));
+            if let Some(b) = self.brakes_after(h, hi) {
+                return Some((hi, true, b));
             }
         }
         let cap = self.stepper.step_cap(h, cap_scale);
@@ -371,11 +373,11 @@ impl Search<'_, '_, '_> {
             let p = search.stepper.path.eval(base.w + f * width);
             let ok =
                 p.w > base.w && p.w < hi.w && search.stepper.feasible(h, &p, cap) && search.chord_ok(h.current(), &p);
-            let v = if ok { search.brakes_after(h, p) } else { None };
-            if let Some(v) = v {
-                *good = (p, v);
+            let safe_by = if ok { search.brakes_after(h, p) } else { None };
+            if let Some(b) = safe_by {
+                *good = (p, b);
             }
-            v.is_some()
+            safe_by.is_some()
         };
         if small_first {
             if test(self, resolution, &mut good) {
