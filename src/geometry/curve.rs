@@ -76,9 +76,11 @@ impl Nurbs {
         Self::from_flat(self.degree, 2 * self.dim, self.dim, self.knots, points, self.weights)
     }
 
+    /// The curve's evaluation view, in O(1): the data was validated in full at construction
+    /// and cannot change (private fields, no mutation), so only the counts are checked again.
+    /// Arc lengths and parameter searches take a view for every call.
     pub fn view(&self) -> CurveView<'_> {
-        // Validated at construction.
-        CurveView::new(self.degree, self.dim, &self.knots, &self.points, &self.weights)
+        CurveView::trusted(self.degree, self.dim, &self.knots, &self.points, &self.weights)
             .expect("Nurbs is validated at construction")
     }
 
@@ -149,12 +151,10 @@ impl Nurbs {
             points.extend_from_slice(self.control_point(i));
         }
         let weights: Vec<f64> = self.weights.iter().rev().copied().collect();
-        Nurbs {
-            knots,
-            points,
-            weights,
-            ..self.clone()
-        }
+        // Validated like any curve ([`Nurbs::view`] relies on it): mirrored knots stay clamped
+        // and non-decreasing, the points and weights are the same values.
+        Self::from_flat(self.degree, self.dim, self.tip_dim, knots, points, weights)
+            .expect("the reverse of a valid curve is valid")
     }
 }
 
