@@ -10,7 +10,7 @@ use common::{
 };
 use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::verify::{verify, Report, Row};
-use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan};
+use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan, BRAKES};
 use nurbs_motion::planner::{Limits, PathCurves};
 
 fn rows(plan: &VpopPlan, tip: usize) -> Vec<Row> {
@@ -53,6 +53,34 @@ fn trident_vpop_limits() {
     tighter.jerk = tighter.jerk.iter().map(|j| 0.99 * j).collect();
     let r = verify(&PathCurves::new(&tp), &tighter, &rows(&plan, 2));
     assert!(!r.violations.is_empty());
+}
+
+/// The trident at its limits with the first braking setting alone and no search back-off (VPOp
+/// before it tried several): a verified plan, but 0.27 s slower, because every state that this
+/// one deceleration sequence does not bring to rest counts as unsafe.
+#[test]
+fn one_braking_setting_brakes_earlier() {
+    let tp = example("trident.json");
+    let options = SearchOptions {
+        brakes: &BRAKES[..1],
+        search_backoff: 0.0,
+        ..SearchOptions::default()
+    };
+    let one = plan_tip(&tp, &trident_vpop(), options).unwrap();
+    check(&tp, &one);
+    let all = plan_tip(&tp, &trident_vpop(), SearchOptions::default()).unwrap();
+    eprintln!(
+        "trident VPOp limits: {:.3} s with one braking setting, {:.3} s with {}",
+        one.motion_time,
+        all.motion_time,
+        BRAKES.len()
+    );
+    assert!(
+        one.motion_time > all.motion_time + 0.2,
+        "{} vs {}",
+        one.motion_time,
+        all.motion_time
+    );
 }
 
 /// A straight line from rest to rest: ends exactly at the end point, and takes at least the

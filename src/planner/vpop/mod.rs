@@ -11,7 +11,7 @@ mod backtrack;
 pub mod constraints;
 pub mod path;
 
-pub use backtrack::{SearchOptions, SearchStats};
+pub use backtrack::{BrakeSetting, SearchOptions, SearchStats, BRAKES};
 pub use path::{JointPath, PathPoint};
 
 use crate::geometry::Toolpath;
