@@ -624,11 +624,17 @@ enum Where {
 trait Candidate {
     fn ok(&self) -> bool;
     fn duration(&self) -> f64;
+    /// Mean excess over the acceleration and jerk limits (eq. 22-23 sums): what the searches
+    /// minimise while no candidate passes.
+    fn violation(&self) -> f64;
 }
 
 impl Candidate for Trial {
     fn ok(&self) -> bool {
         self.ratio <= 1.0
+    }
+    fn violation(&self) -> f64 {
+        self.acc_violation + self.jerk_violation
     }
     fn duration(&self) -> f64 {
         self.duration
@@ -644,6 +650,9 @@ struct Quick {
 impl Candidate for Quick {
     fn ok(&self) -> bool {
         self.estimate.ratio <= 1.0
+    }
+    fn violation(&self) -> f64 {
+        self.estimate.acc_violation + self.estimate.jerk_violation
     }
     fn duration(&self) -> f64 {
         self.duration
@@ -817,17 +826,13 @@ const EXACT_CHORD_ABOVE: f64 = 0.3;
 /// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the
 /// paper's rules: violating vs violating, the smaller violation; both fine, the shorter; else
 /// the one without violation.
-fn golden<T: Candidate>(
-    upper: f64,
-    eval: &dyn Fn(f64) -> Option<T>,
-    violation: &dyn Fn(&T) -> f64,
-) -> Option<(f64, T)> {
+fn golden<T: Candidate>(upper: f64, eval: &dyn Fn(f64) -> Option<T>) -> Option<(f64, T)> {
     let g = (5f64.sqrt() + 1.0) / 2.0;
     let better = |a: &Option<T>, b: &Option<T>| -> bool {
         match (a, b) {
             (Some(x), Some(y)) => match (x.ok(), y.ok()) {
                 (true, true) => x.duration() <= y.duration(),
-                (false, false) => violation(x) <= violation(y),
+                (false, false) => x.violation() <= y.violation(),
                 (ok, _) => ok,
             },
             (Some(_), None) => true,
@@ -956,18 +961,14 @@ fn solve_segment(
             }
         }
         // Steps 3-7 on the estimate.
-        let by_jerk = golden(
-            ctx.jerk,
-            &|j| quick(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j)),
-            &|q| q.estimate.jerk_violation + q.estimate.acc_violation,
-        );
+        let by_jerk = golden(ctx.jerk, &|j| {
+            quick(ctx, from, v0, v1, both(ctx.accel, j), both(ctx.accel, j))
+        });
         let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
         let (a, estimated_ratio) = match by_jerk {
             Some((_, q)) if q.ok() => (ctx.accel, q.estimate.ratio),
-            _ => golden(ctx.accel, &|a| quick(ctx, from, v0, v1, both(a, j), both(a, j)), &|q| {
-                q.estimate.acc_violation + q.estimate.jerk_violation
-            })
-            .map_or((ctx.accel, f64::INFINITY), |(a, q)| (a, q.estimate.ratio)),
+            _ => golden(ctx.accel, &|a| quick(ctx, from, v0, v1, both(a, j), both(a, j)))
+                .map_or((ctx.accel, f64::INFINITY), |(a, q)| (a, q.estimate.ratio)),
         };
         if let Some(t) = trial(ctx, from, v0, v1, both(a, j), both(a, j)) {
             if t.ok() {
@@ -991,9 +992,7 @@ fn solve_segment(
                 return Ok((t.record, t.state));
             }
         }
-        let by_acc = golden(ctx.accel, &|a| trial(ctx, from, v0, v1, both(a, j), both(a, j)), &|t| {
-            t.acc_violation + t.jerk_violation
-        });
+        let by_acc = golden(ctx.accel, &|a| trial(ctx, from, v0, v1, both(a, j), both(a, j)));
         if let Some((_, t)) = by_acc {
             if t.ok() {
                 return Ok((t.record, t.state));
@@ -1021,7 +1020,6 @@ fn solve_segment(
 /// finer. A bend of a few micrometres met from rest needs a crawl (case 7406 of the property
 /// test: 0.03 % of the jerk limit), which neither end feed nor peak can give it.
 fn crawl_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Option<(f64, Trial)> {
-    let violation = |t: &Trial| t.jerk_violation + t.acc_violation;
     let search = |upper: f64| exact_jerk_search(ctx, from, v0, v1, upper);
     let mut upper = ctx.jerk;
     let mut best = search(upper);
@@ -1030,7 +1028,7 @@ fn crawl_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Opti
             Some((j, ref t)) if !t.ok() && j <= FINER_CELL * upper => {
                 upper *= FINER_CELL;
                 best = match (search(upper), best) {
-                    (Some(finer), Some(coarse)) if !finer.1.ok() && violation(&finer.1) > violation(&coarse.1) => {
+                    (Some(finer), Some(coarse)) if !finer.1.ok() && finer.1.violation() > coarse.1.violation() => {
                         Some(coarse)
                     }
                     (finer, coarse) => finer.or(coarse),
@@ -1049,9 +1047,7 @@ fn exact_jerk_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up
         accel: ctx.accel,
         jerk: j,
     };
-    golden(upper, &|j| trial(ctx, from, v0, v1, at(j), at(j)), &|t| {
-        t.jerk_violation + t.acc_violation
-    })
+    golden(upper, &|j| trial(ctx, from, v0, v1, at(j), at(j)))
 }
 
 /// Finer jerk searches of [`crawl_search`], each over this fraction of the range of the one
