@@ -81,12 +81,27 @@ impl ArcGrid {
 pub struct Estimate {
     /// Worst ratio of an axial value (or the chord error) to its limit.
     pub ratio: f64,
+    /// The same for the speed caps alone (axial velocity, chord error).
+    pub speed_ratio: f64,
     pub acc_violation: f64,
     pub jerk_violation: f64,
+    /// Whether every sample was looked at (see `Scope`); if not, `ratio` is above 1 but not
+    /// the worst, and the violations are partial.
+    pub complete: bool,
+}
+
+/// How much of a profile [`estimate`] looks at.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scope {
+    /// Every sample.
+    Full,
+    /// Up to the first sample over a limit: enough to tell whether the profile passes.
+    Verdict,
 }
 
 /// Estimates the axial peaks of `profile` starting at arc length `s_start`, sampled at
-/// `t_first + k dt` (local time), against `limits` scaled by `margin`.
+/// `t_first + k dt` (local time), against `limits` scaled by `margin`. The samples before a
+/// `Scope::Verdict` stops are computed exactly as in a full estimate.
 pub fn estimate(
     grid: &ArcGrid,
     limits: &Limits,
@@ -94,14 +109,17 @@ pub fn estimate(
     table: &SCurveTable,
     s_start: f64,
     t_first: f64,
+    scope: Scope,
 ) -> Estimate {
     let dt = limits.period;
     let tip = grid.tip;
     let eps = 0.9 * limits.chord_tolerance;
     let mut est = Estimate {
         ratio: 0.0,
+        speed_ratio: 0.0,
         acc_violation: 0.0,
         jerk_violation: 0.0,
+        complete: true,
     };
     let mut hint = grid.s.partition_point(|&x| x < s_start).saturating_sub(1);
     let total = table.total_time();
@@ -123,13 +141,20 @@ pub fn estimate(
             let acc = (x2 * st.v * st.v + x1 * st.a).abs() / (margin * limits.acceleration[a]);
             let jerk = (x3 * st.v * st.v * st.v + 3.0 * x2 * st.v * st.a + x1 * st.j).abs() / (margin * limits.jerk[a]);
             est.ratio = est.ratio.max(vel).max(acc).max(jerk);
+            est.speed_ratio = est.speed_ratio.max(vel);
             est.acc_violation += (acc - 1.0).max(0.0);
             est.jerk_violation += (jerk - 1.0).max(0.0);
             kappa2 += x2 * x2;
         }
         let step = st.v * dt;
-        est.ratio = est.ratio.max(kappa2.sqrt() * step * step / 8.0 / eps);
+        let chord = kappa2.sqrt() * step * step / 8.0 / eps;
+        est.ratio = est.ratio.max(chord);
+        est.speed_ratio = est.speed_ratio.max(chord);
         count += 1;
+        if scope == Scope::Verdict && est.ratio > 1.0 {
+            est.complete = false;
+            break;
+        }
     }
     let n = count.max(1) as f64;
     est.acc_violation /= n;
