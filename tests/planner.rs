@@ -7,7 +7,8 @@ mod common;
 
 use common::{example, plan_and_verify, random_cases, trident_vpop, try_plan_and_verify_with, Failure};
 use nurbs_motion::geometry::ArcLengthTable;
-use nurbs_motion::planner::flf::{critical_points, CriticalPointSearch, FlfScan};
+use nurbs_motion::geometry::Nurbs;
+use nurbs_motion::planner::flf::{critical_points, flf, CriticalPointSearch, FlfScan};
 use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
 
 const LAB_SETS: [(f64, f64, f64); 2] = [(2500.0, 1e4, 6e4), (2500.0, 1.5e4, 2e5)];
@@ -94,6 +95,61 @@ fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
             plan.first_record_time * 1e3,
             plan.plan_time * 1e3
         );
+    }
+}
+
+/// The scan evaluates each knot span of a curve of degree 3 or less as Taylor polynomials of
+/// its homogeneous form; its FLF samples agree with the FLF by the basis functions at the same
+/// parameters to rounding, on the bundled curves and on rational curves with uneven knots and
+/// weights 0.2-5. Above degree 3 it takes the basis functions, and the samples are equal.
+#[test]
+fn scan_samples_agree_with_the_flf_by_basis_functions() {
+    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let rational = |degree: usize| {
+        let cps: Vec<Vec<f64>> = (0..9)
+            .map(|i| {
+                let a = i as f64 * 0.7;
+                vec![40.0 * a.cos() + 3.0 * i as f64, 25.0 * (1.3 * a).sin()]
+            })
+            .collect();
+        let weights: Vec<f64> = (0..9)
+            .map(|i| [1.0, 0.2, 5.0, 0.7, 2.5, 1.0, 0.3, 4.0, 1.0][i])
+            .collect();
+        let interior = [0.05, 0.07, 0.3, 0.31, 0.6, 0.9, 0.95, 0.99];
+        let mut knots = vec![0.0; degree + 1];
+        knots.extend(&interior[..9 - degree - 1]);
+        knots.extend(vec![1.0; degree + 1]);
+        Nurbs::new(degree, knots, &cps, Some(weights)).unwrap()
+    };
+    let mut curves: Vec<(String, Nurbs)> = ["trident.json", "butterfly.json", "fan.json"]
+        .iter()
+        .map(|name| (name.to_string(), example(name).elements[0].curve.clone()))
+        .collect();
+    for degree in [1, 2, 3, 5] {
+        curves.push((format!("rational degree {degree}"), rational(degree)));
+    }
+    for (name, curve) in &curves {
+        let view = curve.view();
+        let scan = FlfScan::new(&view, 2, &limits, 500);
+        for (i, &u) in scan.u.iter().enumerate() {
+            let direct = flf(&view, 2, &limits, u);
+            let (value, speed) = (direct.value(), direct.speed_cap());
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-10 * b.abs().max(1e-9);
+            if view.degree() > 3 {
+                assert_eq!((scan.value[i], scan.speed[i]), (value, speed), "{name} at u = {u}");
+            } else {
+                assert!(
+                    close(scan.value[i], value),
+                    "{name} at u = {u}: {} vs {value}",
+                    scan.value[i]
+                );
+                assert!(
+                    close(scan.speed[i], speed),
+                    "{name} at u = {u}: {} vs {speed}",
+                    scan.speed[i]
+                );
+            }
+        }
     }
 }
 

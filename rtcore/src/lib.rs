@@ -16,6 +16,8 @@ pub mod records;
 pub mod scurve;
 
 pub use math::Vector;
-pub use nurbs::{basis_functions, CurveView, GeometryError, ValuesChecked, MAX_DEGREE, MAX_DERIV, MAX_DIM};
+pub use nurbs::{
+    basis_functions, CurveView, GeometryError, Homogeneous, ValuesChecked, MAX_DEGREE, MAX_DERIV, MAX_DIM,
+};
 pub use records::{PathBlock, RecordError, SegmentRecord, StopRun, BLOCK_SAMPLES};
 pub use scurve::{SCurve, SCurveState};

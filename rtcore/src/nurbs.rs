@@ -160,6 +160,14 @@ pub struct CurveView<'a> {
 /// Curve point and derivatives with respect to the parameter: `d[0] = C(u)`, `d[1] = C'(u)`, ...
 pub type Derivatives = [Vector; MAX_DERIV + 1];
 
+/// Derivatives of a curve's homogeneous form at a parameter: `coords[k]` the k-th derivative of
+/// the weighted coordinates, `weight[k]` that of the weight.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Homogeneous {
+    pub coords: [Vector; MAX_DERIV + 1],
+    pub weight: [f64; MAX_DERIV + 1],
+}
+
 impl<'a> CurveView<'a> {
     /// Validates the data (degree, dimension, clamped non-decreasing finite knots, finite
     /// coordinates, positive weights) and returns a view that can be evaluated. O(size of the
@@ -432,12 +440,18 @@ impl<'a> CurveView<'a> {
 
     fn derivatives_in_span(&self, u: f64, span: usize, order: usize) -> Derivatives {
         let order = order.min(MAX_DERIV);
+        self.rational(&self.homogeneous_in_span(u, span, order), order)
+    }
+
+    /// Derivatives up to `order` (≤ 3) of the homogeneous curve (weighted coordinates and
+    /// weight) at `u` on knot span `span` (as [`Self::find_span`] gives it):
+    /// A^(k) = sum N^(k) w P, w^(k) = sum N^(k) w.
+    pub fn homogeneous_in_span(&self, u: f64, span: usize, order: usize) -> Homogeneous {
+        let order = order.min(MAX_DERIV);
         let basis = self.basis_derivatives(span, u, order);
         let p = self.degree;
         let dim = self.dim;
-        // Homogeneous derivatives: A^(k) = sum N^(k) w P, w^(k) = sum N^(k) w.
-        let mut aw = [[0.0f64; MAX_DIM]; MAX_DERIV + 1];
-        let mut w = [0.0f64; MAX_DERIV + 1];
+        let mut h = Homogeneous::default();
         let kmax = order.min(p);
         for j in 0..=p {
             let i = span - p + j;
@@ -445,14 +459,21 @@ impl<'a> CurveView<'a> {
             let point = &self.points[i * dim..i * dim + dim];
             for k in 0..=kmax {
                 let nw = basis[k][j] * wi;
-                w[k] += nw;
-                for (acc, c) in aw[k].iter_mut().zip(point) {
+                h.weight[k] += nw;
+                for (acc, c) in h.coords[k].iter_mut().zip(point) {
                     *acc += nw * c;
                 }
             }
         }
+        h
+    }
+
+    /// Derivatives of the curve up to `order` (≤ 3) from those of its homogeneous form
+    /// (quotient rule, A4.2).
+    pub fn rational(&self, h: &Homogeneous, order: usize) -> Derivatives {
+        let (aw, w) = (&h.coords, &h.weight);
         let mut out = [[0.0f64; MAX_DIM]; MAX_DERIV + 1];
-        for k in 0..=order {
+        for k in 0..=order.min(MAX_DERIV) {
             let mut v = aw[k];
             for i in 1..=k {
                 let factor = binomial(k, i) * w[i];
@@ -460,7 +481,7 @@ impl<'a> CurveView<'a> {
                     *x -= factor * c;
                 }
             }
-            for x in v.iter_mut().take(dim) {
+            for x in v.iter_mut().take(self.dim) {
                 *x /= w[0];
             }
             out[k] = v;
