@@ -1,6 +1,8 @@
 #!/bin/bash
 # Plans every benchmark case with the release build, verifies each output with
 # `nurbs-plan verify`, and prints the README's table of motion and planning times.
+# Plan time is the median of RUNS runs (default 5): single runs on this shared machine vary by
+# 20 % and more.
 # Usage: scripts/figures.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
@@ -24,16 +26,23 @@ echo "| curve | limits | motion time (s) | / lower bound | / best known | plan t
 echo "|---|---|---|---|---|---|---|---|---|"
 for c in "${cases[@]}"; do
   IFS='|' read -r curve name lim lb best <<<"$c"
-  # shellcheck disable=SC2086
-  $bin plan examples/$curve.json $lim --out "$dir/o.csv" --summary "$dir/s.json" 2>/dev/null
+  for run in $(seq "${RUNS:-5}"); do
+    # shellcheck disable=SC2086
+    $bin plan examples/$curve.json $lim --out "$dir/o.csv" --summary "$dir/run$run.json" 2>/dev/null
+  done
   # shellcheck disable=SC2086
   if $bin verify "$dir/o.csv" examples/$curve.json $lim >/dev/null; then ok=pass; else ok=FAIL; fi
-  python3 - "$dir/s.json" "$curve" "$name" "$lb" "$best" "$ok" <<'PY'
-import json, sys
-s = json.load(open(sys.argv[1])); curve, name, lb, best, ok = sys.argv[2:7]
+  python3 - "$curve" "$name" "$lb" "$best" "$ok" "$dir"/run*.json <<'PY'
+import json, statistics, sys
+curve, name, lb, best, ok = sys.argv[1:6]
+runs = [json.load(open(f)) for f in sys.argv[6:]]
+s = runs[-1]
 t = s["motion_time_s"]
+assert all(r["motion_time_s"] == t for r in runs), "the runs planned different motions"
+plan = statistics.median(r["plan_time_s"] for r in runs)
 ratio = lambda x: f"{t / float(x):.2f}" if x else "-"
 jr = max(a / b for a, b in zip(s["max_axial_jerk"], s["limits"]["jerk"]))
-print(f"| {curve} | {name} | {t:.4f} | {ratio(lb)} | {ratio(best)} | {s['plan_time_s']*1e3:.1f} | {100*s['plan_time_s']/t:.1f} % | {jr:.4f} | {ok} |")
+print(f"| {curve} | {name} | {t:.4f} | {ratio(lb)} | {ratio(best)} | {plan*1e3:.1f} | {100*plan/t:.1f} % | {jr:.4f} | {ok} |")
 PY
+  rm -f "$dir"/run*.json
 done
