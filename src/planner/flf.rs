@@ -127,8 +127,8 @@ pub fn flf_of(x: &[Vector; 4], tip: usize, limits: &Limits) -> FlfValue {
 /// [`CurveView::derivatives`] to rounding.
 #[derive(Default)]
 struct SpanTaylor {
-    /// Span index and its parameter range; `None` before the first sample.
-    span: Option<(usize, f64, f64)>,
+    /// The span's parameter range; `None` before the first sample.
+    span: Option<(f64, f64)>,
     /// Derivatives of the homogeneous form at the span's start.
     at_start: Homogeneous,
 }
@@ -141,11 +141,11 @@ impl SpanTaylor {
         }
         let u = u.clamp(curve.u_min(), curve.u_max());
         let start = match self.span {
-            Some((_, start, end)) if u >= start && u < end => start,
+            Some((start, end)) if u >= start && u < end => start,
             _ => {
                 let span = curve.find_span(u);
                 let (start, end) = (curve.knots()[span], curve.knots()[span + 1]);
-                self.span = Some((span, start, end));
+                self.span = Some((start, end));
                 self.at_start = curve.homogeneous_in_span(start, span, MAX_DERIV);
                 start
             }
