@@ -1,11 +1,14 @@
 //! Planning time of the Erwinski planner per bundled curve at lab set 1: the time until the
 //! first record is final (the streaming planner's latency) and the time of the whole plan, in
 //! the same run. The motion time of each plan is printed so plan time / motion time can be
-//! read off, and a median of each time with their ratio.
+//! read off, and a median of each time with their ratio. As a baseline run in the same process,
+//! the time to replay the plan's records through the RK2-PC interpolator (the setpoints the
+//! machine gets): plan time / replay time does not drift with this shared machine's speed.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
+use nurbs_motion::planner::simulate::setpoints;
+use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions, Planner};
 use nurbs_motion::readers::read_toolpath;
 use std::path::Path;
 use std::time::Instant;
@@ -50,11 +53,15 @@ fn bench(c: &mut Criterion) {
         let full = median_ms(11, &|| {
             plan(tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
         });
+        let replay = median_ms(11, &|| {
+            setpoints(&PathCurves::new(tp), &limits, &p.records);
+        });
         println!(
             "{name}: motion time {:.4} s; median of 11: first record {first:.2} ms, whole plan {full:.2} ms, \
-             first / whole {:.1} %",
+             first / whole {:.1} %, replay {replay:.2} ms, whole plan / replay {:.2}",
             p.motion_time,
-            100.0 * first / full
+            100.0 * first / full,
+            full / replay
         );
     }
     let mut g = c.benchmark_group("first record (lab set 1)");
