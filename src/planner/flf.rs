@@ -41,18 +41,14 @@ impl FlfValue {
     }
 }
 
-/// Derivatives of the tool-tip coordinates with respect to arc length at `u` (Faa di Bruno with
-/// u_s = 1/g, u_ss = -(C'.C'')/g^4, u_sss = -(|C''|^2 + C'.C''')/g^5 + 4 (C'.C'')^2/g^7).
+/// Derivatives of the tool-tip coordinates with respect to arc length at `u`.
 pub fn arc_derivatives(curve: &CurveView, tip: usize, u: f64) -> [Vector; 4] {
-    arc_derivatives_and_speed(curve, tip, u).0
+    arc_from_parametric(&curve.derivatives(u, 3), tip).0
 }
 
-/// [`arc_derivatives`] and the parametric speed |C'(u)| they are scaled by.
-pub fn arc_derivatives_and_speed(curve: &CurveView, tip: usize, u: f64) -> ([Vector; 4], f64) {
-    arc_from_parametric(&curve.derivatives(u, 3), tip)
-}
-
-/// [`arc_derivatives_and_speed`] from the derivatives with respect to the parameter.
+/// Derivatives with respect to arc length from those with respect to the parameter `d` (Faa
+/// di Bruno with u_s = 1/g, u_ss = -(C'.C'')/g^4, u_sss = -(|C''|^2 + C'.C''')/g^5 +
+/// 4 (C'.C'')^2/g^7), and the parametric speed g = |C'(u)| they are scaled by.
 fn arc_from_parametric(d: &[Vector; 4], tip: usize) -> ([Vector; 4], f64) {
     let g2 = dot(&d[1], &d[1], tip);
     let g = g2.sqrt();

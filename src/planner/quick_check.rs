@@ -36,7 +36,7 @@ impl ArcGrid {
     }
 
     /// Appends the point at parameter `u` (above the last one), with its arc-length derivatives
-    /// `x` and parametric speed (from [`super::flf::arc_derivatives_and_speed`]).
+    /// `x` and parametric speed (as the FLF scan computes them).
     pub fn push(&mut self, u: f64, x: &[Vector; 4], speed: f64) {
         let tip = self.tip;
         let s = match self.s.last() {

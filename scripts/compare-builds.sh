@@ -1,0 +1,66 @@
+#!/bin/bash
+# Compares two builds of `nurbs-plan` (e.g. copies of target/release/nurbs-plan from two
+# commits): whether every bundled case plans the same setpoints bit for bit, the motion times,
+# `verify` on the second build's output; then the median plan time and time to the first
+# record (`--stream`) of RUNS alternate runs of each (default 11) at lab set 1. Alternate runs
+# share the machine's drift in speed, so their ratio is what to compare.
+# Usage: scripts/compare-builds.sh OLD_BINARY NEW_BINARY
+# shellcheck source=scripts/common.sh
+source "$(dirname "$0")/common.sh"
+old=$(realpath "$1")
+new=$(realpath "$2")
+cases=(
+  "butterfly.json|lab set 1|$lab1" "butterfly.json|lab set 2|$lab2"
+  "trident.json|lab set 1|$lab1" "trident.json|lab set 2|$lab2"
+  "fan.json|lab set 1|$lab1" "fan.json|lab set 2|$lab2"
+  "open_pocket.json|lab set 1|$lab1" "open_pocket.json|lab set 2|$lab2"
+  "fan_5axis.json|lab set 1|$lab1" "fan_5axis.json|lab set 2|$lab2"
+  "butterfly.json|F40 A500 J2e4|--feed 40 --accel 500 --jerk 2e4 --chord-tol 0.001 --period 0.00025"
+  "butterfly.json|F250 A2000 J2e4|--feed 250 --accel 2000 --jerk 2e4 --chord-tol 0.001 --period 0.00025"
+  "butterfly.json|F300 A2500 J5e4|--feed 300 --accel 2500 --jerk 5e4 --chord-tol 0.001 --period 0.00025"
+  "trident.json|VPOp limits|$vpop_limits"
+)
+for program in examples/*.ngc examples/*.dxf; do
+  cases+=("$(basename "$program")|lab set 1|$lab1")
+done
+motion() { python3 -c "import json, sys; print('%.4f' % json.load(open(sys.argv[1]))['motion_time_s'])" "$1"; }
+echo "| path | limits | setpoints | motion old (s) | motion new (s) | verify new |"
+echo "|---|---|---|---|---|---|"
+for c in "${cases[@]}"; do
+  IFS='|' read -r path name lim <<<"$c"
+  # shellcheck disable=SC2086
+  "$old" plan "examples/$path" $lim --out "$dir/old.csv" --summary "$dir/old.json" >/dev/null 2>&1
+  # shellcheck disable=SC2086
+  "$new" plan "examples/$path" $lim --out "$dir/new.csv" --summary "$dir/new.json" >/dev/null 2>&1
+  if cmp -s "$dir/old.csv" "$dir/new.csv"; then same=same; else same=DIFFER; fi
+  # shellcheck disable=SC2086
+  if "$new" verify "$dir/new.csv" "examples/$path" $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
+  echo "| $path | $name | $same | $(motion "$dir/old.json") | $(motion "$dir/new.json") | $ok |"
+done
+echo
+echo "| curve (lab set 1) | whole plan old / new (ms) | ratio | first record old / new (ms) | ratio |"
+echo "|---|---|---|---|---|"
+for curve in trident butterfly fan; do
+  for _ in $(seq "${RUNS:-11}"); do
+    for which in old new; do
+      bin=${!which}
+      # shellcheck disable=SC2086
+      "$bin" plan "examples/$curve.json" $lab1 --out "$dir/o.csv" --summary "$dir/whole.json" >/dev/null 2>&1
+      # shellcheck disable=SC2086
+      "$bin" plan "examples/$curve.json" $lab1 --stream --out "$dir/o.csv" --summary "$dir/stream.json" >/dev/null 2>&1
+      python3 -c "import json, sys; print(sys.argv[1], json.load(open(sys.argv[2]))['plan_time_s'], \
+json.load(open(sys.argv[3]))['first_segment_time_s'])" "$which" "$dir/whole.json" "$dir/stream.json"
+    done
+  done >"$dir/times.txt"
+  python3 - "$curve" "$dir/times.txt" <<'PY'
+import statistics, sys
+curve, path = sys.argv[1:3]
+times = {"old": ([], []), "new": ([], [])}
+for line in open(path):
+    which, whole, first = line.split()
+    times[which][0].append(float(whole) * 1e3)
+    times[which][1].append(float(first) * 1e3)
+(wo, fo), (wn, fn) = [tuple(statistics.median(x) for x in times[k]) for k in ("old", "new")]
+print(f"| {curve} | {wo:.1f} / {wn:.1f} | {wn / wo:.2f} | {fo:.2f} / {fn:.2f} | {fn / fo:.2f} |")
+PY
+done
