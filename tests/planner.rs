@@ -293,6 +293,17 @@ fn cases_refused_at_the_path_start_for_a_crawl_are_planned() {
     assert_planned_and_verified(&[2228, 7406, 9779]);
 }
 
+/// Case 6015: a 227 mm segment cruising at the programmed feed through a bend where the FLF's
+/// jerk cap is barely above it; the deceleration's first jerk phase began there. Its worst
+/// excess came at the peak, which neither lower end feeds nor gentler ramps cure, so the
+/// previous segments were asked, round after round, to end slower: the plan took 19 s and
+/// stopped the motion at the segment's start (11.97 s of motion), and with finer end-feed steps
+/// it was refused. An excess at the peak now lowers the peak (10.66 s, planned in 0.2 s).
+#[test]
+fn case_with_its_worst_excess_at_the_peak_is_planned() {
+    assert_planned_and_verified(&[6015]);
+}
+
 /// Each of `cases` of seed 20261122 plans and passes the checker.
 fn assert_planned_and_verified(cases: &[u64]) {
     for &case in cases {

@@ -24,6 +24,11 @@ pub struct AxialPeaks {
     pub jerk_violation: f64,
     pub vel_violation: f64,
     pub samples: usize,
+    /// The largest acceleration or jerk ratio to its limit of any sample and axis, and the path
+    /// speed at that sample: whether an excess comes with the highest feed of a profile tells
+    /// a lower peak from a gentler ramp as its cure.
+    pub worst_ramp_ratio: f64,
+    pub speed_at_worst: f64,
 }
 
 /// Rolling finite differences over a stream of positions.
@@ -60,6 +65,7 @@ impl FiniteDifferences {
         let [q3, q2, q1] = self.history;
         let dt = self.dt;
         let mut speed2 = 0.0;
+        let mut ramp_ratio: f64 = 0.0;
         for i in 0..n {
             let v0 = (p[i] - q1[i]) / dt;
             speed2 += v0 * v0;
@@ -72,11 +78,18 @@ impl FiniteDifferences {
             pk.vel[i] = pk.vel[i].max(v0.abs());
             pk.acc[i] = pk.acc[i].max(a0.abs());
             pk.jerk[i] = pk.jerk[i].max(j0.abs());
+            let (acc_ratio, jerk_ratio) = (a0.abs() / limits.acceleration[i], j0.abs() / limits.jerk[i]);
             pk.vel_violation += (v0.abs() / limits.velocity[i] - 1.0).max(0.0);
-            pk.acc_violation += (a0.abs() / limits.acceleration[i] - 1.0).max(0.0);
-            pk.jerk_violation += (j0.abs() / limits.jerk[i] - 1.0).max(0.0);
+            pk.acc_violation += (acc_ratio - 1.0).max(0.0);
+            pk.jerk_violation += (jerk_ratio - 1.0).max(0.0);
+            ramp_ratio = ramp_ratio.max(acc_ratio).max(jerk_ratio);
         }
-        self.peaks.feed = self.peaks.feed.max(speed2.sqrt());
+        let speed = speed2.sqrt();
+        if ramp_ratio > self.peaks.worst_ramp_ratio {
+            self.peaks.worst_ramp_ratio = ramp_ratio;
+            self.peaks.speed_at_worst = speed;
+        }
+        self.peaks.feed = self.peaks.feed.max(speed);
         self.peaks.samples += 1;
         self.history = [q2, q1, p];
     }
