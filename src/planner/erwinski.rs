@@ -43,7 +43,7 @@ impl Default for PlanOptions {
     fn default() -> Self {
         PlanOptions {
             samples_per_control_point: 500,
-            flf_margin: 0.9,
+            flf_margin: 0.95,
             start: None,
             stream: false,
         }
