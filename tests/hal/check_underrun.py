@@ -6,7 +6,7 @@
   --stop-from-acceleration (a stop from a path block's end, where the motion may still be
   accelerating) the feed may rise first, but once it falls it never rises again; with
   --any-stop (a stored stop sequence: the plan's next positions, then a deceleration) the feed
-  is not checked here, only by the limit check, and the last step may be up to J dt^2;
+  is not checked here, only by the limit check, and each axis's last step may be up to J dt^2;
 - underrun set, no fault, not done;
 - with --resumed (the samples after a planner re-planned from the stop point and the module got
   its resume command): the first resumed sample is where the stop ended (no jump), the motion ends
@@ -39,11 +39,17 @@ def main():
         elif falling and stop[k]["feed"] > stop[k - 1]["feed"] + 1e-9:
             errors.append(f"feed rises during the stop at sample {planned + k}")
             break
-    # The last moving sample's feed: a sampled S-curve ends below J dt^2 / 2; a stored sequence
-    # (VPOp's discrete stop) ends with a step whose feed is below J dt^2.
-    rest = a.jerk * a.period ** 2 / (1 if a.any_stop else 2)
+    # The last moving sample's feed: a sampled S-curve ends below J dt^2 / 2. A stored sequence
+    # (VPOp's discrete stop) ends with a step onto rest, whose jerk (step / dt^3) each axis must
+    # hold on its own: each axis's last step below J dt^2 (the path speed, their norm, may exceed
+    # that on a diagonal).
     last = samples[-1] if samples else None
-    if last is None or abs(last["feed"]) > rest:
+    if a.any_stop:
+        before = samples[-2] if len(samples) >= 2 else None
+        step = max(abs(last[c] - before[c]) for c in axes) / a.period if before else float("inf")
+        if step > a.jerk * a.period ** 2 * (1 + 1e-6):
+            errors.append(f"not at rest at the end: last axis step {step} mm/s over J dt^2")
+    elif last is None or abs(last["feed"]) > a.jerk * a.period ** 2 / 2:
         errors.append(f"not at rest at the end: feed {last and last['feed']}")
     if last is None or not last["underrun"] or last["fault"] or last["done"]:
         errors.append(f"end state: {last}")

@@ -2,8 +2,8 @@
 # A streamed plan that fails, in real LinuxCNC: nurbs-planner --stream on a curve the Erwinski
 # planner refuses at u = 0 (tests/hal/refused_stream.json, case 1246 of the property test, the
 # only one of its 10,000 curves still refused: over its first 1e-8 mm the sampled positions step
-# back and forth, an axial jerk only a crawl at 0.2 % of the jerk limit avoids, and the planner's
-# work budget runs out first, after some 15 s). The ones refused after records were final (208,
+# back and forth, an axial jerk only a crawl at 0.2 % of the jerk limit avoids; the planner
+# refuses it "even from its lowest start feed", after some 13 s). The ones refused after records were final (208,
 # 917, 4669) and 7406 all plan now.
 # The module is enabled on a running servo thread of the curve's period. nurbs-planner must
 # put nothing into the ring before the start rule holds, so the failure comes first: it exits
