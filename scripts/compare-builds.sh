@@ -9,17 +9,10 @@
 source "$(dirname "$0")/common.sh"
 old=$(realpath "$1")
 new=$(realpath "$2")
-cases=(
-  "butterfly.json|lab set 1|$lab1" "butterfly.json|lab set 2|$lab2"
-  "trident.json|lab set 1|$lab1" "trident.json|lab set 2|$lab2"
-  "fan.json|lab set 1|$lab1" "fan.json|lab set 2|$lab2"
-  "open_pocket.json|lab set 1|$lab1" "open_pocket.json|lab set 2|$lab2"
-  "fan_5axis.json|lab set 1|$lab1" "fan_5axis.json|lab set 2|$lab2"
-  "butterfly.json|F40 A500 J2e4|--feed 40 --accel 500 --jerk 2e4 --chord-tol 0.001 --period 0.00025"
-  "butterfly.json|F250 A2000 J2e4|--feed 250 --accel 2000 --jerk 2e4 --chord-tol 0.001 --period 0.00025"
-  "butterfly.json|F300 A2500 J5e4|--feed 300 --accel 2500 --jerk 5e4 --chord-tol 0.001 --period 0.00025"
-  "trident.json|VPOp limits|$vpop_limits"
-)
+cases=()
+for c in "${bench_cases[@]}"; do
+  cases+=("${c%%|*}.json|${c#*|}")
+done
 for program in examples/*.ngc examples/*.dxf; do
   cases+=("$(basename "$program")|lab set 1|$lab1")
 done

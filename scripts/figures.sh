@@ -6,26 +6,18 @@
 # Usage: scripts/figures.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
-cases=(
-  "butterfly|lab set 1|$lab1|2.404|3.163"
-  "butterfly|lab set 2|$lab2|1.609|"
-  "trident|lab set 1|$lab1|0.721|"
-  "trident|lab set 2|$lab2|0.483|"
-  "fan|lab set 1|$lab1|1.783|"
-  "fan|lab set 2|$lab2|1.194|"
-  "open_pocket|lab set 1 (tip)|$lab1||"
-  "open_pocket|lab set 2 (tip)|$lab2||"
-  "fan_5axis|lab set 1 (tip)|$lab1||"
-  "fan_5axis|lab set 2 (tip)|$lab2||"
-  "butterfly|F40 A500 J2e4|--feed 40 --accel 500 --jerk 2e4 --chord-tol 0.001 --period 0.00025||"
-  "butterfly|F250 A2000 J2e4|--feed 250 --accel 2000 --jerk 2e4 --chord-tol 0.001 --period 0.00025|3.512|4.562"
-  "butterfly|F300 A2500 J5e4|--feed 300 --accel 2500 --jerk 5e4 --chord-tol 0.001 --period 0.00025||"
-  "trident|VPOp limits|$vpop_limits|1.650|1.668"
+# Lower bound and best known plan (examples/CURVES.md), where there are.
+declare -A bounds=(
+  ["butterfly|lab set 1"]="2.404|3.163" ["butterfly|lab set 2"]="1.609|"
+  ["trident|lab set 1"]="0.721|" ["trident|lab set 2"]="0.483|"
+  ["fan|lab set 1"]="1.783|" ["fan|lab set 2"]="1.194|"
+  ["butterfly|F250 A2000 J2e4"]="3.512|4.562" ["trident|VPOp limits"]="1.650|1.668"
 )
 echo "| curve | limits | motion time (s) | / lower bound | / best known | plan time (ms) | plan / motion | max jerk / limit | verify |"
 echo "|---|---|---|---|---|---|---|---|---|"
-for c in "${cases[@]}"; do
-  IFS='|' read -r curve name lim lb best <<<"$c"
+for c in "${bench_cases[@]}"; do
+  IFS='|' read -r curve name lim <<<"$c"
+  IFS='|' read -r lb best <<<"${bounds[$curve|$name]:-|}"
   for run in $(seq "${RUNS:-5}"); do
     # shellcheck disable=SC2086
     $bin plan examples/$curve.json $lim --out "$dir/o.csv" --summary "$dir/run$run.json" 2>/dev/null

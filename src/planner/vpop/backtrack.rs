@@ -161,8 +161,14 @@ impl Search<'_, '_, '_> {
     }
 
     /// Does the deceleration sequence of setting `b` reach rest from `h`?
-    fn brakes_with(&mut self, mut h: History, b: usize) -> bool {
+    fn brakes_with(&mut self, h: History, b: usize) -> bool {
         self.stats.brakes += 1;
+        self.brake_sequence(h, b, None)
+    }
+
+    /// Runs the deceleration sequence of setting `b` from `h`: whether it reaches rest, its
+    /// positions appended to `points` where given (to rest: the machine stays at the last one).
+    fn brake_sequence(&mut self, mut h: History, b: usize, mut points: Option<&mut Vec<PathPoint>>) -> bool {
         let l = self.stepper.limits;
         let vmax = l.feed.max(l.velocity.iter().copied().fold(0.0, f64::max));
         let amin = l.min_accel();
@@ -173,13 +179,19 @@ impl Search<'_, '_, '_> {
             }
             self.stats.brake_steps += 1;
             let (target, jw) = self.brake_target(&h, b);
-            if self.finish_point(&h, jw).is_some() {
+            if let Some(p) = self.finish_point(&h, jw) {
                 // Checked to rest (three periods).
+                if let Some(points) = points.as_deref_mut() {
+                    points.push(p);
+                }
                 return true;
             }
             let Some(p) = self.brake_step_to(&h, target) else {
                 return false;
             };
+            if let Some(points) = points.as_deref_mut() {
+                points.push(p);
+            }
             h.push(p);
         }
         false
@@ -313,29 +325,10 @@ impl Search<'_, '_, '_> {
     /// rest (as [`Self::brakes`] finds it), to rest (the machine stays at the last one), or
     /// `None` where none does.
     pub fn brake_points(&mut self, h: History) -> Option<Vec<PathPoint>> {
-        (0..self.options.brakes.len()).find_map(|b| self.brake_points_with(h, b))
-    }
-
-    fn brake_points_with(&mut self, mut h: History, b: usize) -> Option<Vec<PathPoint>> {
-        let l = self.stepper.limits;
-        let vmax = l.feed.max(l.velocity.iter().copied().fold(0.0, f64::max));
-        let amin = l.min_accel();
-        let limit = (10.0 * (vmax / amin + amin / l.min_jerk()) / l.period) as usize + 100;
-        let mut points = Vec::new();
-        for _ in 0..limit.min(self.options.max_steps) {
-            if h.is_rest() {
-                return Some(points);
-            }
-            let (target, jw) = self.brake_target(&h, b);
-            if let Some(p) = self.finish_point(&h, jw) {
-                points.push(p);
-                return Some(points);
-            }
-            let p = self.brake_step_to(&h, target)?;
-            points.push(p);
-            h.push(p);
-        }
-        None
+        (0..self.options.brakes.len()).find_map(|b| {
+            let mut points = Vec::new();
+            self.brake_sequence(h, b, Some(&mut points)).then_some(points)
+        })
     }
 
     /// [`Self::brakes`] from `h` continued by `p`.
