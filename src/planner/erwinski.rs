@@ -933,11 +933,12 @@ fn duration(ctx: &SegmentContext, v0: f64, v1: f64, ramp: Ramp) -> Option<f64> {
 /// Factors applied to the end feed when a segment cannot be made to fit (step 8), one per
 /// lowering in turn, the last repeated: fine steps first, since the highest end feed that fits
 /// is often a few percent below the first one tried, coarser ones after, to reach low feeds in
-/// few attempts (a constant 0.8 made the bundled plans 1.5-7 % longer).
+/// few attempts (a constant 0.8 made the bundled plans up to 5 % longer).
 const END_FEED_STEPS: [f64; 4] = [0.95, 0.9, 0.85, 0.8];
 /// Factor applied to the start feed asked of the previous segment when even a stop at the end
-/// fails (step 9), and to the peak of a segment from rest to rest.
+/// fails (step 9).
 const START_FEED_STEP: f64 = 0.9;
+/// Factor applied to the peak of a segment from rest to rest ([`lower_peak_at_rest`]).
 const PEAK_STEP: f64 = 0.8;
 
 /// The end feed after the `lowerings`-th lowering (counted from 0) of `v1`; a crawl becomes a
