@@ -14,6 +14,7 @@ use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::{Interpolator, Step};
 use nurbs_rtcore::interp::{fcp_eval, rk2pc_step, sot_step, tot_step, PathCursor};
+use nurbs_rtcore::{CachedCurve, SpanCache};
 use std::hint::black_box;
 use std::path::Path;
 
@@ -47,11 +48,13 @@ fn error_table(curve: &Nurbs, s: &[f64]) {
         println!("| {name} | {:.3e} | {:.3e} |", sq / n, acc);
     };
     println!("| method | mean squared error per step (mm^2) | accumulated error, sum of abs (mm) |\n|---|---|---|");
-    let start = PathCursor::at(&view, 2, curve.u_min(), 0.0);
+    let mut spans = SpanCache::new();
+    let cached = &mut CachedCurve::new(view, &mut spans);
+    let start = PathCursor::at(cached, 2, curve.u_min(), 0.0);
     let mut cur = start;
     let mut us = vec![cur.u];
     for &t in &s[1..] {
-        cur = rk2pc_step(&view, 2, &cur, t);
+        cur = rk2pc_step(cached, 2, &cur, t);
         us.push(cur.u);
     }
     report("RK2-PC", &us);
@@ -60,9 +63,9 @@ fn error_table(curve: &Nurbs, s: &[f64]) {
         let mut us = vec![cur.u];
         for j in 1..s.len() {
             cur = if third {
-                tot_step(&view, 2, &cur, s[j] - s[j - 1])
+                tot_step(cached, 2, &cur, s[j] - s[j - 1])
             } else {
-                sot_step(&view, 2, &cur, s[j] - s[j - 1])
+                sot_step(cached, 2, &cur, s[j] - s[j - 1])
             };
             us.push(cur.u);
         }
@@ -100,31 +103,41 @@ fn bench(c: &mut Criterion) {
     let first = s.len() / 4;
     let stretch = &s[first..first + 1000];
     let table = ArcLengthTable::new(&curve);
-    let start = PathCursor::at(&view, 2, table.parameter_at(&curve, stretch[0]), stretch[0]);
+    // Each method keeps its span cache across iterations, as the servo thread does.
+    let mut spans = SpanCache::new();
+    let start = PathCursor::at(
+        &mut CachedCurve::new(view, &mut spans),
+        2,
+        table.parameter_at(&curve, stretch[0]),
+        stretch[0],
+    );
     let mut g = c.benchmark_group("interpolation step (1000 steps)");
     g.bench_function("RK2-PC", |b| {
         b.iter(|| {
+            let curve = &mut CachedCurve::new(view, &mut spans);
             let mut cur = start;
             for &t in &stretch[1..] {
-                cur = rk2pc_step(&view, 2, &cur, t);
+                cur = rk2pc_step(curve, 2, &cur, t);
             }
             black_box(cur)
         })
     });
     g.bench_function("SOT", |b| {
         b.iter(|| {
+            let curve = &mut CachedCurve::new(view, &mut spans);
             let mut cur = start;
             for w in stretch.windows(2) {
-                cur = sot_step(&view, 2, &cur, w[1] - w[0]);
+                cur = sot_step(curve, 2, &cur, w[1] - w[0]);
             }
             black_box(cur)
         })
     });
     g.bench_function("TOT", |b| {
         b.iter(|| {
+            let curve = &mut CachedCurve::new(view, &mut spans);
             let mut cur = start;
             for w in stretch.windows(2) {
-                cur = tot_step(&view, 2, &cur, w[1] - w[0]);
+                cur = tot_step(curve, 2, &cur, w[1] - w[0]);
             }
             black_box(cur)
         })
@@ -132,10 +145,11 @@ fn bench(c: &mut Criterion) {
     let coeffs = fit_fcp(&curve, &table, stretch[0], stretch[999]);
     g.bench_function("FCP", |b| {
         b.iter(|| {
+            let curve = &mut CachedCurve::new(view, &mut spans);
             let mut acc = 0.0;
             for &t in stretch {
                 let u = fcp_eval(&coeffs, (t - stretch[0]) / (stretch[999] - stretch[0]));
-                acc += view.point(u)[0];
+                acc += curve.point(u)[0];
             }
             black_box(acc)
         })

@@ -205,6 +205,9 @@ impl CurveSet for RtGeometry {
     fn tip_axes(&self) -> usize {
         self.tip
     }
+    fn generation(&self) -> u64 {
+        u64::from(self.generation)
+    }
 }
 
 /// Where the machine stands after a hold or underrun stop (what a resumed plan must start from).
@@ -1045,6 +1048,10 @@ impl Instance {
             self.fault = FaultCode::BlockPath;
             return false;
         };
+        let Some(point) = self.interp.point_at(&self.geometry, curve, u) else {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        };
         // On the same curve onwards from the last position, or at the start of a run on the
         // next curve (across the join), where the run gives the step's start in its measure.
         let s_before = c.run_s_before.take().unwrap_or(p.s);
@@ -1057,7 +1064,7 @@ impl Instance {
             curve,
             u,
             s,
-            point: view.point(u),
+            point,
             feed: 0.0,
             accel: 0.0,
         };
@@ -1137,11 +1144,14 @@ impl Instance {
         let p = self.player;
         let b = &p.block;
         let k = p.index;
-        let (Some(&u), Some(&s), Some(view)) = (b.u.get(k), b.s.get(k), self.geometry.curve(b.curve())) else {
+        let (Some(&u), Some(&s)) = (b.u.get(k), b.s.get(k)) else {
             self.fault = FaultCode::BlockPath;
             return false;
         };
-        let point = view.point(u);
+        let Some(point) = self.interp.point_at(&self.geometry, b.curve(), u) else {
+            self.fault = FaultCode::BlockPath;
+            return false;
+        };
         let mut sample = Sample {
             curve: b.curve(),
             u,

@@ -25,7 +25,7 @@ use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions, Planner};
 use nurbs_rtcore::executor::{Interpolator, Step};
-use nurbs_rtcore::StopRun;
+use nurbs_rtcore::{CachedCurve, SpanCache, StopRun};
 
 /// Stop deceleration and jerk tried at each boundary, as fractions of the smallest axis
 /// acceleration and jerk, largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
@@ -818,10 +818,13 @@ pub fn choose_block_stops(
     let mut last_passed = 0;
     let mut in_stored_run = false;
     let mut brakes = BrakeMemo::default();
+    // The module's evaluation of a block's points (see `Interpolator::point_at`).
+    let mut spans = SpanCache::new();
     for b in blocks.iter_mut() {
-        let view = curves.view(b.curve());
+        let view = *curves.view(b.curve());
+        let curve = &mut CachedCurve::new(view, &mut spans);
         for &u in &b.u[..b.len()] {
-            fd.push(&view.point(u)[..tip], limits);
+            fd.push(&curve.point(u)[..tip], limits);
         }
         end += b.len();
         let curve_points = stop_points.get(b.curve()).map_or(&[][..], Vec::as_slice);
@@ -1126,8 +1129,10 @@ fn stored_stop(
     let tip = limits.velocity.len();
     let mut f = fd;
     f.reset_peaks();
+    let mut spans = SpanCache::new();
     for p in &points {
-        f.push(&curves.view(p.element).point(p.u)[..tip], limits);
+        let point = CachedCurve::new(*curves.view(p.element), &mut spans).point(p.u);
+        f.push(&point[..tip], limits);
     }
     f.finish(limits);
     let ratio = f.worst_ratio(limits);

@@ -10,6 +10,7 @@ use crate::interp::{rk2pc_step, PathCursor};
 use crate::nurbs::CurveView;
 use crate::records::SegmentRecord;
 use crate::scurve::SCurveTable;
+use crate::span_cache::{CachedCurve, SpanCache};
 use crate::Vector;
 
 pub use crate::nurbs::Derivatives as Derivs;
@@ -19,6 +20,11 @@ pub trait CurveSet {
     fn curve(&self, index: usize) -> Option<CurveView<'_>>;
     /// Number of tool-tip coordinates (the rest of a 6-D curve is the tool-axis top curve).
     fn tip_axes(&self) -> usize;
+    /// Changes whenever curve data may have been rewritten in place (the interpolator's
+    /// [`SpanCache`] is keyed by where the data lies).
+    fn generation(&self) -> u64 {
+        0
+    }
 }
 
 /// One interpolated setpoint.
@@ -57,6 +63,8 @@ pub struct Interpolator {
     t_local: f64,
     loaded: bool,
     finished: bool,
+    /// Taylor data of the knot spans in use (results never depend on it, see [`SpanCache`]).
+    spans: SpanCache,
 }
 
 /// A record ending at or below this feed (mm/s) ends at rest.
@@ -106,6 +114,15 @@ impl Interpolator {
         }
     }
 
+    /// The point of curve `index` at `u`, evaluated as the samples are (so that a position
+    /// taken from elsewhere on the path, e.g. a stored stop's, meets them without a rounding
+    /// step); `None` if the curve does not exist.
+    pub fn point_at<C: CurveSet + ?Sized>(&mut self, curves: &C, index: usize, u: f64) -> Option<Vector> {
+        let view = curves.curve(index)?;
+        self.spans.use_generation(curves.generation());
+        Some(CachedCurve::new(view, &mut self.spans).point(u))
+    }
+
     fn load<C: CurveSet + ?Sized>(&mut self, curves: &C, record: SegmentRecord, t_local: f64) -> bool {
         let index = record.curve();
         // At a stop the machine is at rest exactly at the record's start: place the cursor there
@@ -113,7 +130,9 @@ impl Interpolator {
         let at_rest = self.ends_at_rest();
         if !self.loaded || index != self.curve || at_rest {
             let Some(view) = curves.curve(index) else { return false };
-            self.cursor = PathCursor::at(&view, curves.tip_axes(), record.u_start, record.s_start);
+            self.spans.use_generation(curves.generation());
+            let curve = &mut CachedCurve::new(view, &mut self.spans);
+            self.cursor = PathCursor::at(curve, curves.tip_axes(), record.u_start, record.s_start);
             self.curve = index;
         }
         self.record = record;
@@ -137,7 +156,9 @@ impl Interpolator {
     ) -> bool {
         let index = record.curve();
         let Some(view) = curves.curve(index) else { return false };
-        self.cursor = PathCursor::at(&view, curves.tip_axes(), record.u_start, record.s_start);
+        self.spans.use_generation(curves.generation());
+        let curve = &mut CachedCurve::new(view, &mut self.spans);
+        self.cursor = PathCursor::at(curve, curves.tip_axes(), record.u_start, record.s_start);
         self.curve = index;
         self.record = record;
         self.table = table;
@@ -190,16 +211,18 @@ impl Interpolator {
         let Some(view) = curves.curve(self.curve) else {
             return Step::BadRecord;
         };
+        self.spans.use_generation(curves.generation());
+        let curve = &mut CachedCurve::new(view, &mut self.spans);
         let mut state = self.table.state_at(t);
         let s_target = self.record.s_start + state.s;
         if self.record.is_last() && t >= self.table.total_time() {
             // End of the path: land exactly on the end parameter, at rest (the profile's end
             // feed is zero up to rounding).
-            self.cursor = PathCursor::at(&view, curves.tip_axes(), self.record.u_end, s_target);
+            self.cursor = PathCursor::at(curve, curves.tip_axes(), self.record.u_end, s_target);
             self.finished = true;
             (state.v, state.a) = (0.0, 0.0);
         } else {
-            self.cursor = rk2pc_step(&view, curves.tip_axes(), &self.cursor, s_target);
+            self.cursor = rk2pc_step(curve, curves.tip_axes(), &self.cursor, s_target);
         }
         self.t_local = t;
         Step::Sample(Sample {

@@ -21,7 +21,8 @@
 //! polynomial) are the comparison methods of the paper's Table I.
 
 use crate::math::{dot, norm, Vector};
-use crate::nurbs::{CurveView, Derivatives};
+use crate::nurbs::Derivatives;
+use crate::span_cache::CachedCurve;
 
 /// Where the interpolator is on the curve after a period.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -46,7 +47,7 @@ const MIN_SPEED: f64 = 1e-12;
 
 impl PathCursor {
     /// Cursor at parameter `u`, taken to be at arc length `s`.
-    pub fn at(curve: &CurveView, tip_axes: usize, u: f64, s: f64) -> Self {
+    pub fn at(curve: &mut CachedCurve, tip_axes: usize, u: f64, s: f64) -> Self {
         let d = curve.derivatives(u, 2);
         let speed = norm(&d[1], tip_axes);
         PathCursor {
@@ -60,7 +61,7 @@ impl PathCursor {
 }
 
 #[inline]
-fn speed_at(curve: &CurveView, tip_axes: usize, u: f64) -> f64 {
+fn speed_at(curve: &mut CachedCurve, tip_axes: usize, u: f64) -> f64 {
     norm(&curve.derivatives(u, 1)[1], tip_axes)
 }
 
@@ -89,15 +90,22 @@ fn slope_of_speed(first: &Vector, second: &Vector, speed: f64, tip_axes: usize) 
 /// 1 + (1 + MAX_CORRECTIONS) (3 MAX_PANELS - 1) = 540 evaluations of at most two derivatives
 /// (a measurement evaluates the end, MAX_PANELS midpoints and both sides of up to
 /// MAX_PANELS - 1 knots), plus constant work.
-pub fn rk2pc_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64) -> PathCursor {
+pub fn rk2pc_step(curve: &mut CachedCurve, tip_axes: usize, cur: &PathCursor, s_target: f64) -> PathCursor {
     step_to(curve, tip_axes, cur, s_target, true)
 }
 
 /// [`rk2pc_step`]; `expand_correction = false` always takes the robust corrector (tests compare
 /// the two).
 #[inline(always)]
-fn step_to(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64, expand_correction: bool) -> PathCursor {
-    let (u_lo, u_hi) = (curve.u_min(), curve.u_max());
+fn step_to(
+    curve: &mut CachedCurve,
+    tip_axes: usize,
+    cur: &PathCursor,
+    s_target: f64,
+    expand_correction: bool,
+) -> PathCursor {
+    let view = curve.view();
+    let (u_lo, u_hi) = (view.u_min(), view.u_max());
     let ds = s_target - cur.s;
     if ds == 0.0 {
         return PathCursor { s: s_target, ..*cur };
@@ -118,10 +126,10 @@ fn step_to(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64, 
     // Arc length actually covered by the prediction, by Simpson's rule, piecewise over the knot
     // spans crossed: at a knot |C'| may have a kink or (C0 knot, e.g. two collinear lines of a
     // rational polyline) a jump, which a single Simpson panel across it would misjudge.
-    let knots = curve.knots();
-    let first_knot = curve.find_span(cur.u) + 1;
-    let simpson = |u: f64, end_speed: f64| {
-        let panel = |a: f64, b: f64, speed_a: f64, speed_b: f64| {
+    let knots = view.knots();
+    let first_knot = view.find_span(cur.u) + 1;
+    let simpson = |curve: &mut CachedCurve, u: f64, end_speed: f64| {
+        let panel = |curve: &mut CachedCurve, a: f64, b: f64, speed_a: f64, speed_b: f64| {
             (b - a) / 6.0 * (speed_a + 4.0 * speed_at(curve, tip_axes, 0.5 * (a + b)) + speed_b)
         };
         let (mut a, mut speed_a, mut total) = (cur.u, cur.speed, 0.0);
@@ -130,17 +138,18 @@ fn step_to(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64, 
         // within one period) the last panel spans the rest.
         while k < knots.len() && knots[k] < u && knots[k] > a && k < first_knot + MAX_PANELS - 1 {
             let b = knots[k];
-            total += panel(a, b, speed_a, norm(&curve.derivatives_left(b, 1)[1], tip_axes));
+            let speed_b = norm(&curve.derivatives_left(b, 1)[1], tip_axes);
+            total += panel(curve, a, b, speed_a, speed_b);
             a = b;
             speed_a = speed_at(curve, tip_axes, b);
             k += 1;
         }
-        total + panel(a, u, speed_a, end_speed)
+        total + panel(curve, a, u, speed_a, end_speed)
     };
     let mut d = curve.derivatives(u_pred, 2);
     let mut u = u_pred;
     let mut speed = norm(&d[1], tip_axes);
-    let mut covered = simpson(u, speed);
+    let mut covered = simpson(curve, u, speed);
     let span_end = knots.get(first_knot).copied().unwrap_or(u_hi);
     if expand_correction {
         if let Some(next) = taylor_correction(cur, u_pred, &d, covered, ds, span_end, tip_axes) {
@@ -170,7 +179,7 @@ fn step_to(curve: &CurveView, tip_axes: usize, cur: &PathCursor, s_target: f64, 
         };
         d = curve.derivatives(u, 2);
         speed = norm(&d[1], tip_axes);
-        covered = simpson(u, speed);
+        covered = simpson(curve, u, speed);
     }
     // The next step aims at its own target from the arc length actually reached, so the
     // corrector's residual never accumulates along the path.
@@ -256,16 +265,16 @@ const MAX_PANELS: usize = 4;
 const MAX_CORRECTIONS: usize = 48;
 
 /// Second-order Taylor step of u(s) by the arc-length increment `ds`.
-pub fn sot_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {
+pub fn sot_step(curve: &mut CachedCurve, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {
     taylor_step(curve, tip_axes, cur, ds, false)
 }
 
 /// Third-order Taylor step of u(s) by the arc-length increment `ds`.
-pub fn tot_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {
+pub fn tot_step(curve: &mut CachedCurve, tip_axes: usize, cur: &PathCursor, ds: f64) -> PathCursor {
     taylor_step(curve, tip_axes, cur, ds, true)
 }
 
-fn taylor_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64, third: bool) -> PathCursor {
+fn taylor_step(curve: &mut CachedCurve, tip_axes: usize, cur: &PathCursor, ds: f64, third: bool) -> PathCursor {
     let d = curve.derivatives(cur.u, if third { 3 } else { 2 });
     let g2 = dot(&d[1], &d[1], tip_axes).max(MIN_SPEED * MIN_SPEED);
     let g = g2.sqrt_rt();
@@ -279,7 +288,7 @@ fn taylor_step(curve: &CurveView, tip_axes: usize, cur: &PathCursor, ds: f64, th
         let u_sss = -(c22 + c13) / g5 + 4.0 * c12 * c12 / (g5 * g2);
         du += ds * ds * ds * u_sss / 6.0;
     }
-    let u = (cur.u + du).clamp(curve.u_min(), curve.u_max());
+    let u = (cur.u + du).clamp(curve.view().u_min(), curve.view().u_max());
     let e = curve.derivatives(u, 1);
     PathCursor {
         u,
@@ -316,6 +325,8 @@ impl SqrtRt for f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nurbs::CurveView;
+    use crate::span_cache::SpanCache;
 
     /// Arc length from the curve start to `u`: 5-point Gauss-Legendre on 64 pieces per knot
     /// span (|C'| is smooth inside a span), exact to rounding for these curves.
@@ -359,15 +370,17 @@ mod tests {
     /// agrees with the evaluated one: same `u`, honest `s`, the point and speed of its `u`.
     /// Returns how many steps there were and how many took the expansion (differ from the
     /// robust corrector's result).
-    fn walk(curve: &CurveView, ds0: f64, growth: f64) -> (usize, usize) {
-        let total = length_to(curve, curve.u_max());
-        let mut cur = PathCursor::at(curve, 2, curve.u_min(), 0.0);
+    fn walk(view: &CurveView, ds0: f64, growth: f64) -> (usize, usize) {
+        let mut cache = SpanCache::new();
+        let curve = &mut CachedCurve::new(*view, &mut cache);
+        let total = length_to(view, view.u_max());
+        let mut cur = PathCursor::at(curve, 2, view.u_min(), 0.0);
         let (mut ds, mut steps, mut expanded) = (ds0, 0, 0);
         while cur.s + ds < total {
             let target = cur.s + ds;
             let next = rk2pc_step(curve, 2, &cur, target);
             let robust = step_to(curve, 2, &cur, target, false);
-            let covered = length_to(curve, next.u) - length_to(curve, cur.u);
+            let covered = length_to(view, next.u) - length_to(view, cur.u);
             assert!(
                 (covered - ds).abs() <= 1e-8 * ds + 1e-12,
                 "step {steps}: {covered} for {ds}"
@@ -399,7 +412,7 @@ mod tests {
         }
         // A target beyond the end stops at the end with the arc length actually reached.
         let last = rk2pc_step(curve, 2, &cur, total + 1.0);
-        assert_eq!(last.u, curve.u_max());
+        assert_eq!(last.u, view.u_max());
         assert!((last.s - total).abs() <= 1e-6 * (total - cur.s));
         (steps, expanded)
     }
@@ -445,11 +458,13 @@ mod tests {
         let knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
         let points = [0.0, 0.0, 40.0, 60.0, 80.0, 0.0];
         let curve = CurveView::new(2, 2, &knots, &points, &[1.0; 3]).unwrap();
+        let mut cache = SpanCache::new();
+        let cached = &mut CachedCurve::new(curve, &mut cache);
         let cur = PathCursor {
             speed_slope: 0.0,
-            ..PathCursor::at(&curve, 2, 0.3, length_to(&curve, 0.3))
+            ..PathCursor::at(cached, 2, 0.3, length_to(&curve, 0.3))
         };
-        let next = rk2pc_step(&curve, 2, &cur, cur.s + 0.5);
+        let next = rk2pc_step(cached, 2, &cur, cur.s + 0.5);
         assert!((length_to(&curve, next.u) - (cur.s + 0.5)).abs() <= 1e-10);
         assert!((next.s - (cur.s + 0.5)).abs() <= 1e-12);
     }

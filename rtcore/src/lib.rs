@@ -14,6 +14,7 @@ pub mod math;
 pub mod nurbs;
 pub mod records;
 pub mod scurve;
+pub mod span_cache;
 
 pub use math::Vector;
 pub use nurbs::{
@@ -21,3 +22,4 @@ pub use nurbs::{
 };
 pub use records::{PathBlock, RecordError, SegmentRecord, StopRun, BLOCK_SAMPLES};
 pub use scurve::{SCurve, SCurveState};
+pub use span_cache::{CachedCurve, SpanCache};

@@ -687,6 +687,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     let (period, feed) = (ctx.limits.period, ctx.limits.feed);
     let mut worst_speed = (0.0f64, ctx.node_start.start_u, 0.0, 0usize);
     let mut count = 0usize;
+    let mut probe_spans = nurbs_rtcore::SpanCache::new();
     let sink = &mut |s: &nurbs_rtcore::executor::Sample| {
         if let Some(p) = prev {
             let mut ratio = 0.0f64;
@@ -699,7 +700,8 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
             ratio = ratio.max(step2.sqrt() / period / feed);
             if p.curve == s.curve && s.u > p.u {
                 if let Some(view) = ctx.curves.curve(s.curve) {
-                    let r = sagitta(&view, tip, &p, s, eps) / eps;
+                    let curve = &mut nurbs_rtcore::CachedCurve::new(view, &mut probe_spans);
+                    let r = sagitta(curve, tip, &p, s, eps) / eps;
                     chord_ratio = chord_ratio.max(r);
                     ratio = ratio.max(r.sqrt());
                 }
@@ -726,7 +728,10 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     if state.interp.ends_at_rest() {
         let node = ctx.node_end;
         let view = ctx.curves.curve(node.start_curve)?;
-        let cursor = nurbs_rtcore::interp::PathCursor::at(&view, tip, node.start_u, node.start_s);
+        // As the interpolator places itself there (its evaluation does not depend on its cache).
+        let mut spans = nurbs_rtcore::SpanCache::new();
+        let curve = &mut nurbs_rtcore::CachedCurve::new(view, &mut spans);
+        let cursor = nurbs_rtcore::interp::PathCursor::at(curve, tip, node.start_u, node.start_s);
         let at_node = nurbs_rtcore::executor::Sample {
             curve: node.start_curve,
             u: cursor.u,
@@ -808,16 +813,17 @@ fn quick(
 /// the parametrisation is uneven across the step (near-repeated control points); where they
 /// come near the tolerance `eps`, the step is measured as `verify` measures it.
 fn sagitta(
-    view: &nurbs_rtcore::CurveView,
+    curve: &mut nurbs_rtcore::CachedCurve,
     tip: usize,
     a: &nurbs_rtcore::executor::Sample,
     b: &nurbs_rtcore::executor::Sample,
     eps: f64,
 ) -> f64 {
-    let probe = |f: f64| super::verify::distance_to_chord(&view.point(a.u + f * (b.u - a.u)), &a.point, &b.point, tip);
+    let mut probe =
+        |f: f64| super::verify::distance_to_chord(&curve.point(a.u + f * (b.u - a.u)), &a.point, &b.point, tip);
     let probed = probe(0.5).max(probe(0.25)).max(probe(0.75));
     if probed > EXACT_CHORD_ABOVE * eps {
-        super::verify::chord_error(view, tip, a.u, b.u, &a.point, &b.point)
+        super::verify::chord_error(&curve.view(), tip, a.u, b.u, &a.point, &b.point)
     } else {
         probed
     }
@@ -962,7 +968,7 @@ fn solve_segment(
     v1_target: f64,
     from: &SimState,
 ) -> Result<(SegmentRecord, SimState), SegmentFailure> {
-    let both = |accel: f64, jerk: f64| Ramp { accel, jerk };
+    let both = Ramp::new;
     let mut local = *ctx;
     let ctx = &mut local;
     let mut v1 = v1_target.min(reachable_feed(v0, ctx.length, ctx.accel, ctx.jerk, v1_target));
@@ -1158,10 +1164,7 @@ fn crawl_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Opti
 /// The golden-section search of the jerk over `(0, upper]` on exact trials, the acceleration
 /// nominal (steps 5-6).
 fn exact_jerk_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, upper: f64) -> Option<(f64, Trial)> {
-    let at = |j: f64| Ramp {
-        accel: ctx.accel,
-        jerk: j,
-    };
+    let at = |j: f64| Ramp::new(ctx.accel, j);
     golden(upper, &|j| duration(ctx, v0, v1, at(j)), &|j, _| {
         trial(ctx, from, v0, v1, at(j), at(j))
     })

@@ -11,7 +11,7 @@
 
 use super::Limits;
 use nurbs_rtcore::math::dot;
-use nurbs_rtcore::{CurveView, Homogeneous, Vector, MAX_DERIV};
+use nurbs_rtcore::{CachedCurve, CurveView, SpanCache, Vector};
 
 /// Fraction of the chord tolerance the planner plans for: its per-period check measures the
 /// sagitta at the middle parameter only, `verify` searches the whole step for the largest one.
@@ -116,57 +116,6 @@ pub fn flf_of(x: &[Vector; 4], tip: usize, limits: &Limits) -> FlfValue {
     v
 }
 
-/// The homogeneous curve on one knot span as Taylor polynomials about the span's start, for
-/// the FLF scan's hundreds of samples per span: on a curve of degree 3 or less they are exact
-/// (the curve is a polynomial of that degree there) and cost a few multiplications per sample
-/// instead of the basis functions and their derivatives. The derivatives agree with
-/// [`CurveView::derivatives`] to rounding.
-#[derive(Default)]
-struct SpanTaylor {
-    /// The span's parameter range; `None` before the first sample.
-    span: Option<(f64, f64)>,
-    /// Derivatives of the homogeneous form at the span's start.
-    at_start: Homogeneous,
-}
-
-impl SpanTaylor {
-    /// Curve point and derivatives up to the third at `u`, like `curve.derivatives(u, 3)`.
-    fn derivatives(&mut self, curve: &CurveView, u: f64) -> [Vector; 4] {
-        if curve.degree() > MAX_DERIV {
-            return curve.derivatives(u, 3);
-        }
-        let u = u.clamp(curve.u_min(), curve.u_max());
-        let start = match self.span {
-            Some((start, end)) if u >= start && u < end => start,
-            _ => {
-                let span = curve.find_span(u);
-                let (start, end) = (curve.knots()[span], curve.knots()[span + 1]);
-                self.span = Some((start, end));
-                self.at_start = curve.homogeneous_in_span(start, span, MAX_DERIV);
-                start
-            }
-        };
-        let t = u - start;
-        let (c, w) = (&self.at_start.coords, &self.at_start.weight);
-        // Order k: sum over m >= k of c[m] t^(m-k) / (m-k)!, by Horner.
-        let taylor = |c0: f64, c1: f64, c2: f64, c3: f64| c0 + t * (c1 + t / 2.0 * (c2 + t / 3.0 * c3));
-        let mut h = Homogeneous::default();
-        for i in 0..curve.dim() {
-            h.coords[0][i] = taylor(c[0][i], c[1][i], c[2][i], c[3][i]);
-            h.coords[1][i] = taylor(c[1][i], c[2][i], c[3][i], 0.0);
-            h.coords[2][i] = taylor(c[2][i], c[3][i], 0.0, 0.0);
-            h.coords[3][i] = c[3][i];
-        }
-        h.weight = [
-            taylor(w[0], w[1], w[2], w[3]),
-            taylor(w[1], w[2], w[3], 0.0),
-            taylor(w[2], w[3], 0.0, 0.0),
-            w[3],
-        ];
-        curve.rational(&h, MAX_DERIV)
-    }
-}
-
 /// A local minimum of the FLF where a segment starts or ends (its feed: the FLF there).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CriticalPoint {
@@ -224,10 +173,12 @@ impl FlfScan {
     ) {
         let (a, b) = (curve.u_min(), curve.u_max());
         let end = self.u.len().saturating_add(count).min(self.full_len());
-        let mut span = SpanTaylor::default();
+        // Hundreds of samples per span: evaluated through the span's Taylor polynomials.
+        let mut spans = SpanCache::new();
+        let cached = &mut CachedCurve::new(*curve, &mut spans);
         for k in self.u.len()..end {
             let u = a + (b - a) * k as f64 / self.steps as f64;
-            let (x, speed) = arc_from_parametric(&span.derivatives(curve, u), tip);
+            let (x, speed) = arc_from_parametric(&cached.derivatives(u, 3), tip);
             each(u, &x, speed);
             let f = flf_of(&x, tip, limits);
             self.u.push(u);

@@ -5,15 +5,33 @@ use nurbs_rtcore::scurve::{SCurve, PHASES};
 /// Durations (T1, T2, T3) of a jerk-limited change of feed by `dv >= 0`: trapezoidal
 /// acceleration when `dv >= A^2/J` (eq. 15-17), triangular otherwise (eq. 18-19).
 pub fn ramp_times(dv: f64, accel: f64, jerk: f64) -> [f64; 3] {
+    ramp_times_with(dv, Ramp::new(accel, jerk))
+}
+
+/// [`ramp_times`] with a jerk of its own for the ramp's first and last phase: the acceleration
+/// builds up at `start_jerk` and falls back to zero at `end_jerk`; those two phases change the
+/// feed by `a^2 / 2 (1 / start_jerk + 1 / end_jerk)` at peak acceleration `a`.
+pub fn ramp_times_with(dv: f64, ramp: Ramp) -> [f64; 3] {
     if dv <= 0.0 {
         return [0.0; 3];
     }
-    if dv * jerk >= accel * accel {
-        let t1 = accel / jerk;
-        [t1, dv / accel - t1, t1]
+    let (accel, j1, j3) = (ramp.accel, ramp.start_jerk, ramp.end_jerk);
+    if j1 == j3 {
+        // The paper's symmetric forms, so that symmetric ramps keep their rounding.
+        return if dv * j1 >= accel * accel {
+            let t1 = accel / j1;
+            [t1, dv / accel - t1, t1]
+        } else {
+            let t1 = (dv / j1).sqrt();
+            [t1, 0.0, t1]
+        };
+    }
+    let compliance = 0.5 * (1.0 / j1 + 1.0 / j3);
+    if dv >= accel * accel * compliance {
+        [accel / j1, dv / accel - accel * compliance, accel / j3]
     } else {
-        let t1 = (dv / jerk).sqrt();
-        [t1, 0.0, t1]
+        let peak = (dv / compliance).sqrt();
+        [peak / j1, 0.0, peak / j3]
     }
 }
 
@@ -22,6 +40,25 @@ pub fn ramp_times(dv: f64, accel: f64, jerk: f64) -> [f64; 3] {
 pub fn ramp_distance(va: f64, vb: f64, accel: f64, jerk: f64) -> f64 {
     let t = ramp_times((vb - va).abs(), accel, jerk);
     0.5 * (va + vb) * (t[0] + t[1] + t[2])
+}
+
+/// Distance covered by `ramp` from feed `va` to `vb` (either way; `start_jerk` acts first).
+pub fn ramp_distance_with(va: f64, vb: f64, ramp: Ramp) -> f64 {
+    let t = ramp_times_with((vb - va).abs(), ramp);
+    let mean = 0.5 * (va + vb) * (t[0] + t[1] + t[2]);
+    if ramp.start_jerk == ramp.end_jerk {
+        return mean;
+    }
+    // The mean feed times the duration is off by dv (T/2 - c), c the centroid in time of the
+    // trapezoidal acceleration of peak a: a ((t3^2 - t1^2) / 12 + t2 (t3 - t1) / 4), zero for
+    // a symmetric ramp; added rising, subtracted falling.
+    let a = t[0] * ramp.start_jerk;
+    let skew = a * ((t[2] * t[2] - t[0] * t[0]) / 12.0 + t[1] * (t[2] - t[0]) / 4.0);
+    if vb >= va {
+        mean + skew
+    } else {
+        mean - skew
+    }
 }
 
 /// Highest feed reachable from `v_from` within `length` (also: the highest feed from which
@@ -52,17 +89,30 @@ pub enum FitError {
     TooShort,
 }
 
-/// Acceleration and jerk of one ramp of a profile.
+/// Acceleration and jerks of one ramp of a profile (rise to the peak or fall from it).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ramp {
     pub accel: f64,
-    pub jerk: f64,
+    /// Jerk of the ramp's first phase (phase 1 of the rise, 5 of the fall) and its last (3, 7).
+    pub start_jerk: f64,
+    pub end_jerk: f64,
+}
+
+impl Ramp {
+    /// The paper's ramp: one jerk for both phases.
+    pub fn new(accel: f64, jerk: f64) -> Self {
+        Ramp {
+            accel,
+            start_jerk: jerk,
+            end_jerk: jerk,
+        }
+    }
 }
 
 /// Profile from `v0` to `v1` over `length` with peak feed at most `v_max`, acceleration `accel`
 /// and jerk `jerk` on both ramps.
 pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> Result<SCurve, FitError> {
-    let r = Ramp { accel, jerk };
+    let r = Ramp::new(accel, jerk);
     fit_ramps(v0, v1, length, v_max, r, r)
 }
 
@@ -73,7 +123,7 @@ pub fn fit(v0: f64, v1: f64, length: f64, v_max: f64, accel: f64, jerk: f64) -> 
 pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp) -> Result<SCurve, FitError> {
     let v_floor = v0.max(v1);
     let v_max = v_max.max(v_floor);
-    let total = |vp: f64| ramp_distance(v0, vp, up.accel, up.jerk) + ramp_distance(vp, v1, down.accel, down.jerk);
+    let total = |vp: f64| ramp_distance_with(v0, vp, up) + ramp_distance_with(vp, v1, down);
     if total(v_floor) > length * (1.0 + 1e-12) + 1e-12 {
         return Err(FitError::TooShort);
     }
@@ -103,17 +153,31 @@ pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp
         }
         best
     };
-    let rise = ramp_times(peak - v0, up.accel, up.jerk);
-    let fall = ramp_times(peak - v1, down.accel, down.jerk);
+    let rise = ramp_times_with(peak - v0, up);
+    let fall = ramp_times_with(peak - v1, down);
     let mut durations = [rise[0], rise[1], rise[2], 0.0, fall[0], fall[1], fall[2]];
-    let ramps = SCurve::from_phases(v0, durations, up.jerk, down.jerk).table().length();
+    let jerks = [
+        up.start_jerk,
+        0.0,
+        -up.end_jerk,
+        0.0,
+        -down.start_jerk,
+        0.0,
+        down.end_jerk,
+    ];
+    let with = |durations| SCurve {
+        feed_start: v0,
+        durations,
+        jerks,
+    };
+    let ramps = with(durations).table().length();
     // Cruise fills the rest exactly, so the profile length equals the segment length.
     durations[3] = if peak > 0.0 {
         ((length - ramps) / peak).max(0.0)
     } else {
         0.0
     };
-    let mut profile = SCurve::from_phases(v0, durations, up.jerk, down.jerk);
+    let mut profile = with(durations);
     for k in 0..PHASES {
         if profile.durations[k] == 0.0 {
             profile.jerks[k] = 0.0;
@@ -148,5 +212,84 @@ mod tests {
             }
         }
         assert_eq!(fit(0.0, 1000.0, 1.0, 2500.0, 1e4, 6e4), Err(FitError::TooShort));
+    }
+
+    /// Ramps with a jerk per phase: the fitted profile covers the length, ends at the end feed
+    /// with zero acceleration, keeps each phase's jerk and the acceleration limit, and the
+    /// closed-form ramp distance is the integrated one.
+    #[test]
+    fn ramps_with_a_jerk_per_phase_fit_exactly() {
+        let ramps = [
+            Ramp {
+                accel: 1e4,
+                start_jerk: 6e4,
+                end_jerk: 2e4,
+            },
+            Ramp {
+                accel: 1e4,
+                start_jerk: 1.5e4,
+                end_jerk: 6e4,
+            },
+            Ramp {
+                accel: 2e3,
+                start_jerk: 1e5,
+                end_jerk: 3e4,
+            },
+        ];
+        for up in ramps {
+            for down in ramps {
+                for &(v0, v1, len) in &[
+                    (0.0, 0.0, 10.0),
+                    (100.0, 20.0, 5.0),
+                    (0.0, 500.0, 300.0),
+                    (50.0, 50.0, 0.2),
+                    (0.0, 0.0, 500.0),
+                ] {
+                    for (va, vb) in [(v0, 900.0f64), (900.0, v1)] {
+                        let r = if vb > va { up } else { down };
+                        let t = ramp_times_with((vb - va).abs(), r);
+                        let sign = if vb > va { 1.0 } else { -1.0 };
+                        let p = SCurve {
+                            feed_start: va,
+                            durations: [t[0], t[1], t[2], 0.0, 0.0, 0.0, 0.0],
+                            jerks: [sign * r.start_jerk, 0.0, -sign * r.end_jerk, 0.0, 0.0, 0.0, 0.0],
+                        };
+                        let tab = p.table();
+                        assert!((tab.end().v - vb).abs() < 1e-9 * (1.0 + vb), "{r:?} {va} {vb}");
+                        assert!(tab.end().a.abs() < 1e-9 * r.accel);
+                        let d = ramp_distance_with(va, vb, r);
+                        assert!(
+                            (tab.length() - d).abs() < 1e-9 * (1.0 + d),
+                            "{r:?} {va} {vb}: {} vs {d}",
+                            tab.length()
+                        );
+                    }
+                    let Ok(p) = fit_ramps(v0, v1, len, 2500.0, up, down) else {
+                        continue;
+                    };
+                    let t = p.table();
+                    assert!(
+                        (t.length() - len).abs() < 1e-9 * (1.0 + len),
+                        "{v0} {v1} {len}: {}",
+                        t.length()
+                    );
+                    assert!((t.end().v - v1).abs() < 1e-6, "end feed {}", t.end().v);
+                    assert!(t.end().a.abs() < 1e-6);
+                    let limits = [
+                        up.start_jerk,
+                        0.0,
+                        up.end_jerk,
+                        0.0,
+                        down.start_jerk,
+                        0.0,
+                        down.end_jerk,
+                    ];
+                    for k in 0..PHASES {
+                        assert!(p.jerks[k].abs() <= limits[k] * (1.0 + 1e-12));
+                        assert!(t.states[k].a.abs() <= up.accel.max(down.accel) * (1.0 + 1e-9));
+                    }
+                }
+            }
+        }
     }
 }

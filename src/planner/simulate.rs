@@ -6,6 +6,7 @@ use crate::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_rtcore::executor::{Interpolator, Sample, Step};
 use nurbs_rtcore::interp::{fcp_eval, sot_step, tot_step, PathCursor};
 use nurbs_rtcore::SegmentRecord;
+use nurbs_rtcore::{CachedCurve, SpanCache};
 
 /// Interpolator and finite-difference state between two segments: the planner's checkpoint.
 #[derive(Clone, Copy, Debug)]
@@ -104,21 +105,23 @@ pub fn setpoints_with(
     // Per element: the Taylor cursor, or the element's polynomials.
     let mut cursor: Option<(usize, PathCursor)> = None;
     let mut fits: Option<(usize, f64, Vec<[f64; 8]>)> = None;
+    let mut spans = SpanCache::new();
     for sample in &mut samples {
         let c = sample.curve;
-        let view = curves.view(c);
+        let view = *curves.view(c);
+        let curve = &mut CachedCurve::new(view, &mut spans);
         let u = match method {
             Interpolation::Rk2pc => sample.u,
             Interpolation::Sot | Interpolation::Tot => {
                 let mut cur = match cursor {
                     Some((e, cur)) if e == c => cur,
-                    _ => PathCursor::at(view, tip, view.u_min(), 0.0),
+                    _ => PathCursor::at(curve, tip, view.u_min(), 0.0),
                 };
                 let ds = sample.s - cur.s;
                 cur = if method == Interpolation::Sot {
-                    sot_step(view, tip, &cur, ds)
+                    sot_step(curve, tip, &cur, ds)
                 } else {
-                    tot_step(view, tip, &cur, ds)
+                    tot_step(curve, tip, &cur, ds)
                 };
                 cursor = Some((c, cur));
                 cur.u
@@ -144,7 +147,7 @@ pub fn setpoints_with(
             }
         };
         sample.u = u;
-        sample.point = view.point(u);
+        sample.point = curve.point(u);
     }
     samples
 }
