@@ -352,6 +352,7 @@ impl<'a> Planner<'a> {
             jerk: self.jerk,
             work: &self.work,
             work_budget,
+            refine: true,
         }
     }
 
@@ -359,7 +360,10 @@ impl<'a> Planner<'a> {
     /// back-tracking cascade that reaches it once the records before it are final (and cannot
     /// be revised) is absorbed there, by that stop at worst.
     fn can_stop_at_end(&self, j: usize, work_budget: u64) -> bool {
-        let ctx = self.context(j, work_budget);
+        let ctx = SegmentContext {
+            refine: false,
+            ..self.context(j, work_budget)
+        };
         solve_segment(&ctx, self.start_feeds[j], 0.0, &self.states[j]).is_ok()
     }
 
@@ -586,6 +590,8 @@ struct SegmentContext<'a> {
     work: &'a Cell<u64>,
     /// Periods the trials may have simulated in all before the plan is refused.
     work_budget: u64,
+    /// The record will be used (not only whether one exists): worth [`with_phase_jerks`].
+    refine: bool,
 }
 
 /// One candidate profile, interpolated and measured.
@@ -789,6 +795,18 @@ fn quick(
     down: Ramp,
     scope: Scope,
 ) -> Option<Estimate> {
+    quick_with_margin(ctx, from, (v0, v1), (up, down), scope, ESTIMATE_MARGIN)
+}
+
+/// [`quick`] aiming at `margin` times the limits.
+fn quick_with_margin(
+    ctx: &SegmentContext,
+    from: &SimState,
+    (v0, v1): (f64, f64),
+    (up, down): (Ramp, Ramp),
+    scope: Scope,
+    margin: f64,
+) -> Option<Estimate> {
     let profile = fit_ramps(v0, v1, ctx.length, ctx.peak_cap, up, down).ok()?;
     // Local time of the segment's first sample (0 from rest at a stop, see the executor).
     let t_first = match from.interp.record() {
@@ -799,7 +817,7 @@ fn quick(
     Some(estimate(
         ctx.grid,
         ctx.limits,
-        ESTIMATE_MARGIN,
+        margin,
         &table,
         ctx.node_start.start_s,
         t_first,
@@ -999,8 +1017,9 @@ fn solve_segment(
             // ms of its 73). Not on the first failures at higher start feeds: there a stop at
             // the end can fail where a lower end feed passes, and the plans would be slower.
             stop_tried = true;
+            let check = SegmentContext { refine: false, ..*ctx };
             if let Err(failure @ (SegmentFailure::StartTooFast(_) | SegmentFailure::PeakTooHigh(_))) =
-                solve_segment(ctx, v0, 0.0, from)
+                solve_segment(&check, v0, 0.0, from)
             {
                 return Err(failure);
             }
@@ -1078,6 +1097,7 @@ fn solve_segment(
         let mut worst_at_peak = None;
         if let Some(t) = trial(ctx, from, v0, v1, both(a, j), both(a, j)) {
             if t.ok() {
+                let t = with_phase_jerks(ctx, from, v0, v1, (a, j), t);
                 return Ok((t.record, t.state));
             }
             worst_at_peak = excess_at_peak(&t, v0, v1);
@@ -1107,14 +1127,16 @@ fn solve_segment(
         let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
         if let Some((_, t)) = by_jerk {
             if t.ok() {
+                let t = with_phase_jerks(ctx, from, v0, v1, (ctx.accel, j), t);
                 return Ok((t.record, t.state));
             }
         }
         let by_acc = golden(ctx.accel, &|a| duration(ctx, v0, v1, both(a, j)), &|a, _| {
             trial(ctx, from, v0, v1, both(a, j), both(a, j))
         });
-        if let Some((_, t)) = by_acc {
+        if let Some((a, t)) = by_acc {
             if t.ok() {
+                let t = with_phase_jerks(ctx, from, v0, v1, (a, j), t);
                 return Ok((t.record, t.state));
             }
         }
@@ -1134,6 +1156,87 @@ fn solve_segment(
     }
     Err(SegmentFailure::StartTooFast(START_FEED_STEP * v0))
 }
+
+/// A jerk per phase for a segment that passed with acceleration and jerk `(a, j)` on both
+/// ramps, `j` below the limit: the searches set one jerk for all four jerk phases, from the
+/// worst sample of one of them, so the others can mostly go faster. Each phase's jerk in turn
+/// (rise start, rise end, fall start, fall end) is raised as far as the estimate passes it (the
+/// limit, or bisection), and the result replaces `passed` if its exact trial passes and it is
+/// shorter.
+fn with_phase_jerks(
+    ctx: &SegmentContext,
+    from: &SimState,
+    v0: f64,
+    v1: f64,
+    (a, j): (f64, f64),
+    passed: Trial,
+) -> Trial {
+    if !ctx.refine || j >= ctx.jerk {
+        return passed;
+    }
+    let ramps = |jerks: [f64; 4]| {
+        let ramp = |start_jerk, end_jerk| Ramp {
+            accel: a,
+            start_jerk,
+            end_jerk,
+        };
+        (ramp(jerks[0], jerks[1]), ramp(jerks[2], jerks[3]))
+    };
+    // The estimate steers by its own measure: calibrated on the passing profile, it aims
+    // where the exact trial is expected at the limit (the estimate errs by about 1 %, mostly
+    // the same way along a segment), within bounds.
+    let (up, down) = ramps([j; 4]);
+    let Some(calibration) = quick_with_margin(ctx, from, (v0, v1), (up, down), Scope::Full, 1.0) else {
+        return passed;
+    };
+    let margin =
+        (PHASE_JERK_AIM * calibration.ratio / passed.ratio.max(1e-9)).clamp(MIN_PHASE_MARGIN, MAX_PHASE_MARGIN);
+    let passes = |jerks: [f64; 4]| {
+        let (up, down) = ramps(jerks);
+        quick_with_margin(ctx, from, (v0, v1), (up, down), Scope::Verdict, margin).is_some_and(|q| q.ok())
+    };
+    // Where the estimate fails the passing profile itself, it cannot steer the raises.
+    if !passes([j; 4]) {
+        return passed;
+    }
+    let mut jerks = [j; 4];
+    for phase in 0..4 {
+        let mut raised = jerks;
+        raised[phase] = ctx.jerk;
+        if passes(raised) {
+            jerks = raised;
+            continue;
+        }
+        let (mut lo, mut hi) = (j, ctx.jerk);
+        for _ in 0..PHASE_JERK_BISECTIONS {
+            raised[phase] = 0.5 * (lo + hi);
+            if passes(raised) {
+                lo = raised[phase];
+            } else {
+                hi = raised[phase];
+            }
+        }
+        jerks[phase] = lo;
+    }
+    if jerks == [j; 4] {
+        return passed;
+    }
+    let (up, down) = ramps(jerks);
+    let duration = |t: &Trial| t.record.durations.iter().sum::<f64>();
+    match trial(ctx, from, v0, v1, up, down) {
+        Some(t) if t.ok() && duration(&t) < duration(&passed) => t,
+        _ => passed,
+    }
+}
+
+/// Bisections of a phase's jerk between the segment's jerk and the limit in
+/// [`with_phase_jerks`].
+const PHASE_JERK_BISECTIONS: usize = 4;
+/// Where [`with_phase_jerks`] aims, as a fraction of the limits by the calibrated estimate,
+/// and the bounds of the estimate's margin there.
+const PHASE_JERK_AIM: f64 = 0.998;
+const MIN_PHASE_MARGIN: f64 = 0.98;
+const MAX_PHASE_MARGIN: f64 = 1.03;
 
 /// The last resort of a segment from rest: the exact golden-section search of the jerk over
 /// `(0, J]`, and where its best still violates in the lowest cell (the excess shrinks with the
