@@ -81,23 +81,26 @@ impl<'a, 'c> CachedCurve<'a, 'c> {
     /// Point and derivatives up to `order` (<= 3) at `u` (clamped to the domain), as
     /// [`CurveView::derivatives`] gives them to rounding; higher entries are zero.
     pub fn derivatives(&mut self, u: f64, order: usize) -> Derivatives {
-        let u = u.clamp(self.view.u_min(), self.view.u_max());
-        if self.view.degree() > MAX_DERIV {
-            return self.view.derivatives(u, order);
-        }
-        let k = self.entry(u, false);
-        evaluate(&self.view, &self.cache.entries[k], u, order)
+        self.evaluate(u, order, false)
     }
 
     /// Left-hand limits at `u`, as [`CurveView::derivatives_left`] (they differ from
     /// [`Self::derivatives`] only at knots).
     pub fn derivatives_left(&mut self, u: f64, order: usize) -> Derivatives {
+        self.evaluate(u, order, true)
+    }
+
+    fn evaluate(&mut self, u: f64, order: usize, left: bool) -> Derivatives {
         let u = u.clamp(self.view.u_min(), self.view.u_max());
         if self.view.degree() > MAX_DERIV {
-            return self.view.derivatives_left(u, order);
+            return if left {
+                self.view.derivatives_left(u, order)
+            } else {
+                self.view.derivatives(u, order)
+            };
         }
-        let k = self.entry(u, true);
-        evaluate(&self.view, &self.cache.entries[k], u, order)
+        let k = self.entry(u, left);
+        from_taylor(&self.view, &self.cache.entries[k], u, order)
     }
 
     /// Curve point at `u`: equal bit for bit to `self.derivatives(u, 0)[0]`.
@@ -154,7 +157,7 @@ impl<'a, 'c> CachedCurve<'a, 'c> {
 /// The curve's derivatives up to `order` at `u` from a span's Taylor data (exact for degree
 /// <= 3: the fourth derivative of the homogeneous form vanishes on a span).
 #[inline]
-fn evaluate(view: &CurveView, entry: &SpanEntry, u: f64, order: usize) -> Derivatives {
+fn from_taylor(view: &CurveView, entry: &SpanEntry, u: f64, order: usize) -> Derivatives {
     let order = order.min(MAX_DERIV);
     let t = u - entry.start;
     let (c, w) = (&entry.at_start.coords, &entry.at_start.weight);

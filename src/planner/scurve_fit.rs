@@ -3,15 +3,11 @@
 use nurbs_rtcore::scurve::{SCurve, PHASES};
 
 /// Durations (T1, T2, T3) of a jerk-limited change of feed by `dv >= 0`: trapezoidal
-/// acceleration when `dv >= A^2/J` (eq. 15-17), triangular otherwise (eq. 18-19).
-pub fn ramp_times(dv: f64, accel: f64, jerk: f64) -> [f64; 3] {
-    ramp_times_with(dv, Ramp::new(accel, jerk))
-}
-
-/// [`ramp_times`] with a jerk of its own for the ramp's first and last phase: the acceleration
-/// builds up at `start_jerk` and falls back to zero at `end_jerk`; those two phases change the
-/// feed by `a^2 / 2 (1 / start_jerk + 1 / end_jerk)` at peak acceleration `a`.
-pub fn ramp_times_with(dv: f64, ramp: Ramp) -> [f64; 3] {
+/// acceleration when `dv >= A^2/J` (eq. 15-17), triangular otherwise (eq. 18-19). A ramp may
+/// have a jerk of its own for its first and last phase: the acceleration builds up at
+/// `start_jerk` and falls back to zero at `end_jerk`; those two phases change the feed by
+/// `a^2 / 2 (1 / start_jerk + 1 / end_jerk)` at peak acceleration `a`.
+pub fn ramp_times(dv: f64, ramp: Ramp) -> [f64; 3] {
     if dv <= 0.0 {
         return [0.0; 3];
     }
@@ -35,16 +31,15 @@ pub fn ramp_times_with(dv: f64, ramp: Ramp) -> [f64; 3] {
     }
 }
 
-/// Distance covered while changing feed from `va` to `vb` (symmetric ramp: mean feed times
+/// Distance covered while changing feed from `va` to `vb` with one jerk (mean feed times
 /// duration).
 pub fn ramp_distance(va: f64, vb: f64, accel: f64, jerk: f64) -> f64 {
-    let t = ramp_times((vb - va).abs(), accel, jerk);
-    0.5 * (va + vb) * (t[0] + t[1] + t[2])
+    ramp_distance_with(va, vb, Ramp::new(accel, jerk))
 }
 
 /// Distance covered by `ramp` from feed `va` to `vb` (either way; `start_jerk` acts first).
 pub fn ramp_distance_with(va: f64, vb: f64, ramp: Ramp) -> f64 {
-    let t = ramp_times_with((vb - va).abs(), ramp);
+    let t = ramp_times((vb - va).abs(), ramp);
     let mean = 0.5 * (va + vb) * (t[0] + t[1] + t[2]);
     if ramp.start_jerk == ramp.end_jerk {
         return mean;
@@ -153,8 +148,8 @@ pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp
         }
         best
     };
-    let rise = ramp_times_with(peak - v0, up);
-    let fall = ramp_times_with(peak - v1, down);
+    let rise = ramp_times(peak - v0, up);
+    let fall = ramp_times(peak - v1, down);
     let mut durations = [rise[0], rise[1], rise[2], 0.0, fall[0], fall[1], fall[2]];
     let jerks = [
         up.start_jerk,
@@ -190,6 +185,18 @@ pub fn fit_ramps(v0: f64, v1: f64, length: f64, v_max: f64, up: Ramp, down: Ramp
 mod tests {
     use super::*;
 
+    /// `p` covers `len` and ends at `v1` with zero acceleration.
+    fn assert_fits(p: &SCurve, v0: f64, v1: f64, len: f64) {
+        let t = p.table();
+        assert!(
+            (t.length() - len).abs() < 1e-9 * (1.0 + len),
+            "{v0} {v1} {len}: {}",
+            t.length()
+        );
+        assert!((t.end().v - v1).abs() < 1e-6, "end feed {}", t.end().v);
+        assert!(t.end().a.abs() < 1e-6);
+    }
+
     #[test]
     fn fits_cover_the_length_and_end_at_the_end_feed() {
         for &(v0, v1, len) in &[
@@ -199,14 +206,8 @@ mod tests {
             (50.0, 50.0, 0.2),
         ] {
             let p = fit(v0, v1, len, 2500.0, 1e4, 6e4).unwrap();
+            assert_fits(&p, v0, v1, len);
             let t = p.table();
-            assert!(
-                (t.length() - len).abs() < 1e-9 * (1.0 + len),
-                "{v0} {v1} {len}: {}",
-                t.length()
-            );
-            assert!((t.end().v - v1).abs() < 1e-6, "end feed {}", t.end().v);
-            assert!(t.end().a.abs() < 1e-6);
             for k in 0..8 {
                 assert!(t.states[k].v <= 2500.0 + 1e-9 && t.states[k].a.abs() <= 1e4 + 1e-6);
             }
@@ -236,6 +237,7 @@ mod tests {
                 end_jerk: 3e4,
             },
         ];
+        let mut fitted = 0;
         for up in ramps {
             for down in ramps {
                 for &(v0, v1, len) in &[
@@ -247,7 +249,7 @@ mod tests {
                 ] {
                     for (va, vb) in [(v0, 900.0f64), (900.0, v1)] {
                         let r = if vb > va { up } else { down };
-                        let t = ramp_times_with((vb - va).abs(), r);
+                        let t = ramp_times((vb - va).abs(), r);
                         let sign = if vb > va { 1.0 } else { -1.0 };
                         let p = SCurve {
                             feed_start: va,
@@ -267,14 +269,9 @@ mod tests {
                     let Ok(p) = fit_ramps(v0, v1, len, 2500.0, up, down) else {
                         continue;
                     };
+                    assert_fits(&p, v0, v1, len);
+                    fitted += 1;
                     let t = p.table();
-                    assert!(
-                        (t.length() - len).abs() < 1e-9 * (1.0 + len),
-                        "{v0} {v1} {len}: {}",
-                        t.length()
-                    );
-                    assert!((t.end().v - v1).abs() < 1e-6, "end feed {}", t.end().v);
-                    assert!(t.end().a.abs() < 1e-6);
                     let limits = [
                         up.start_jerk,
                         0.0,
@@ -291,5 +288,7 @@ mod tests {
                 }
             }
         }
+        // Only the 0.2 mm case at 50 mm/s may be too short for some ramps.
+        assert!(fitted >= 4 * ramps.len() * ramps.len(), "{fitted} fitted");
     }
 }
