@@ -120,6 +120,26 @@ impl SCurveTable {
     }
 }
 
+impl SCurveTable {
+    /// [`SCurveTable::state_at`] for times that do not decrease from call to call: the search
+    /// for the phase starts at `phase` (0 at first) and leaves it there for the next call.
+    #[inline]
+    pub fn state_at_from(&self, t: f64, phase: &mut usize) -> SCurveState {
+        if t <= 0.0 {
+            return self.states[0];
+        }
+        if t >= self.starts[PHASES] {
+            return self.states[PHASES];
+        }
+        let mut k = *phase;
+        while k + 1 < PHASES && t >= self.starts[k + 1] {
+            k += 1;
+        }
+        *phase = k;
+        self.states[k].advance(self.profile.jerks[k], t - self.starts[k])
+    }
+}
+
 /// Jerk-limited stop from feed `v0` and tangential acceleration `a0` to rest: jerk `-jerk` until
 /// the deceleration reaches its peak (at most `accel`), constant deceleration, jerk `+jerk` back
 /// to zero acceleration as the feed reaches zero. Returns the profile (phases 0-2, run with
@@ -192,6 +212,22 @@ mod tests {
         }
         // Zero feed: nothing to do.
         assert_eq!(stop_from(0.0, 5.0, a, j).table().total_time(), 0.0);
+    }
+
+    /// For times that do not decrease, the phase cursor gives exactly what the search from the
+    /// first phase gives, zero-length phases and times past the end included.
+    #[test]
+    fn state_at_from_a_phase_cursor_is_state_at() {
+        let (j, a) = (6.0e4, 1.0e4);
+        let t1 = a / j;
+        let p = SCurve::from_phases(10.0, [t1, 0.0, t1, 0.05, 0.5 * t1, 0.0, 2.0 * t1], j, j);
+        let tab = p.table();
+        let mut phase = 0;
+        let n = 997;
+        for k in 0..=n + 3 {
+            let t = tab.total_time() * k as f64 / n as f64;
+            assert_eq!(tab.state_at_from(t, &mut phase), tab.state_at(t), "t = {t}");
+        }
     }
 
     #[test]
