@@ -139,7 +139,7 @@ impl<'a> JointPath<'a> {
 
     fn tip_and_axis(&self, w: f64) -> ([f64; 3], [f64; 3]) {
         let (e, u) = self.locate(w);
-        let p = self.fast[e].eval(u, 0)[0];
+        let p = self.fast[e].point(u);
         let mut tip = [0.0; 3];
         tip[..self.tip].copy_from_slice(&p[..self.tip]);
         let mut axis = [0.0, 0.0, 1.0];
@@ -174,14 +174,14 @@ impl<'a> JointPath<'a> {
             return None;
         }
         let w = element as f64 + if b > a { (u - a) / (b - a) } else { 0.0 };
-        let p = self.fast[element].eval(u, 0)[0];
+        let p = self.fast[element].point(u);
         Some(self.point_at(w, element, u, &p))
     }
 
     /// Joint positions and tool tip at `w`.
     pub fn eval(&self, w: f64) -> PathPoint {
         let (element, u) = self.locate(w);
-        let p = self.fast[element].eval(u, 0)[0];
+        let p = self.fast[element].point(u);
         self.point_at(w, element, u, &p)
     }
 
@@ -414,10 +414,57 @@ impl PowerCurve {
         }
     }
 
+    /// Index of the span of `u`: the last whose start is at or below `u` (the first below the
+    /// first start). Guessed from `u`'s place in the parameter range (knots are mostly about
+    /// evenly spaced), then walked to; a binary search where the guess is far off.
+    fn span_of(&self, u: f64) -> usize {
+        let n = self.starts.len();
+        let (first, last) = (self.starts[0], self.starts[n - 1]);
+        // At or below the first start, and NaN: span 0.
+        if u.partial_cmp(&first) != Some(std::cmp::Ordering::Greater) {
+            return 0;
+        }
+        if u >= last {
+            return n - 1;
+        }
+        // Here starts[0] < u < starts[n - 1]: the span k has starts[k] <= u < starts[k + 1].
+        let guess = ((u - first) / (last - first) * (n - 1) as f64) as usize;
+        let mut k = guess.min(n - 2);
+        for _ in 0..4 {
+            if self.starts[k] > u {
+                k -= 1;
+            } else if self.starts[k + 1] <= u {
+                k += 1;
+            } else {
+                return k;
+            }
+        }
+        self.starts.partition_point(|&s| s <= u) - 1
+    }
+
+    /// The point at `u` ([`Self::eval`]'s first entry, by the same arithmetic).
+    pub fn point(&self, u: f64) -> [f64; MAX_DIM] {
+        let s = &self.spans[self.span_of(u)];
+        let t = (u - s.u0) * s.inv;
+        let p = self.degree;
+        let m = self.dim + 1;
+        let mut f = [0.0; MAX_DIM + 1];
+        f[..m].copy_from_slice(&s.coef[p][..m]);
+        for c in s.coef[..p].iter().rev() {
+            for d in 0..m {
+                f[d] = f[d] * t + c[d];
+            }
+        }
+        let mut out = [0.0; MAX_DIM];
+        for d in 0..self.dim {
+            out[d] = f[d] / f[self.dim];
+        }
+        out
+    }
+
     /// Point and derivatives with respect to `u` up to `order` (<= 2); higher entries zero.
     pub fn eval(&self, u: f64, order: usize) -> [[f64; MAX_DIM]; 3] {
-        let k = self.starts.partition_point(|&s| s <= u).saturating_sub(1);
-        let s = &self.spans[k];
+        let s = &self.spans[self.span_of(u)];
         let t = (u - s.u0) * s.inv;
         let p = self.degree;
         let m = self.dim + 1;
@@ -614,6 +661,31 @@ mod tests {
                         assert!((exact[2][d] - got[2][d]).abs() <= 1e-7 * s2, "{name} u {u} d2");
                     }
                 }
+            }
+        }
+    }
+
+    /// The span guess finds the span the binary search finds (the last start at or below `u`),
+    /// on uneven knots too, at and between every knot, outside the range and at NaN; and
+    /// `point` is `eval`'s point bit for bit.
+    #[test]
+    fn span_guess_is_the_binary_search() {
+        let cps: Vec<Vec<f64>> = (0..9).map(|i| vec![i as f64, (i * i % 5) as f64]).collect();
+        let knots = vec![0.0, 0.0, 0.0, 0.0, 0.01, 0.02, 0.5, 0.51, 3.0, 10.0, 10.0, 10.0, 10.0];
+        let curve = crate::geometry::Nurbs::new(3, knots.clone(), &cps, None).unwrap();
+        let fast = PowerCurve::new(&curve.view());
+        let binary = |u: f64| fast.starts.partition_point(|&s| s <= u).saturating_sub(1);
+        let mut us = vec![-1.0, f64::NAN, 11.0, f64::INFINITY];
+        for w in knots.windows(2) {
+            for f in [0.0, 1e-12, 0.3, 0.999_999, 1.0] {
+                us.push(w[0] + (w[1] - w[0]) * f);
+            }
+        }
+        us.extend((0..=2000).map(|k| 10.0 * k as f64 / 2000.0));
+        for u in us {
+            assert_eq!(fast.span_of(u), binary(u), "u = {u}");
+            if (0.0..=10.0).contains(&u) {
+                assert_eq!(fast.point(u), fast.eval(u, 0)[0], "u = {u}");
             }
         }
     }
