@@ -325,6 +325,16 @@ fn case_with_its_worst_excess_at_the_peak_is_planned_without_a_stop() {
     );
 }
 
+/// Case 3107: a cubic with three nearly coincident control points, so a near-cusp whose
+/// curvature spike lies between the FLF scan's samples. A trial that skipped the chord probes of
+/// a step on the tabulated curvature alone emitted a step whose chord error was 1.746e-4 mm
+/// against a tolerance of 1.300e-4 mm; the arc-length bound (the sagitta is at most half of
+/// sqrt(l^2 - c^2)) sends that step to the probes.
+#[test]
+fn a_near_cusp_between_scan_samples_keeps_its_chord_probes() {
+    assert_planned_and_verified(&[3107]);
+}
+
 /// Each of `cases` of seed 20261122 plans and passes the checker.
 fn assert_planned_and_verified(cases: &[u64]) {
     for &case in cases {

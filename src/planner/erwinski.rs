@@ -706,13 +706,19 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
             }
             ratio = ratio.max(step2.sqrt() / period / feed);
             if p.curve == s.curve && s.u > p.u {
-                // Where the tabulated curvature bounds the sagitta far below the tolerance
-                // (kappa l^2 / 8, twice over for a peak between grid points), the probes
-                // cannot find anything that matters: most steps of a plan.
-                let bound = ctx.grid.max_curvature(p.s, s.s, &mut grid_hint).map(|kappa| {
-                    let l = s.s - p.s;
-                    SAGITTA_BOUND_FACTOR * kappa * l * l / 8.0
-                });
+                // Where two bounds put the sagitta far below the tolerance, the probes cannot
+                // find anything that matters (most steps of a plan): the tabulated curvature
+                // (kappa l^2 / 8, twice over for a peak between grid points), and the arc
+                // length l against the chord c (every point of the arc is within
+                // sqrt(l^2 - c^2) / 2 of the chord), which a curvature spike between grid
+                // points cannot pass unseen (a near-cusp: case 3107 of the random curves).
+                let l = s.s - p.s;
+                let c = step2.sqrt();
+                let by_length = 0.5 * (l * l - c * c).max(0.0).sqrt();
+                let bound = ctx
+                    .grid
+                    .max_curvature(p.s, s.s, &mut grid_hint)
+                    .map(|kappa| (SAGITTA_BOUND_FACTOR * kappa * l * l / 8.0).max(by_length));
                 if let Some(b) = bound.filter(|b| *b < PROBE_BELOW * eps) {
                     chord_ratio = chord_ratio.max(b / eps);
                     ratio = ratio.max((b / eps).sqrt());
