@@ -106,21 +106,9 @@ impl SCurveTable {
     /// State at time `t` from the segment start; clamped to `[0, total_time]`.
     #[inline]
     pub fn state_at(&self, t: f64) -> SCurveState {
-        if t <= 0.0 {
-            return self.states[0];
-        }
-        if t >= self.starts[PHASES] {
-            return self.states[PHASES];
-        }
-        let mut k = 0;
-        while k + 1 < PHASES && t >= self.starts[k + 1] {
-            k += 1;
-        }
-        self.states[k].advance(self.profile.jerks[k], t - self.starts[k])
+        self.state_at_from(t, &mut 0)
     }
-}
 
-impl SCurveTable {
     /// [`SCurveTable::state_at`] for times that do not decrease from call to call: the search
     /// for the phase starts at `phase` (0 at first) and leaves it there for the next call.
     #[inline]
@@ -214,8 +202,9 @@ mod tests {
         assert_eq!(stop_from(0.0, 5.0, a, j).table().total_time(), 0.0);
     }
 
-    /// For times that do not decrease, the phase cursor gives exactly what the search from the
-    /// first phase gives, zero-length phases and times past the end included.
+    /// For times that do not decrease, a phase cursor carried from call to call gives exactly
+    /// what the search from the first phase gives, zero-length phases and times past the end
+    /// included.
     #[test]
     fn state_at_from_a_phase_cursor_is_state_at() {
         let (j, a) = (6.0e4, 1.0e4);
