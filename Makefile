@@ -10,11 +10,12 @@
 #   make check-generated   fail if the committed header or bindings are stale
 #   make tools         install the generator versions the committed files were made with
 #
-# The module is this workspace's nurbs-hal staticlib linked whole into a shared object. Only the
-# RTAPI entry points are exported (hal/module.ver) and -Bsymbolic binds our own references
-# inside the module, so two Rust modules loaded into the same rtapi_app never share globals.
-# hal_* resolve from hal_lib.so and rtapi_* from rtapi_app at dlopen time: never link
-# liblinuxcnchal into the module.
+# The module is this workspace's nurbs-interp staticlib (hal/module: the no_std nurbs-hal crate,
+# aborting on panic) linked whole into a shared object. Only the RTAPI entry points are exported
+# (hal/module.ver) and -Bsymbolic binds our own references inside the module, so two Rust modules
+# loaded into the same rtapi_app never share globals. hal_* resolve from hal_lib.so and rtapi_*
+# from rtapi_app at dlopen time: never link liblinuxcnchal into the module. The userspace
+# binaries (nurbs-planner, nurbs-hal-record) come from the planner/ crate.
 
 CARGO       ?= cargo
 CC          ?= gcc
@@ -23,7 +24,7 @@ CBINDGEN    ?= cbindgen
 TARGET_DIR  ?= $(or $(CARGO_TARGET_DIR),target)
 OUT         := $(TARGET_DIR)/release
 MODULE      := $(OUT)/nurbs_interp.so
-STATICLIB   := $(OUT)/libnurbs_hal.a
+STATICLIB   := $(OUT)/libnurbs_interp.a
 BINS        := nurbs-planner nurbs-hal-record nurbs-plan
 LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
 MODULE_DIR  ?= /usr/lib/linuxcnc/modules
@@ -35,8 +36,8 @@ BINDIR      ?= $(PREFIX)/bin
 BINDGEN_VERSION  := 0.60.1
 CBINDGEN_VERSION := 0.29.4
 
-# What Rust's std needs from the C side (rustc --print native-static-libs for a staticlib).
-NATIVE_LIBS := -lgcc_s -lutil -lrt -lpthread -lm -ldl -lc
+# What the no_std staticlib needs from the C side (abort, memcpy and friends).
+NATIVE_LIBS := -lc
 
 BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc-comments \
 	--default-enum-style=consts \
@@ -54,12 +55,14 @@ BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc
 
 all: module planner
 
-# One cargo invocation builds the staticlib and the binaries with the same features.
+# The module's staticlib and the userspace binaries are separate cargo invocations: the module
+# must not share features (the mock HAL, std) with anything else.
 $(STATICLIB): FORCE
-	$(CARGO) build --release -p nurbs-hal --features linuxcnc --lib --bins
-	$(CARGO) build --release -p nurbs-motion --bin nurbs-plan
+	$(CARGO) build --release --manifest-path hal/module/Cargo.toml --target-dir $(TARGET_DIR)
 
-planner: $(STATICLIB)
+planner: FORCE
+	$(CARGO) build --release -p nurbs-planner --features linuxcnc --bins
+	$(CARGO) build --release -p nurbs-motion --bin nurbs-plan
 
 module: $(MODULE)
 
@@ -82,7 +85,7 @@ test-cargo:
 	$(CARGO) test --workspace
 
 bench:
-	$(CARGO) bench -p nurbs-hal --features mock-hal --bench update
+	$(CARGO) bench -p nurbs-planner --bench update
 
 # Needs root (or the RTAPI_UID setup in tests/hal/lib.sh) and an installed module.
 test-hal: install
@@ -122,7 +125,7 @@ tools:
 		$(CARGO) install --locked cbindgen --version $(CBINDGEN_VERSION)
 
 clean:
-	$(CARGO) clean -p nurbs-hal
+	$(CARGO) clean -p nurbs-hal -p nurbs-planner
 	rm -f $(MODULE)
 
 FORCE:
@@ -148,7 +151,9 @@ demo: setup install
 
 lint:
 	$(CARGO) fmt --all -- --check
+	$(CARGO) fmt --manifest-path hal/module/Cargo.toml -- --check
 	$(CARGO) clippy --workspace --all-targets -- -D warnings
+	$(CARGO) clippy --manifest-path hal/module/Cargo.toml --target-dir $(TARGET_DIR) -- -D warnings
 
 check: setup lint check-generated
 	$(CARGO) test --workspace

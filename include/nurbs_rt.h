@@ -21,35 +21,35 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 9
+#define CHANNEL_VERSION 10
 
 /**
- * Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
- * time margin the planner keeps.
+ * Slots in the record ring (a power of two). A group of records that share one stop goes into
+ * the ring whole before the module takes its first record, so the longest group must fit.
  */
-#define SEGMENT_SLOTS 1024
+#define SEGMENT_SLOTS 8192
 
 /**
- * Most curves (path elements) one geometry can hold: every curve index a record can carry (16
- * bits). A G1 program with its corners rounded is two elements per line.
+ * Curve descriptors in flight (a power of two): curves published ahead of the module.
  */
-#define MAX_CURVES (1 << 16)
+#define CURVE_SLOTS (1 << 14)
 
 /**
- * Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
- * together, then their stop points and the stored stop sequences): 32 MiB. The curves need
- * little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
- * 208); a stored stop sequence needs two values per period and three per element it runs on.
- * The butterfly's VPOp blocks at lab set 1 need 766,256 values in all; a 1,000-line G1 program
- * with the Erwinski planner 631,844 (3,038 of its 3,958 boundaries, most at element joins, have
- * a stored stop): this capacity holds some 6,000 such lines.
+ * Capacity of the geometry arena in `f64` values (32 MiB), reused as the motion goes on: the
+ * curves ahead of the module (a G1 line takes 12 values, a rounded corner 27), and for path
+ * blocks their curves' stop points and stored stop sequences.
  */
-#define GEOMETRY_VALUES (1 << 22)
+#define ARENA_VALUES (1 << 22)
+
+/**
+ * Most joints a record may drive (5-axis machines; this build drives the tool tip only).
+ */
+#define MAX_JOINTS 5
 
 /**
  * Checks of curve values (knots, coordinates and weights once, interior knots once more) the
- * module runs per period on a newly published geometry (a few microseconds), within a curve
- * if it is larger ([`validate_curves`]).
+ * module runs per period on the curves of the geometry stream (a few microseconds), within a
+ * curve if it is larger ([`check_curve`]).
  */
 #define VALIDATION_VALUES_PER_PERIOD 4096
 
@@ -87,7 +87,7 @@
 #define StopRun_VALUES 3
 
 /**
- * One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
+ * One planned segment along the curve (`#[repr(C)]`, 168 bytes, no pointers).
  */
 typedef struct SegmentRecord {
   /**
@@ -98,6 +98,11 @@ typedef struct SegmentRecord {
    * `FLAG_*` bits.
    */
   uint32_t flags;
+  /**
+   * Index of the path element (curve) the segment runs on.
+   */
+  uint32_t curve;
+  uint32_t reserved;
   /**
    * Curve parameter at the segment start and end.
    */
@@ -140,9 +145,13 @@ typedef struct PathBlock {
    */
   uint32_t seq;
   /**
-   * `FLAG_*` bits and the curve index (upper 16 bits), as for segment records.
+   * `FLAG_*` bits, as for segment records.
    */
   uint32_t flags;
+  /**
+   * Index of the path element (curve) of every sample.
+   */
+  uint32_t curve;
   /**
    * Samples used (1..=[`BLOCK_SAMPLES`]).
    */
@@ -161,7 +170,17 @@ typedef struct PathBlock {
    */
   uint32_t points_offset;
   uint32_t points_len;
-  uint32_t reserved;
+  /**
+   * Highest curve index the rest of the block's group and its stop run on (a stored stop
+   * may cross joins).
+   */
+  uint32_t curve_needed;
+  /**
+   * Blocks of the group from this one on (1: the block ends its group). Only a group's last
+   * block has a stop the planner found within the limits; the module takes a group's first
+   * block only once the whole group is queued, and stops only at a group's end.
+   */
+  uint32_t group_left;
   double stop_accel;
   double stop_jerk;
   double s_before[2];
@@ -170,40 +189,38 @@ typedef struct PathBlock {
 } PathBlock;
 
 /**
- * The stop the module makes after a segment record if no further record is taken (underrun,
- * hold, abort), as the planner chose and checked it (within the axis limits by finite
- * differences). Every segment record carries its own: a record is never run before its stop
- * is known, and the planner can hand records out while it is still choosing later stops.
- */
-typedef struct RecordStop {
-  /**
-   * Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
-   */
-  double accel;
-  double jerk;
-  /**
-   * Non-zero: instead, the planner's stop sequence of this many positions, stored as
-   * [`StopRun`](nurbs_rtcore::StopRun)s in the geometry arena from value `stored_offset`
-   * (written before the record was pushed).
-   */
-  uint32_t stored_len;
-  uint32_t stored_offset;
-  /**
-   * The stop points of the record's curve: `points_len` `(s, feed cap)` pairs in the arena
-   * from value `points_offset` (arc length from the curve start in the records' measure, mm;
-   * feed cap, mm/s): the planner's critical points and the curve end (feed 0), which the
-   * tangential stop must not pass faster than their cap.
-   */
-  uint32_t points_offset;
-  uint32_t points_len;
-} RecordStop;
-
-/**
- * A segment record with the stop after it: the segment payload of a [`Slot`].
+ * A segment record as the ring carries it: with the stop after it and where it stands in
+ * its group.
+ *
+ * The planner hands records out in groups that end at a boundary with a stop: the next
+ * segment re-planned to end at rest from that boundary, checked by finite differences with
+ * the machine holding at its end (`nurbs_motion::planner::FinalRecord`). The
+ * records inside a group have no stop of their own: the motion may end only at a group's end.
+ * So the module takes the first record of a group only once the whole group is in the ring
+ * (`group_left` records from it on) on checked curves (up to `curve_needed`), and holds,
+ * aborts or stops for an underrun only at a group's end, by running `stop`.
  */
 typedef struct SegmentSlot {
   struct SegmentRecord record;
-  struct RecordStop stop;
+  /**
+   * The stop after this record (when `has_stop` is 1): a record of sequence number
+   * `record.seq + 1` that ends at rest.
+   */
+  struct SegmentRecord stop;
+  /**
+   * Records of the group from this one on (1: this record ends its group).
+   */
+  uint32_t group_left;
+  /**
+   * 1: `stop` is the stop after this record; 0: none (inside a group, or the path's last
+   * record, which ends at rest).
+   */
+  uint32_t has_stop;
+  /**
+   * Highest curve index the rest of the group and its stop run on.
+   */
+  uint32_t curve_needed;
+  uint32_t reserved;
 } SegmentSlot;
 
 /**
@@ -228,9 +245,14 @@ typedef struct Slot {
 } Slot;
 
 /**
- * Where one curve's data lies in the geometry arena (offsets and lengths in `f64` values).
+ * Where one curve's data lies in the geometry arena (physical offsets and lengths in `f64`
+ * values) and which curve it is.
  */
 typedef struct CurveDesc {
+  /**
+   * Path element index of the curve (absolute; its descriptor slot is `index % CURVE_SLOTS`).
+   */
+  uint32_t index;
   uint32_t degree;
   /**
    * Coordinates per control point (2, 3, or 6 for a 5-axis tip + top curve).
@@ -242,18 +264,27 @@ typedef struct CurveDesc {
   uint32_t points_len;
   uint32_t weights_offset;
   uint32_t weights_len;
+  uint32_t reserved;
 } CurveDesc;
 
 /**
- * The fixed-size part of a geometry. (The stop after each record travels with the record:
- * [`RecordStop`], [`PathBlock::stop_accel`].)
+ * What one geometry stream (one planned motion) is about; fixed while it runs.
  */
 typedef struct GeometryHeader {
-  uint32_t curve_count;
+  /**
+   * Index of the first path element in the stream (0, or where a resumed plan starts).
+   */
+  uint32_t first_curve;
   /**
    * Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
    */
   uint32_t tip_axes;
+  /**
+   * Machine joints the records drive directly (0: the tool-tip axes; up to [`MAX_JOINTS`]
+   * is reserved for 5-axis paths, which this build refuses).
+   */
+  uint32_t joints;
+  uint32_t reserved;
 } GeometryHeader;
 
 /**

@@ -62,8 +62,9 @@ fn trident_with_vpop_limits() {
 }
 
 /// The planner streams: on the bundled curves the first record is final before the path is
-/// scanned to its end, and what is handed out is never revised (the records streamed are the
-/// records of the finished plan, in order).
+/// scanned to its end, and what is handed out is never revised (a streamed planner forgets a
+/// record once it is handed out, so a revision would index a released record and panic; the
+/// records come in order, as many as the plan reports).
 #[test]
 fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
     for name in ["trident.json", "butterfly.json", "fan.json", "open_pocket.json"] {
@@ -86,10 +87,7 @@ fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
         let mut streamed = vec![first];
         streamed.extend(planner.by_ref().map(|r| r.unwrap()));
         let plan = planner.finish();
-        assert_eq!(
-            streamed, plan.records,
-            "{name}: a record was revised after it was handed out"
-        );
+        assert_eq!(streamed.len(), plan.records, "{name}: records handed out");
         assert!(streamed.iter().enumerate().all(|(k, r)| r.seq as usize == k));
         assert!(plan.first_record_time < plan.plan_time);
         // The same streamed plan (planning is deterministic), sampled and checked by finite

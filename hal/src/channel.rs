@@ -3,55 +3,48 @@
 //! The realtime module creates one RTAPI shared-memory block ([`CHANNEL_KEY`], created in
 //! `rtapi_app_main`, zeroed by RTAPI) and lays a [`Channel`] over it; the planner attaches to the
 //! same key and checks the header before writing. The block holds a single-producer /
-//! single-consumer ring of fixed-size tagged [`Slot`]s (a [`SegmentRecord`] or a
-//! [`crate::record::PathBlock`]): the planner only advances `head`, the
-//! module only advances `tail`, each with release ordering after touching a slot and acquire
-//! ordering before reading the other side's counter. No locks, no syscalls, no allocation.
+//! single-consumer ring of fixed-size tagged [`Slot`]s (a segment record with the stop after
+//! it, or a [`crate::record::PathBlock`]): the planner only advances `head`, the module only
+//! advances `tail`, each with release ordering after touching a slot and acquire ordering
+//! before reading the other side's counter. No locks, no syscalls, no allocation.
 //!
-//! After the ring comes the [`GeometryArea`]: the curves (knots, control points, weights) the
-//! records refer to, in one fixed-capacity arena of `f64` published seqlock-style (a generation
-//! counter, odd while the planner writes, even and non-zero once published, stored last). The
-//! module validates a published geometry with `CurveView`'s checks (a slice of values per
-//! period) before it runs a single record on it and refuses (fault, hold) anything that does
-//! not validate. Behind the published curves
-//! the planner appends the curves' stop points and the stored stop sequences while the motion
-//! runs ([`GeometryArea::append`]), each before the first record that refers to it: the ring's
-//! release/acquire pair orders them, so the planner can hand records out while it still
-//! checks the stops of later ones.
+//! After the ring comes the [`GeometryStream`]: the curves (knots, control points, weights) the
+//! records refer to, streamed while the motion runs, so that a program of any length fits: a
+//! ring of curve descriptors and an arena of values, both reused once the module has passed
+//! what they held ([`Progress`]). The module checks every curve once, in path order, a slice of
+//! values per period, and takes a record only on a checked curve; it refuses (fault, hold)
+//! anything that does not validate.
 //!
-//! Why not `hal_stream`: it carries at most `HAL_STREAM_MAX_PINS` = 21 values per record, exactly
-//! the size of a segment record, which leaves no room for a record kind, and curve geometry
-//! (knots, control points, weights: variable size, possibly thousands of values) would have to be
-//! chopped into 21-value pieces on a second stream. Our own block keeps one ABI-checked layout
-//! (magic, version, record size, capacity) for both and grows without limits of HAL's.
+//! Why not `hal_stream`: it carries at most `HAL_STREAM_MAX_PINS` = 21 values per record, which
+//! is less than one segment record, and curve geometry (knots, control points, weights:
+//! variable size, possibly thousands of values) would have to be chopped into 21-value pieces
+//! on a second stream. Our own block keeps one ABI-checked layout (magic, version, record size,
+//! capacities) for both and grows without limits of HAL's.
 
 use core::cell::UnsafeCell;
 use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
 use nurbs_rtcore::{CurveView, ValuesChecked};
 
-pub use crate::record::{PathBlock, Record, RecordStop, SegmentRecord, SegmentSlot, Slot};
+pub use crate::record::{PathBlock, Record, SegmentRecord, SegmentSlot, Slot};
 
 /// RTAPI shared-memory key of the channel ("NRB0").
 pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 9;
-/// Segment slots in the ring (a power of two). 1024 segments cover far more than the buffered
-/// time margin the planner keeps.
-pub const SEGMENT_SLOTS: usize = 1024;
-/// Most curves (path elements) one geometry can hold: every curve index a record can carry (16
-/// bits). A G1 program with its corners rounded is two elements per line.
-pub const MAX_CURVES: usize = 1 << 16;
-/// Capacity of the geometry arena in `f64` values (knots, coordinates and weights of all curves
-/// together, then their stop points and the stored stop sequences): 32 MiB. The curves need
-/// little (e.g. 64 cubic 3-D curves of 250 control points each: 64,000 values; the butterfly:
-/// 208); a stored stop sequence needs two values per period and three per element it runs on.
-/// The butterfly's VPOp blocks at lab set 1 need 766,256 values in all; a 1,000-line G1 program
-/// with the Erwinski planner 631,844 (3,038 of its 3,958 boundaries, most at element joins, have
-/// a stored stop): this capacity holds some 6,000 such lines.
-pub const GEOMETRY_VALUES: usize = 1 << 22;
+pub const CHANNEL_VERSION: u32 = 10;
+/// Slots in the record ring (a power of two). A group of records that share one stop goes into
+/// the ring whole before the module takes its first record, so the longest group must fit.
+pub const SEGMENT_SLOTS: usize = 8192;
+/// Curve descriptors in flight (a power of two): curves published ahead of the module.
+pub const CURVE_SLOTS: usize = 1 << 14;
+/// Capacity of the geometry arena in `f64` values (32 MiB), reused as the motion goes on: the
+/// curves ahead of the module (a G1 line takes 12 values, a rounded corner 27), and for path
+/// blocks their curves' stop points and stored stop sequences.
+pub const ARENA_VALUES: usize = 1 << 22;
+/// Most joints a record may drive (5-axis machines; this build drives the tool tip only).
+pub const MAX_JOINTS: usize = 5;
 
 /// Why a channel cannot be used.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -165,17 +158,19 @@ pub struct Channel {
     version: AtomicU32,
     record_size: AtomicU32,
     segment_slots: AtomicU32,
-    geometry_values: AtomicU32,
-    max_curves: AtomicU32,
+    curve_slots: AtomicU32,
+    arena_values: AtomicU32,
     /// Total motion time (s, `f64` bits) of the records the planner has pushed so far; with the
     /// time the module has taken, this gives the buffered motion time.
     planned_time: AtomicU64,
     /// Module → planner: where the module stands after a hold or underrun stop.
     pub stop: StopStatus,
+    /// Module → planner: which curves it still needs.
+    pub progress: Progress,
     /// Planner → module records (segments or path blocks).
     pub segments: SpscRing<Slot, SEGMENT_SLOTS>,
     /// Planner → module curve geometry.
-    pub geometry: GeometryArea,
+    pub geometry: GeometryStream,
 }
 
 impl Channel {
@@ -196,11 +191,17 @@ impl Channel {
             .record_size
             .store(core::mem::size_of::<Slot>() as u32, Ordering::Relaxed);
         channel.segment_slots.store(SEGMENT_SLOTS as u32, Ordering::Relaxed);
-        channel.geometry_values.store(GEOMETRY_VALUES as u32, Ordering::Relaxed);
-        channel.max_curves.store(MAX_CURVES as u32, Ordering::Relaxed);
+        channel.curve_slots.store(CURVE_SLOTS as u32, Ordering::Relaxed);
+        channel.arena_values.store(ARENA_VALUES as u32, Ordering::Relaxed);
         channel.planned_time.store(0, Ordering::Relaxed);
         channel.stop.clear();
+        channel.progress.report(Report {
+            generation: 0,
+            moving: false,
+            curve: 0,
+        });
         channel.geometry.generation.store(0, Ordering::Relaxed);
+        channel.geometry.published.store(0, Ordering::Relaxed);
         channel.magic.store(CHANNEL_MAGIC, Ordering::Release);
         channel
     }
@@ -223,8 +224,8 @@ impl Channel {
         let layout_ok = self.version.load(Ordering::Relaxed) == CHANNEL_VERSION
             && self.record_size.load(Ordering::Relaxed) as usize == core::mem::size_of::<Slot>()
             && self.segment_slots.load(Ordering::Relaxed) as usize == SEGMENT_SLOTS
-            && self.geometry_values.load(Ordering::Relaxed) as usize == GEOMETRY_VALUES
-            && self.max_curves.load(Ordering::Relaxed) as usize == MAX_CURVES;
+            && self.curve_slots.load(Ordering::Relaxed) as usize == CURVE_SLOTS
+            && self.arena_values.load(Ordering::Relaxed) as usize == ARENA_VALUES;
         if layout_ok {
             Ok(())
         } else {
@@ -260,7 +261,8 @@ pub struct StopPoint {
     pub curve: u32,
     pub u: f64,
     pub s: f64,
-    pub point: [f64; 3],
+    /// The position the module outputs there (the tool-tip axes first, then zeros).
+    pub point: [f64; MAX_JOINTS],
 }
 
 /// Module → planner status: the [`StopPoint`] of the last stop, while the module waits
@@ -275,7 +277,7 @@ pub struct StopStatus {
     curve: AtomicU32,
     u: AtomicU64,
     s: AtomicU64,
-    point: [AtomicU64; 3],
+    point: [AtomicU64; MAX_JOINTS],
 }
 
 impl StopStatus {
@@ -315,17 +317,20 @@ impl StopStatus {
             curve: self.curve.load(Ordering::Relaxed),
             u: f(&self.u),
             s: f(&self.s),
-            point: [f(&self.point[0]), f(&self.point[1]), f(&self.point[2])],
+            point: core::array::from_fn(|i| self.point.get(i).map_or(0.0, f)),
         };
         fence(Ordering::Acquire);
         (self.epoch.load(Ordering::Relaxed) == epoch).then_some(p)
     }
 }
 
-/// Where one curve's data lies in the geometry arena (offsets and lengths in `f64` values).
+/// Where one curve's data lies in the geometry arena (physical offsets and lengths in `f64`
+/// values) and which curve it is.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct CurveDesc {
+    /// Path element index of the curve (absolute; its descriptor slot is `index % CURVE_SLOTS`).
+    pub index: u32,
     pub degree: u32,
     /// Coordinates per control point (2, 3, or 6 for a 5-axis tip + top curve).
     pub dim: u32,
@@ -335,32 +340,30 @@ pub struct CurveDesc {
     pub points_len: u32,
     pub weights_offset: u32,
     pub weights_len: u32,
+    pub reserved: u32,
 }
 
-/// The fixed-size part of a geometry. (The stop after each record travels with the record:
-/// [`RecordStop`], [`PathBlock::stop_accel`].)
+/// What one geometry stream (one planned motion) is about; fixed while it runs.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct GeometryHeader {
-    pub curve_count: u32,
+    /// Index of the first path element in the stream (0, or where a resumed plan starts).
+    pub first_curve: u32,
     /// Tool-tip coordinates (2 or 3): the axes the module drives and the arc length measures.
     pub tip_axes: u32,
+    /// Machine joints the records drive directly (0: the tool-tip axes; up to [`MAX_JOINTS`]
+    /// is reserved for 5-axis paths, which this build refuses).
+    pub joints: u32,
+    pub reserved: u32,
 }
 
-/// A geometry as the channel holds it: the header, the descriptors of its curves (in their own
-/// array of the channel, indexed like the records' curve numbers) and the arena values.
-#[derive(Clone, Copy, Debug)]
-pub struct GeometryRef<'a> {
-    pub header: GeometryHeader,
-    pub curves: &'a [CurveDesc],
-    pub values: &'a [f64],
-}
-
-/// Why a published geometry is refused.
+/// Why a geometry stream or one of its curves is refused.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum GeometryFault {
-    /// No curve, more than [`MAX_CURVES`], or a tip-axis count outside 2..=3.
+    /// A tip-axis count outside 2..=3, or joints (not supported by this build).
     Header,
+    /// A descriptor that is not the curve it should be (slot reused, or never written).
+    Descriptor { curve: usize },
     /// A curve's data lies (partly) outside the arena.
     OutOfBounds { curve: usize },
     /// A curve has fewer coordinates than the tip axes.
@@ -378,110 +381,19 @@ fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     values.get(start..end)
 }
 
-/// Checks the header and every curve of `g` (see [`valid_curve`]). Allocation-free and
-/// panic-free: the planner runs it before publishing; the realtime module runs the same checks
-/// a slice per period ([`validate_header`], [`validate_curves`]).
-pub fn validate_geometry(g: &GeometryRef) -> Result<(), GeometryFault> {
-    validate_header(g)?;
-    (0..g.header.curve_count as usize).try_for_each(|curve| valid_curve(g, curve).map(|_| ()))
-}
-
-/// Checks the header of `g`: 1..=[`MAX_CURVES`] curves, 2 or 3 tip axes.
-pub fn validate_header(g: &GeometryRef) -> Result<(), GeometryFault> {
-    let header = &g.header;
-    let count = header.curve_count as usize;
-    let tip = header.tip_axes as usize;
-    if count == 0 || count > MAX_CURVES || count > g.curves.len() || !(2..=3).contains(&tip) {
+/// Checks a stream's header: 2 or 3 tip axes, no joints.
+pub fn validate_header(header: &GeometryHeader) -> Result<(), GeometryFault> {
+    if !(2..=3).contains(&(header.tip_axes as usize)) || header.joints != 0 {
         return Err(GeometryFault::Header);
     }
     Ok(())
 }
 
-/// Where [`validate_curves`] stands: a curve, and a value of it (in the order of
-/// [`CurveView::check_values`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct CurvesCursor {
-    pub curve: usize,
-    pub value: usize,
-}
-
-/// How far [`validate_curves`] got.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CurvesChecked {
-    /// Every curve from where it started is valid.
-    All,
-    /// Everything before this point is valid; the budget is spent.
-    UpTo(CurvesCursor),
-}
-
-/// Checks the curves of `g` from `from` on ([`valid_curve`]'s checks) until `budget` value
-/// checks are run ([`CurveView::value_checks`]: knots, coordinates and weights once, interior
-/// knots once more), within a curve if need be: a curve of a million control points is checked
-/// over many calls. The header must be valid ([`validate_header`]).
-/// O(budget), allocation-free and panic-free.
-pub fn validate_curves(g: &GeometryRef, from: CurvesCursor, budget: usize) -> Result<CurvesChecked, GeometryFault> {
-    let count = g.header.curve_count as usize;
-    let mut at = from;
-    let mut left = budget;
-    while at.curve < count {
-        let (desc, knots, points, weights) = curve_data(g, at.curve)?;
-        let curve = at.curve;
-        match CurveView::check_values(
-            desc.degree as usize,
-            desc.dim as usize,
-            knots,
-            points,
-            weights,
-            at.value,
-            left,
-        )
-        .map_err(|error| GeometryFault::Curve { curve, error })?
-        {
-            ValuesChecked::UpTo(value) => return Ok(CurvesChecked::UpTo(CurvesCursor { curve, value })),
-            ValuesChecked::All => {
-                let total = CurveView::value_checks(desc.degree as usize, knots, points, weights);
-                left = left.saturating_sub(total.saturating_sub(at.value).max(1));
-                at = CurvesCursor {
-                    curve: curve + 1,
-                    value: 0,
-                };
-                if left == 0 && at.curve < count {
-                    return Ok(CurvesChecked::UpTo(at));
-                }
-            }
-        }
-    }
-    Ok(CurvesChecked::All)
-}
-
-/// Curve `curve` of `g`, checked: its data within the arena, at least the tip axes, and a NURBS
-/// `CurveView::new` accepts (O(size of the curve)). Allocation-free and panic-free.
-pub fn valid_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a>, GeometryFault> {
-    let (desc, knots, points, weights) = curve_data(g, curve)?;
-    CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights)
-        .map_err(|error| GeometryFault::Curve { curve, error })
-}
-
-/// Curve `curve` of a geometry whose curves [`validate_curves`] has passed and which has not
-/// been rewritten since (its generation unchanged): O(1) ([`CurveView::trusted`]).
-pub fn trusted_curve<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveView<'a>, GeometryFault> {
-    let (desc, knots, points, weights) = curve_data(g, curve)?;
-    CurveView::trusted(desc.degree as usize, desc.dim as usize, knots, points, weights)
-        .map_err(|error| GeometryFault::Curve { curve, error })
-}
-
-type CurveData<'a> = (&'a CurveDesc, &'a [f64], &'a [f64], &'a [f64]);
-
-/// The descriptor and the knots, coordinates and weights of curve `curve`, within the arena and
-/// with at least the tip axes (O(1)).
-fn curve_data<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveData<'a>, GeometryFault> {
-    let header = &g.header;
-    let desc = g
-        .curves
-        .get(curve)
-        .filter(|_| curve < header.curve_count as usize)
-        .ok_or(GeometryFault::Header)?;
-    let values = g.values;
+/// The knots, coordinates and weights of the curve `desc` describes, within `values` and with
+/// at least `tip` coordinates (O(1)).
+type CurveData<'a> = (&'a [f64], &'a [f64], &'a [f64]);
+fn curve_data<'a>(desc: &CurveDesc, values: &'a [f64], tip: usize) -> Result<CurveData<'a>, GeometryFault> {
+    let curve = desc.index as usize;
     let (Some(knots), Some(points), Some(weights)) = (
         slice_of(values, desc.knots_offset, desc.knots_len),
         slice_of(values, desc.points_offset, desc.points_len),
@@ -489,13 +401,67 @@ fn curve_data<'a>(g: &GeometryRef<'a>, curve: usize) -> Result<CurveData<'a>, Ge
     ) else {
         return Err(GeometryFault::OutOfBounds { curve });
     };
-    if (desc.dim as usize) < header.tip_axes as usize {
+    if (desc.dim as usize) < tip {
         return Err(GeometryFault::Dimension { curve });
     }
-    Ok((desc, knots, points, weights))
+    Ok((knots, points, weights))
 }
 
-/// The stop points a record or block refers to: `pairs` `(s, feed cap)` pairs in `values` from
+/// Where the check of one curve stands: the first value not yet checked (in the order of
+/// [`CurveView::check_values`]).
+pub type ValueCursor = usize;
+
+/// Checks the curve `desc` describes from value `from` on ([`CurveView::check_values`]: knots,
+/// coordinates and weights once, interior knots once more) until `budget` value checks are run:
+/// a curve of a million control points is checked over many calls. Returns the checks run and
+/// `None` once the curve is checked through, or the cursor to go on from. O(budget),
+/// allocation-free and panic-free.
+pub fn check_curve(
+    desc: &CurveDesc,
+    values: &[f64],
+    tip: usize,
+    from: ValueCursor,
+    budget: usize,
+) -> Result<(usize, Option<ValueCursor>), GeometryFault> {
+    let (knots, points, weights) = curve_data(desc, values, tip)?;
+    let curve = desc.index as usize;
+    let (degree, dim) = (desc.degree as usize, desc.dim as usize);
+    match CurveView::check_values(degree, dim, knots, points, weights, from, budget)
+        .map_err(|error| GeometryFault::Curve { curve, error })?
+    {
+        ValuesChecked::UpTo(next) => Ok((budget, Some(next))),
+        ValuesChecked::All => {
+            let total = CurveView::value_checks(degree, knots, points, weights);
+            Ok((total.saturating_sub(from).max(1), None))
+        }
+    }
+}
+
+/// The curve `desc` describes, checked in full (`CurveView::new`, O(size of the curve)).
+/// Allocation-free and panic-free.
+pub fn valid_curve<'a>(desc: &CurveDesc, values: &'a [f64], tip: usize) -> Result<CurveView<'a>, GeometryFault> {
+    let (knots, points, weights) = curve_data(desc, values, tip)?;
+    CurveView::new(desc.degree as usize, desc.dim as usize, knots, points, weights).map_err(|error| {
+        GeometryFault::Curve {
+            curve: desc.index as usize,
+            error,
+        }
+    })
+}
+
+/// The curve `desc` describes, which [`check_curve`] has passed and which has not been
+/// rewritten since: O(1) ([`CurveView::trusted`]).
+pub fn trusted_curve<'a>(desc: &CurveDesc, values: &'a [f64], tip: usize) -> Result<CurveView<'a>, GeometryFault> {
+    let (knots, points, weights) = curve_data(desc, values, tip)?;
+    CurveView::trusted(desc.degree as usize, desc.dim as usize, knots, points, weights).map_err(|error| {
+        GeometryFault::Curve {
+            curve: desc.index as usize,
+            error,
+        }
+    })
+}
+
+/// The stop points a path block refers to: `pairs` `(s, feed cap)` pairs in `values` from
 /// value `offset`, if they lie within the arena and are finite with a cap >= 0. O(pairs),
 /// allocation-free and panic-free.
 pub fn stop_points(values: &[f64], offset: u32, pairs: u32) -> Option<&[f64]> {
@@ -506,128 +472,186 @@ pub fn stop_points(values: &[f64], offset: u32, pairs: u32) -> Option<&[f64]> {
         .then_some(points)
 }
 
-/// The curve geometry in shared memory, written by the planner, read by the module.
+/// The curve geometry of one planned motion, streamed by the planner while the motion runs
+/// and read by the module: a header, a ring of curve descriptors ([`CURVE_SLOTS`], the slot of
+/// curve `i` is `i % CURVE_SLOTS`) and an arena of values (knots, coordinates and weights of the
+/// curves; for path blocks also stop points and stored stop sequences).
 ///
-/// Seqlock protocol: the writer makes `generation` odd, writes header and values, then stores
-/// the next even value (release). A reader takes a snapshot only at an even, non-zero
-/// generation and confirms the generation unchanged after it has validated the data.
+/// A stream begins ([`GeometryStream::begin`], only while the module runs no motion) with a
+/// new generation: odd while the header is written, then even and non-zero (release). Curves
+/// follow in path order: the planner writes a curve's values, then its descriptor, then
+/// advances [`GeometryStream::published`] (release); the module reads a descriptor only below
+/// `published` (acquire), checks it once, and takes records only on checked curves. The planner
+/// reuses a descriptor slot or arena values only once the module has reported that it no
+/// longer needs them ([`Channel::progress`]): the curves before the one it is on, and the
+/// arena values written before that curve's (blocks: and before the stored data of the block
+/// it runs).
 #[repr(C)]
-pub struct GeometryArea {
+pub struct GeometryStream {
     generation: AtomicU32,
+    published: AtomicU32,
     header: UnsafeCell<GeometryHeader>,
-    curves: UnsafeCell<[CurveDesc; MAX_CURVES]>,
-    values: UnsafeCell<[f64; GEOMETRY_VALUES]>,
+    curves: UnsafeCell<[CurveDesc; CURVE_SLOTS]>,
+    values: UnsafeCell<[f64; ARENA_VALUES]>,
 }
 
-// SAFETY: writes happen only under an odd generation, reads are confirmed by an unchanged even
-// generation (seqlock); the data are plain numbers.
-unsafe impl Sync for GeometryArea {}
+// SAFETY: the header is written only under an odd generation (seqlock); a descriptor and the
+// values it points to are written before `published` passes it and not rewritten while the
+// module may use them (the release protocol above); the data are plain numbers.
+unsafe impl Sync for GeometryStream {}
 
-/// Why the planner cannot publish a geometry.
+/// Why the planner cannot write into the geometry stream.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PublishError {
-    /// More values than [`GEOMETRY_VALUES`].
-    TooLarge,
-    /// The geometry does not validate (the module would refuse it).
+    /// Values beyond the arena, or a curve descriptor out of order.
+    OutOfPlace,
+    /// The curve does not validate (the module would refuse it).
     Invalid(GeometryFault),
 }
 
-impl GeometryArea {
-    /// Current generation: 0 = nothing published, odd = being written.
+impl GeometryStream {
+    /// Current generation: 0 = nothing published, odd = being begun.
     pub fn generation(&self) -> u32 {
         self.generation.load(Ordering::Acquire)
     }
 
-    /// Producer side: validate and publish `g`; returns the new generation. The module must be
-    /// idle (it refuses a geometry that changes during motion).
-    pub fn publish(&self, g: &GeometryRef) -> Result<u32, PublishError> {
-        if g.values.len() > GEOMETRY_VALUES || g.curves.len() > MAX_CURVES {
-            return Err(PublishError::TooLarge);
-        }
-        validate_geometry(g).map_err(PublishError::Invalid)?;
-        Ok(self.write(g))
+    /// One past the index of the last curve whose descriptor is written (acquire: its values
+    /// and descriptor are visible).
+    pub fn published(&self) -> u32 {
+        self.published.load(Ordering::Acquire)
     }
 
-    /// Writes `g` under the seqlock protocol (odd generation while writing).
-    fn write(&self, g: &GeometryRef) -> u32 {
+    /// Producer side: starts a new stream with `header` (the module must be idle: it refuses a
+    /// stream that changes during motion); returns its generation.
+    pub fn begin(&self, header: &GeometryHeader) -> Result<u32, PublishError> {
+        validate_header(header).map_err(PublishError::Invalid)?;
         let old = self.generation.load(Ordering::Relaxed);
         let writing = (old | 1).wrapping_add(if old & 1 == 1 { 2 } else { 0 });
         self.generation.store(writing, Ordering::Relaxed);
         fence(Ordering::Release);
-        // SAFETY: the generation is odd: a reader will discard what it sees now; the lengths
-        // are within the arrays (checked by the callers, `take` for the test helper).
-        unsafe {
-            self.header.get().write_volatile(g.header);
-            let curves = self.curves.get() as *mut CurveDesc;
-            for (i, c) in g.curves.iter().take(MAX_CURVES).enumerate() {
-                curves.add(i).write_volatile(*c);
-            }
-            let base = self.values.get() as *mut f64;
-            for (i, v) in g.values.iter().take(GEOMETRY_VALUES).enumerate() {
-                base.add(i).write_volatile(*v);
-            }
-        }
-        let published = writing.wrapping_add(1).max(2);
-        self.generation.store(published, Ordering::Release);
-        published
+        // SAFETY: the generation is odd: a reader discards what it sees now.
+        unsafe { self.header.get().write_volatile(*header) };
+        self.published.store(header.first_curve, Ordering::Relaxed);
+        let begun = writing.wrapping_add(1).max(2);
+        self.generation.store(begun, Ordering::Release);
+        Ok(begun)
     }
 
-    /// Producer side, after [`GeometryArea::publish`]: writes `values` into the arena from value
-    /// `offset`, behind everything published and appended before (the caller keeps count), for
-    /// records pushed afterwards to refer to (stored stop sequences). No reader looks there
-    /// before it has taken such a record, so the generation stays as it is.
-    pub fn append(&self, offset: usize, values: &[f64]) -> Result<(), PublishError> {
-        let end = offset.checked_add(values.len()).ok_or(PublishError::TooLarge)?;
-        if end > GEOMETRY_VALUES {
-            return Err(PublishError::TooLarge);
+    /// Producer side: writes `values` into the arena from physical value `offset`. The caller
+    /// owns that range: nothing the module may still read lies there.
+    pub fn write_values(&self, offset: usize, values: &[f64]) -> Result<(), PublishError> {
+        let end = offset.checked_add(values.len()).ok_or(PublishError::OutOfPlace)?;
+        if end > ARENA_VALUES {
+            return Err(PublishError::OutOfPlace);
         }
         let base = self.values.get() as *mut f64;
         for (i, v) in values.iter().enumerate() {
             // SAFETY: within the array (checked above); the module reads these values only
-            // after the ring has handed it a record pushed after this write.
+            // after a descriptor or record pushed after this write refers to them.
             unsafe { base.add(offset + i).write_volatile(*v) };
         }
         Ok(())
     }
 
-    /// Test helper: publish without validating (to prove the module refuses bad geometry).
-    #[cfg(test)]
-    pub(crate) fn publish_unchecked(&self, g: &GeometryRef) -> u32 {
-        self.write(g)
+    /// Producer side: publishes the next curve, whose values are written; checks it first as
+    /// the module will (what it refuses, the planner does not send).
+    pub fn publish_curve(&self, desc: &CurveDesc) -> Result<(), PublishError> {
+        let next = self.published.load(Ordering::Relaxed);
+        if desc.index != next {
+            return Err(PublishError::OutOfPlace);
+        }
+        let tip = self.header().tip_axes as usize;
+        valid_curve(desc, self.values(), tip).map_err(PublishError::Invalid)?;
+        self.write_descriptor(desc);
+        Ok(())
     }
 
-    /// Consumer side: the published geometry (a copy of the header, the curve descriptors and
-    /// the whole arena in place), if there is one (generation even and non-zero). Confirm with
-    /// [`GeometryArea::unchanged`] after using the data.
-    pub fn snapshot(&self) -> Option<(u32, GeometryRef<'_>)> {
-        let generation = self.generation.load(Ordering::Acquire);
-        if generation == 0 || generation & 1 == 1 {
+    fn write_descriptor(&self, desc: &CurveDesc) {
+        let slot = desc.index as usize % CURVE_SLOTS;
+        // SAFETY: the slot index is within the array; the module reads this slot only once
+        // `published` passes `desc.index` (stored below, release), and the previous curve in
+        // the slot is released (the planner's protocol).
+        unsafe { (self.curves.get() as *mut CurveDesc).add(slot).write_volatile(*desc) };
+        self.published.store(desc.index.wrapping_add(1), Ordering::Release);
+    }
+
+    /// Test helper: publish a descriptor without checking it (to prove the module refuses bad
+    /// curves).
+    #[cfg(any(test, feature = "mock-hal"))]
+    pub fn publish_unchecked(&self, desc: &CurveDesc) {
+        self.write_descriptor(desc);
+    }
+
+    /// The stream's header (read it under an unchanged generation).
+    pub fn header(&self) -> GeometryHeader {
+        // SAFETY: plain data; a concurrent `begin` is detected by the generation.
+        unsafe { self.header.get().read_volatile() }
+    }
+
+    /// The descriptor of curve `index`, if it is published and its slot still holds it.
+    pub fn descriptor(&self, index: u32) -> Option<CurveDesc> {
+        if index >= self.published() {
             return None;
         }
-        // SAFETY: read of plain data; a concurrent writer is detected by `unchanged`. The arrays
-        // stay mapped as long as the channel.
-        let (header, curves, values) = unsafe {
-            (
-                self.header.get().read_volatile(),
-                &*self.curves.get(),
-                &*self.values.get(),
-            )
+        // SAFETY: within the array; written before `published` passed it (acquire above).
+        let desc = unsafe {
+            (self.curves.get() as *const CurveDesc)
+                .add(index as usize % CURVE_SLOTS)
+                .read_volatile()
         };
-        let count = (header.curve_count as usize).min(MAX_CURVES);
-        Some((
-            generation,
-            GeometryRef {
-                header,
-                curves: &curves[..count],
-                values,
-            },
-        ))
+        (desc.index == index).then_some(desc)
     }
 
-    /// True if the geometry of `generation` is still the published one.
+    /// True if stream `generation` is still the current one (after reading its data).
     pub fn unchanged(&self, generation: u32) -> bool {
         fence(Ordering::Acquire);
         self.generation.load(Ordering::Relaxed) == generation
+    }
+
+    /// The arena in place.
+    pub fn values(&self) -> &[f64] {
+        // SAFETY: the array stays mapped as long as the channel; values are plain numbers,
+        // read only where the protocol says they are written.
+        unsafe { &*self.values.get() }
+    }
+}
+
+/// Module → planner: how far the module has got, so the planner may reuse what lies behind
+/// and knows when it may begin a new stream. One 64-bit word (the stream's generation, whether
+/// a motion is running, and a curve index), so the three are read together.
+#[repr(C)]
+pub struct Progress {
+    word: AtomicU64,
+}
+
+/// What the module last reported ([`Progress`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Report {
+    pub generation: u32,
+    /// A motion is running (it may still read curves and stored stops).
+    pub moving: bool,
+    /// The module will not use curves before this one again.
+    pub curve: u32,
+}
+
+const MOVING: u64 = 1 << 31;
+
+impl Progress {
+    /// Module side.
+    pub fn report(&self, r: Report) {
+        let moving = if r.moving { MOVING } else { 0 };
+        let word = (u64::from(r.generation) << 32) | moving | (u64::from(r.curve) & (MOVING - 1));
+        self.word.store(word, Ordering::Release);
+    }
+
+    /// Planner side.
+    pub fn read(&self) -> Report {
+        let word = self.word.load(Ordering::Acquire);
+        Report {
+            generation: (word >> 32) as u32,
+            moving: word & MOVING != 0,
+            curve: (word & (MOVING - 1)) as u32,
+        }
     }
 }
 
@@ -650,25 +674,25 @@ mod tests {
             let mut b = PathBlock {
                 seq,
                 count: 1,
+                group_left: 1,
                 ..PathBlock::default()
             };
             b.u[0] = seq as f64 / 7.0;
             Slot::block(&b)
         } else {
-            let stop = RecordStop {
-                accel: 1e4,
-                jerk: 6e4,
-                stored_len: seq,
-                stored_offset: 2 * seq,
-                points_offset: 3 * seq,
-                points_len: 1,
-            };
-            let r = SegmentRecord {
+            let record = SegmentRecord {
                 seq,
                 u_start: seq as f64 / 7.0,
                 ..SegmentRecord::default()
             };
-            Slot::segment(&r, &stop)
+            Slot::segment(&SegmentSlot {
+                record,
+                stop: SegmentRecord { seq: seq + 1, ..record },
+                group_left: 1 + seq % 4,
+                has_stop: u32::from(seq.is_multiple_of(4)),
+                curve_needed: seq,
+                reserved: 0,
+            })
         }
     }
 
@@ -734,87 +758,129 @@ mod tests {
         assert_eq!(c.segments.push(&record(0)), Err(ChannelError::Corrupt));
     }
 
-    /// A clamped cubic: the trident's control polygon.
-    fn trident() -> (GeometryHeader, Vec<CurveDesc>, Vec<f64>) {
+    /// A clamped cubic: the trident's control polygon, as (knots, points, weights).
+    fn trident() -> ([f64; 11], [f64; 14], [f64; 7]) {
         let knots = [0.0, 0.0, 0.0, 0.0, 0.25, 0.5, 0.75, 1.0, 1.0, 1.0, 1.0];
         let points = [
             10.0, 0.0, 20.0, 27.0, 12.0, 8.0, 10.0, 20.0, 8.0, 8.0, 0.0, 27.0, 10.0, 0.0,
         ];
-        let weights = [1.0; 7];
-        let mut values = Vec::new();
-        let mut desc = CurveDesc {
+        (knots, points, [1.0; 7])
+    }
+
+    /// Curve `index` written at `offset` of the arena of `g`; its descriptor.
+    fn write_trident(g: &GeometryStream, index: u32, offset: u32, weights: &[f64]) -> CurveDesc {
+        let (knots, points, _) = trident();
+        let data: Vec<f64> = knots.iter().chain(&points).chain(weights).copied().collect();
+        g.write_values(offset as usize, &data).unwrap();
+        CurveDesc {
+            index,
             degree: 3,
             dim: 2,
-            ..CurveDesc::default()
-        };
-        desc.knots_offset = values.len() as u32;
-        desc.knots_len = knots.len() as u32;
-        values.extend_from_slice(&knots);
-        desc.points_offset = values.len() as u32;
-        desc.points_len = points.len() as u32;
-        values.extend_from_slice(&points);
-        desc.weights_offset = values.len() as u32;
-        desc.weights_len = weights.len() as u32;
-        values.extend_from_slice(&weights);
-        let header = GeometryHeader {
-            curve_count: 1,
-            tip_axes: 2,
-        };
-        (header, vec![desc], values)
+            knots_offset: offset,
+            knots_len: 11,
+            points_offset: offset + 11,
+            points_len: 14,
+            weights_offset: offset + 25,
+            weights_len: weights.len() as u32,
+            reserved: 0,
+        }
     }
 
-    fn geometry<'a>(header: GeometryHeader, curves: &'a [CurveDesc], values: &'a [f64]) -> GeometryRef<'a> {
-        GeometryRef { header, curves, values }
+    fn header(first_curve: u32) -> GeometryHeader {
+        GeometryHeader {
+            first_curve,
+            tip_axes: 2,
+            ..GeometryHeader::default()
+        }
     }
 
     #[test]
-    fn geometry_publishes_and_validates() {
+    fn a_stream_publishes_curves_in_order() {
         let mut b = block();
         let c = unsafe { Channel::init(aligned(&mut b)) };
-        assert!(c.geometry.snapshot().is_none());
-        let (header, curves, values) = trident();
-        let g = geometry(header, &curves, &values);
-        let generation = c.geometry.publish(&g).unwrap();
-        assert_eq!(generation, 2);
-        let (gen, snap) = c.geometry.snapshot().unwrap();
-        assert_eq!((gen, snap.header, snap.curves), (generation, header, &curves[..]));
-        validate_geometry(&snap).unwrap();
-        let p = valid_curve(&snap, 0).unwrap().point(1.0);
-        assert_eq!((p[0], p[1]), (10.0, 0.0));
-        assert_eq!(valid_curve(&snap, 1).unwrap_err(), GeometryFault::Header);
-        assert!(c.geometry.unchanged(gen));
-        // Values appended behind the published ones: seen in place, the generation kept.
-        c.geometry.append(values.len(), &[1.5, -2.5]).unwrap();
-        let (gen2, snap) = c.geometry.snapshot().unwrap();
-        assert_eq!((gen2, &snap.values[values.len()..][..2]), (gen, &[1.5, -2.5][..]));
+        let g = &c.geometry;
+        assert_eq!(g.generation(), 0);
+        let generation = g.begin(&header(5)).unwrap();
+        assert_eq!((generation, g.published(), g.header()), (2, 5, header(5)));
+        assert!(g.descriptor(5).is_none(), "not published yet");
+        let desc = write_trident(g, 5, 100, &[1.0; 7]);
         assert_eq!(
-            c.geometry.append(GEOMETRY_VALUES - 1, &[0.0, 0.0]),
-            Err(PublishError::TooLarge)
+            g.publish_curve(&CurveDesc { index: 6, ..desc }),
+            Err(PublishError::OutOfPlace)
         );
-        assert_eq!(c.geometry.append(usize::MAX, &[0.0]), Err(PublishError::TooLarge));
-        assert_eq!(c.geometry.publish(&g), Ok(4));
-        assert!(!c.geometry.unchanged(gen));
+        g.publish_curve(&desc).unwrap();
+        assert_eq!((g.published(), g.descriptor(5)), (6, Some(desc)));
+        let view = valid_curve(&desc, g.values(), 2).unwrap();
+        let p = view.point(1.0);
+        assert_eq!((p[0], p[1]), (10.0, 0.0));
+        // The slot of curve 5 + CURVE_SLOTS is curve 5's: a descriptor that is not the curve
+        // asked for is not taken.
+        assert!(g.descriptor(5 + CURVE_SLOTS as u32).is_none());
+        assert!(g.unchanged(generation));
+        assert_eq!(g.begin(&header(0)), Ok(4));
+        assert!(!g.unchanged(generation));
+        assert_eq!(g.published(), 0);
+        for bad in [
+            GeometryHeader {
+                tip_axes: 1,
+                ..header(0)
+            },
+            GeometryHeader { joints: 5, ..header(0) },
+        ] {
+            assert_eq!(g.begin(&bad), Err(PublishError::Invalid(GeometryFault::Header)));
+        }
+        assert_eq!(
+            g.write_values(ARENA_VALUES - 1, &[0.0, 0.0]),
+            Err(PublishError::OutOfPlace)
+        );
+        assert_eq!(g.write_values(usize::MAX, &[0.0]), Err(PublishError::OutOfPlace));
     }
 
-    /// Any budget: each call runs exactly that many value checks (the last one what is left),
-    /// across curve boundaries, and the calls cover every check of every curve once.
     #[test]
-    fn curves_are_validated_a_budget_at_a_time() {
-        let (mut header, one, values) = trident();
-        header.curve_count = 3;
-        let curves = [one[0]; 3];
-        let g = geometry(header, &curves, &values);
-        let (k, p, w) = (&values[..11], &values[11..25], &values[25..]);
-        let per_curve = CurveView::value_checks(3, k, p, w);
-        assert_eq!(per_curve, 11 + 3 + 14 + 7);
-        for budget in 1..=2 * per_curve + 1 {
-            let (mut at, mut calls) = (CurvesCursor::default(), 0);
-            while let CurvesChecked::UpTo(next) = validate_curves(&g, at, budget).unwrap() {
-                let checks = |c: CurvesCursor| c.curve * per_curve + c.value;
-                assert_eq!(checks(next) - checks(at), budget, "budget {budget}");
-                (at, calls) = (next, calls + 1);
+    fn the_module_reports_its_progress_in_one_word() {
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        for r in [
+            Report {
+                generation: 7,
+                moving: true,
+                curve: 123_456,
+            },
+            Report {
+                generation: u32::MAX,
+                moving: false,
+                curve: (1 << 31) - 1,
+            },
+        ] {
+            c.progress.report(r);
+            assert_eq!(c.progress.read(), r);
+        }
+    }
+
+    /// Any budget: each call runs at most that many value checks (the last one what is left)
+    /// and the calls cover every check of the curve once.
+    #[test]
+    fn a_curve_is_checked_a_budget_at_a_time() {
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        let desc = write_trident(&c.geometry, 0, 0, &[1.0; 7]);
+        let values = c.geometry.values();
+        let (k, p, w) = trident();
+        let total = CurveView::value_checks(3, &k, &p, &w);
+        assert_eq!(total, 11 + 3 + 14 + 7);
+        for budget in 1..=total + 1 {
+            let (mut at, mut calls, mut used_all) = (0, 0, 0);
+            loop {
+                let (used, next) = check_curve(&desc, values, 2, at, budget).unwrap();
+                calls += 1;
+                used_all += used;
+                match next {
+                    Some(n) => at = n,
+                    None => break,
+                }
             }
-            assert_eq!(calls + 1, (3 * per_curve).div_ceil(budget), "budget {budget}");
+            assert_eq!(used_all, total, "budget {budget}");
+            assert_eq!(calls, total.div_ceil(budget), "budget {budget}");
         }
     }
 
@@ -831,37 +897,44 @@ mod tests {
     }
 
     #[test]
-    fn malformed_geometry_is_refused() {
-        let (header, curves, values) = trident();
-        let check = |h: GeometryHeader, c: &[CurveDesc], v: &[f64]| validate_geometry(&geometry(h, c, v)).map(|_| ());
-        let mut c = curves.clone();
-        c[0].weights_len = 8; // past the end of the values
-        assert_eq!(check(header, &c, &values), Err(GeometryFault::OutOfBounds { curve: 0 }));
-        let mut c = curves.clone();
-        c[0].knots_offset = u32::MAX; // offset + len overflows
-        assert_eq!(check(header, &c, &values), Err(GeometryFault::OutOfBounds { curve: 0 }));
-        let mut h = header;
-        h.curve_count = MAX_CURVES as u32 + 1;
-        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
-        let mut h = header;
-        h.curve_count = 2; // more than the descriptors
-        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
-        let mut h = header;
-        h.tip_axes = 4;
-        assert_eq!(check(h, &curves, &values), Err(GeometryFault::Header));
-        let mut v = values.clone();
-        v[5] = 0.1; // knots decrease
+    fn malformed_curves_are_refused() {
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        let g = &c.geometry;
+        g.begin(&header(0)).unwrap();
+        let values = g.values();
+        let good = write_trident(g, 0, 0, &[1.0; 7]);
+        let past = CurveDesc {
+            weights_offset: (ARENA_VALUES - 3) as u32,
+            ..good
+        };
+        assert_eq!(
+            valid_curve(&past, values, 2).err(),
+            Some(GeometryFault::OutOfBounds { curve: 0 })
+        );
+        let overflow = CurveDesc {
+            knots_offset: u32::MAX,
+            ..good
+        };
+        assert_eq!(
+            valid_curve(&overflow, values, 2).err(),
+            Some(GeometryFault::OutOfBounds { curve: 0 })
+        );
+        assert_eq!(
+            valid_curve(&good, values, 3).err(),
+            Some(GeometryFault::Dimension { curve: 0 })
+        );
+        let negative = write_trident(g, 0, 0, &[1.0, 1.0, -1.0, 1.0, 1.0, 1.0, 1.0]);
         assert!(matches!(
-            check(header, &curves, &v),
+            valid_curve(&negative, values, 2),
             Err(GeometryFault::Curve { curve: 0, .. })
         ));
-        let mut b = block();
-        let ch = unsafe { Channel::init(aligned(&mut b)) };
         assert!(matches!(
-            ch.geometry.publish(&geometry(header, &curves, &v)),
-            Err(PublishError::Invalid(_))
+            check_curve(&negative, values, 2, 0, 1000),
+            Err(GeometryFault::Curve { .. })
         ));
-        assert_eq!(ch.geometry.generation(), 0);
+        assert!(matches!(g.publish_curve(&negative), Err(PublishError::Invalid(_))));
+        assert_eq!(g.published(), 0);
     }
 
     #[test]

@@ -3,20 +3,19 @@
 //!
 //! `rtapi_app_main` creates the component, its pins (all instance state lives in `hal_malloc`'d
 //! memory, as in C components), the shared-memory [`Channel`] the planner writes to, and exports
-//! `nurbs_interp.update`. [`Instance::update`] runs every servo period: it takes the curve
-//! geometry once the planner has published it (validated with `CurveView`'s checks, a slice of
-//! values per period), drives the
-//! `nurbs_rtcore` [`Interpolator`] with the segment records it pops from the channel (S-curve
-//! feed, RK2 predictor-corrector step of the curve parameter, NURBS evaluation) and writes the
-//! output pins. It never allocates, locks, calls the OS or panics (no indexing that can fail);
-//! failures are pins (fault, fault-code, underrun), not errors.
+//! `nurbs_interp.update`. [`Instance::update`] runs every servo period: it follows the geometry
+//! stream the planner publishes (checking each curve once, in path order, a slice of values
+//! per period), drives the `nurbs_rtcore` [`Interpolator`] with the segment records it pops
+//! from the channel (S-curve feed, RK2 predictor-corrector step of the curve parameter, NURBS
+//! evaluation) and writes the output pins. It never allocates, locks, calls the OS or panics
+//! (no indexing that can fail); failures are pins (fault, fault-code, underrun), not errors.
 //!
 //! Pins:
 //!
 //! | pin | type | dir | unit | meaning |
 //! | --- | --- | --- | --- | --- |
 //! | `nurbs_interp.enable` | bit | in | | run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine) |
-//! | `nurbs_interp.hold` | bit | in | | feed hold: at the next segment boundary, the planner-checked stop to rest on the path; released, the plan from the stop point runs (see below) |
+//! | `nurbs_interp.hold` | bit | in | | feed hold: at the next boundary with a stop, the planner's stop to rest on the path; released, the plan from the stop point runs (see below) |
 //! | `nurbs_interp.abort` | bit | in | | stop as for hold, then discard the queue; the motion is over until a planner publishes a new geometry |
 //! | `nurbs_interp.resume` | bit | in | | after an underrun stop: a rising edge starts the plan from the stop point once one is queued (`resume-ready`); an edge without it is ignored |
 //! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | mm | axis position commands (`-z` is 0 on a 2-D path) |
@@ -35,33 +34,31 @@
 //! | `nurbs_interp.seq` | u32 | out | | sequence number of the last record taken |
 //! | `nurbs_interp.buffered` | float | out | s | motion time queued ahead of the current sample |
 //!
-//! Every stop is the same planner-checked stop. The records end at segment boundaries with zero
-//! tangential acceleration; when the module must not (hold, abort) or cannot (underrun: the next
-//! record is missing) take the next record, it appends a jerk-limited stop of its own (a
-//! three-phase S-curve from the feed at the segment end to rest, [`underrun_stop`]) and runs it
-//! through the same interpolator along the same curve: no jump, the feed ramps down to zero.
-//! Its deceleration and jerk (or a stored stop sequence to play instead) come with the record
-//! ([`RecordStop`] in its slot): the planner ran this very stop from every boundary, by finite differences on the
-//! setpoints the module will produce, and chose limits under which it stays within the axis
-//! limits (`plan_geometry.rs`); the stop is compressed in time where it would otherwise pass a
-//! corner, critical point or the curve end faster than that point's feed cap. So hold, abort
-//! and underrun stops are within the axis limits by the same check as the plan itself; the price
-//! is that a hold or abort takes effect at the next segment boundary (measured on the butterfly
-//! and the trident: at rest at most 0.30 s after the request), and a hold during the last
-//! segment lets the motion end at C(1). Afterwards the module holds that position; records
+//! Every stop is a planned stop. Segment records come in groups ([`SegmentSlot`]), and the
+//! last record of a group carries the stop after it: the next segment re-planned by the planner
+//! to end at rest, checked by finite differences like every segment of the plan and with the
+//! machine holding at its end. The module takes the first record of a group only once the whole
+//! group is queued on checked curves; so an underrun (the next group is not there in time), a
+//! hold or an abort all happen at a group's end, and the module runs that stop record through
+//! the same interpolator: no jump, within the axis limits by the planner's own check, and no
+//! stop checks of its own. The price is that a hold or abort takes effect at the next group end
+//! (on the bundled curves a group is at most about 1 s of motion; on dense G1 programs of tiny
+//! segments, where no single segment can stop, groups are longer), and a hold during the last
+//! group lets the motion end at C(1). Afterwards the module holds that position; records
 //! arriving later are not run (they were planned from a feed the machine no longer has).
 //!
 //! Resume (after a hold or an underrun): at rest, the module publishes where it stands in the
 //! channel ([`crate::channel::StopStatus`]: cause, element, parameter `u`, arc length `s`,
 //! position, the last record's sequence number). A planner (the running `nurbs-planner`, or one
 //! started afterwards) plans the rest of the path from rest at exactly that point
-//! (`PlanOptions::start`) and publishes it as a new geometry with its own records (sequence
-//! from 0). The module takes it but does not move until the command: for a hold,
+//! (`PlanOptions::start`) and publishes it as a new geometry stream with its own records
+//! (sequence from 0). The module takes it but does not move until the command: for a hold,
 //! `hold` false; for an underrun, a rising edge on `resume` (with records queued:
 //! `resume-ready`; `hold` must be false). Then it runs the new plan with a fresh interpolator,
 //! whose first setpoint is the stop point, at rest, as in the planner's own check. The first
-//! record must start at rest at exactly the held element, `u` and `s`, and its first sample must
-//! be the held position (within [`RESUME_TOLERANCE`]); otherwise nothing moves and the module
+//! record must start at rest at exactly the held element, `u` and `s` (or at the start of the
+//! next element when the machine stands at its element's end), and its first sample must be
+//! the held position (within [`RESUME_TOLERANCE`]); otherwise nothing moves and the module
 //! faults ([`FaultCode::ResumePoint`]). `abort` while stopped ends the stopped motion (and
 //! withdraws the stop point): the next geometry is a new motion from its own first record.
 
@@ -70,17 +67,16 @@ use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
 
+use nurbs_rtcore::block_stop::{block_stop, step_fits};
 use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::{CurveView, StopRun};
 
-use nurbs_rtcore::scurve::{stop_from, SCurveTable};
-
 use crate::channel::{
-    stop_points, trusted_curve, validate_curves, validate_header, Channel, CurveDesc, CurvesChecked, CurvesCursor,
-    GeometryHeader, GeometryRef, RecordStop, StopPoint, CHANNEL_KEY,
+    check_curve, stop_points, trusted_curve, validate_header, Channel, GeometryHeader, GeometryStream, Report,
+    StopPoint, ValueCursor, CHANNEL_KEY,
 };
 use crate::pins::Pin;
-use crate::record::{PathBlock, Record, SegmentRecord, FLAG_LAST, KIND_BLOCK, PHASES};
+use crate::record::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
 use crate::sys;
 
 /// Component name: must equal the module's file name (`loadrt` dlopens `NAME.so`).
@@ -102,10 +98,10 @@ pub enum FaultCode {
     Channel = 1,
     /// The published geometry does not validate.
     Geometry = 2,
-    /// The geometry was re-published while a motion was running.
+    /// A new geometry stream began while a motion was running.
     GeometryChanged = 3,
-    /// A record failed its structural check (non-finite, negative, inconsistent profile, or the
-    /// limits of the stop it carries not finite and positive).
+    /// A record failed its structural check (non-finite, negative, inconsistent profile, a stop
+    /// that is not a record ending at rest after it, or group fields that do not fit).
     Record = 4,
     /// A record's sequence number is not the next one (lost or repeated record).
     Sequence = 5,
@@ -148,19 +144,30 @@ pub struct Pins {
     pub held: Pin<bool>,
 }
 
-/// The accepted curve geometry: the channel's header, curve descriptors and arena, validated
-/// once when published; each curve's view is made when it is needed (validated again: O(size
-/// of the curve), once per change of curve thanks to a one-entry cache).
+/// The geometry stream the motion runs on: its header, how far its curves are checked, and the
+/// channel's descriptors and arena. A curve's view is made when it is needed, in O(1): it was
+/// checked once, in path order, a slice of values per period ([`RtGeometry::follow`]).
 pub struct RtGeometry {
-    /// Generation of the channel geometry (0: none).
+    /// Generation of the channel's stream (0: none).
     generation: u32,
     header: GeometryHeader,
-    curves: &'static [CurveDesc],
     tip: usize,
-    /// The geometry arena (curve data, stored stop sequences).
-    values: &'static [f64],
+    stream: Option<&'static GeometryStream>,
+    /// Curves from `header.first_curve` up to (not including) this one are checked ...
+    checked: u32,
+    /// ... and this one up to this value.
+    cursor: ValueCursor,
     /// The last curve asked for.
     cache: Cell<Option<(usize, CurveView<'static>)>>,
+}
+
+/// What [`RtGeometry::follow`] saw.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Followed {
+    /// The same stream (perhaps more curves checked).
+    Same,
+    /// A new stream began: a new motion.
+    New,
 }
 
 impl RtGeometry {
@@ -168,33 +175,83 @@ impl RtGeometry {
         RtGeometry {
             generation: 0,
             header: GeometryHeader::default(),
-            curves: &[],
             tip: 2,
-            values: &[],
+            stream: None,
+            checked: 0,
+            cursor: 0,
             cache: Cell::new(None),
         }
     }
 
-    /// Curve `index`, if the geometry has it. O(1): the curves were checked when the geometry
-    /// was accepted, and a rewrite (a new generation) is never used unchecked.
+    /// The arena (empty before a stream).
+    fn values(&self) -> &'static [f64] {
+        self.stream.map_or(&[], |s| s.values())
+    }
+
+    /// Curve `index`, if the stream has it checked. O(1).
     fn valid(&self, index: usize) -> Option<CurveView<'static>> {
         if let Some((i, c)) = self.cache.get() {
             if i == index {
                 return Some(c);
             }
         }
-        let g = GeometryRef {
-            header: self.header,
-            curves: self.curves,
-            values: self.values,
-        };
-        let c = trusted_curve(&g, index).ok()?;
+        let stream = self.stream?;
+        let index32 = u32::try_from(index).ok()?;
+        if index32 < self.header.first_curve || index32 >= self.checked {
+            return None;
+        }
+        let desc = stream.descriptor(index32)?;
+        let c = trusted_curve(&desc, stream.values(), self.tip).ok()?;
         self.cache.set(Some((index, c)));
         Some(c)
     }
 
     fn is_valid(&self) -> bool {
         self.generation != 0
+    }
+
+    /// Takes a new stream of `stream` (only while no motion runs: `Err(GeometryChanged)`
+    /// otherwise), and checks up to [`VALIDATION_VALUES_PER_PERIOD`] more values of the
+    /// published curves, in path order. Bounded work, allocation-free, panic-free.
+    fn follow(&mut self, stream: &'static GeometryStream, in_motion: bool) -> Result<Followed, FaultCode> {
+        let generation = stream.generation();
+        let mut followed = Followed::Same;
+        if generation != self.generation && generation != 0 && generation & 1 == 0 {
+            if in_motion {
+                return Err(FaultCode::GeometryChanged);
+            }
+            let header = stream.header();
+            if !stream.unchanged(generation) {
+                return Ok(Followed::Same); // begun again meanwhile: next period
+            }
+            validate_header(&header).map_err(|_| FaultCode::Geometry)?;
+            *self = RtGeometry {
+                generation,
+                header,
+                tip: header.tip_axes as usize,
+                stream: Some(stream),
+                checked: header.first_curve,
+                cursor: 0,
+                cache: Cell::new(None),
+            };
+            followed = Followed::New;
+        }
+        if self.generation == 0 {
+            return Ok(followed);
+        }
+        let (published, values) = (stream.published(), stream.values());
+        let mut budget = VALIDATION_VALUES_PER_PERIOD;
+        while budget > 0 && self.checked < published {
+            let desc = stream.descriptor(self.checked).ok_or(FaultCode::Geometry)?;
+            let (used, next) =
+                check_curve(&desc, values, self.tip, self.cursor, budget).map_err(|_| FaultCode::Geometry)?;
+            budget = budget.saturating_sub(used);
+            match next {
+                Some(cursor) => self.cursor = cursor,
+                None => (self.checked, self.cursor) = (self.checked.saturating_add(1), 0),
+            }
+        }
+        Ok(followed)
     }
 }
 
@@ -217,11 +274,23 @@ pub struct Held {
     pub u: f64,
     pub s: f64,
     pub point: [f64; 3],
+    /// At the end of its curve (not the path's last): a plan from here starts on the next one.
+    pub at_curve_end: bool,
+}
+
+impl Held {
+    /// Whether a plan from rest at element `curve`, parameter `u` and arc length `s` starts
+    /// exactly here: the same element, `u` and `s`, or at the end of the element the start
+    /// (arc length 0) of the next.
+    fn is_at(&self, curve: usize, u: f64, s: f64) -> bool {
+        let here = curve == self.curve && u == self.u && s == self.s;
+        here || (self.at_curve_end && curve == self.curve.wrapping_add(1) && s == 0.0)
+    }
 }
 
 /// Checks of curve values (knots, coordinates and weights once, interior knots once more) the
-/// module runs per period on a newly published geometry (a few microseconds), within a curve
-/// if it is larger ([`validate_curves`]).
+/// module runs per period on the curves of the geometry stream (a few microseconds), within a
+/// curve if it is larger ([`check_curve`]).
 pub const VALIDATION_VALUES_PER_PERIOD: usize = 4096;
 
 /// Largest distance (mm) between where the machine stands and a resumed motion's first sample.
@@ -235,15 +304,13 @@ pub struct Instance {
     pub pins: Pins,
     channel: *const Channel,
     geometry: RtGeometry,
-    /// A published geometry being validated: its generation and where the check stands.
-    validating: Option<(u32, CurvesCursor)>,
     interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
-    /// The stop after the last segment record taken (it came with the record).
-    record_stop: RecordStop,
-    /// The stop points of the last record or block taken, validated (with the arena offset and
-    /// length they came as: records on one curve share them, checked once).
+    /// The last segment record taken, with its stop and group (checked when taken).
+    slot: SegmentSlot,
+    /// The stop points of the last block taken, validated (with the arena offset and length
+    /// they came as: blocks on one curve share them, checked once).
     points: StopPoints,
     records: u32,
     underruns: u32,
@@ -275,6 +342,109 @@ pub struct Instance {
     period: f64,
     /// Path-block motion: the block being output.
     player: BlockPlayer,
+}
+
+/// Where the interpolator takes segment records from: the ring, a group at a time.
+struct SegmentSource<'a> {
+    ring: &'a crate::channel::SpscRing<crate::record::Slot, { crate::channel::SEGMENT_SLOTS }>,
+    geometry: &'a RtGeometry,
+    /// Take nothing more at a group's end.
+    no_more: bool,
+    /// The first record must start here (a resumed motion).
+    resume_from: Option<Held>,
+    next_seq: &'a mut u32,
+    /// The last slot taken.
+    slot: &'a mut SegmentSlot,
+    records: &'a mut u32,
+    taken_time: &'a mut f64,
+    seq_pin: &'a Pin<u32>,
+    pull: &'a mut Pull,
+}
+
+impl SegmentSource<'_> {
+    /// The next record for the interpolator, or `None` (and why in `pull`). Within a group the
+    /// next record is always queued (the group was complete when its first record was taken);
+    /// at a group's end the next group is taken only if it is complete, on checked curves, and
+    /// neither hold nor abort is on.
+    fn next(&mut self) -> Option<SegmentRecord> {
+        if *self.pull != Pull::Fine {
+            return None;
+        }
+        // Before the first record the last slot is the default one, of no group.
+        let at_group_end = self.slot.group_left <= 1;
+        if at_group_end && self.no_more {
+            return None;
+        }
+        let slot = match self.ring.peek() {
+            Ok(Some(slot)) => slot,
+            Ok(None) => {
+                *self.pull = if at_group_end {
+                    Pull::Empty
+                } else {
+                    Pull::Fault(FaultCode::Channel) // a queued group lost a record
+                };
+                return None;
+            }
+            Err(_) => {
+                *self.pull = Pull::Fault(FaultCode::Channel);
+                return None;
+            }
+        };
+        let Some(Record::Segment(next)) = slot.decode() else {
+            *self.pull = Pull::Fault(FaultCode::RecordKind);
+            return None;
+        };
+        if at_group_end {
+            // A new group: only whole, and on curves the module has checked.
+            let queued = self.ring.len();
+            if (queued as u64) < u64::from(next.group_left) || next.curve_needed >= self.geometry.checked {
+                *self.pull = Pull::Empty;
+                return None;
+            }
+        } else if next.group_left.wrapping_add(1) != self.slot.group_left {
+            *self.pull = Pull::Fault(FaultCode::Record);
+            return None;
+        }
+        if let Err(code) = self.check(&next) {
+            *self.pull = Pull::Fault(code);
+            return None;
+        }
+        if !matches!(self.ring.pop(), Ok(Some(_))) {
+            *self.pull = Pull::Fault(FaultCode::Channel);
+            return None;
+        }
+        let r = next.record;
+        *self.next_seq = r.seq.wrapping_add(1);
+        *self.slot = next;
+        *self.records = self.records.wrapping_add(1);
+        *self.taken_time += r.profile().total_time();
+        self.seq_pin.set(r.seq);
+        Some(r)
+    }
+
+    /// A slot's checks before its record runs: sequence, the resume point, structure of the
+    /// record, its stop (a record ending at rest, next in sequence) and its group fields.
+    fn check(&self, next: &SegmentSlot) -> Result<(), FaultCode> {
+        let r = &next.record;
+        if r.seq != *self.next_seq {
+            return Err(FaultCode::Sequence);
+        }
+        if self.resume_from.is_some_and(|h| !starts_at(r, &h)) {
+            return Err(FaultCode::ResumePoint);
+        }
+        check_record(r).map_err(|_| FaultCode::Record)?;
+        if !next.is_consistent() {
+            return Err(FaultCode::Record);
+        }
+        if let Some(stop) = next.stop() {
+            let at_rest = stop.profile().table().end().v <= FEED_ROUNDING;
+            let ok = stop.seq == r.seq.wrapping_add(1) && stop.curve <= next.curve_needed && at_rest;
+            if !ok || check_record(stop).is_err() {
+                return Err(FaultCode::Record);
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The record kind of a motion.
@@ -319,7 +489,9 @@ impl BlockPlayer {
             stop_offset: 0,
             points_offset: 0,
             points_len: 0,
-            reserved: 0,
+            curve: 0,
+            curve_needed: 0,
+            group_left: 0,
             stop_accel: 0.0,
             stop_jerk: 0.0,
             s_before: [0.0; 2],
@@ -415,176 +587,6 @@ enum Pull {
     Fault(FaultCode),
 }
 
-/// Phase times `(t1, t2)` of a stop from `v0` to rest with deceleration `accel` and jerk `jerk`:
-/// jerk `-jerk` for `t1`, constant deceleration for `t2`, jerk `+jerk` for `t1`. The feed falls
-/// point-symmetrically, so the stop covers `v0 (2 t1 + t2) / 2`.
-fn stop_phases(v0: f64, accel: f64, jerk: f64) -> (f64, f64) {
-    if v0 * jerk <= accel * accel {
-        ((v0 / jerk).sqrt(), 0.0)
-    } else {
-        (accel / jerk, (v0 - accel * accel / jerk) / accel)
-    }
-}
-
-/// Distance of the stop of [`stop_phases`].
-pub fn stop_distance(v0: f64, accel: f64, jerk: f64) -> f64 {
-    let (t1, t2) = stop_phases(v0, accel, jerk);
-    v0 * (2.0 * t1 + t2) / 2.0
-}
-
-/// The jerk-limited stop appended after `last` when no next record comes: from the feed at the
-/// end of `last` (zero tangential acceleration there) to rest along the same curve, with
-/// deceleration `accel * k` and jerk `jerk * k^2`, i.e. the `(accel, jerk)` stop compressed in
-/// time by `k >= 1`.
-pub fn stop_record(last: &SegmentRecord, accel: f64, jerk: f64, k: f64) -> SegmentRecord {
-    let v0 = last.profile().table().end().v.max(0.0);
-    let j = jerk * k * k;
-    let (t1, t2) = stop_phases(v0, accel * k, j);
-    let (t1, t2, j) = if t1.is_finite() && t2.is_finite() && j.is_finite() && v0 > 0.0 {
-        (t1, t2, j)
-    } else {
-        (0.0, 0.0, 0.0) // no feed, or no room: stop where we are
-    };
-    let mut durations = [0.0; PHASES];
-    let mut jerks = [0.0; PHASES];
-    for (i, (d, jk)) in [(t1, -j), (t2, 0.0), (t1, j)].into_iter().enumerate() {
-        if let (Some(di), Some(ji)) = (durations.get_mut(i), jerks.get_mut(i)) {
-            *di = d;
-            *ji = jk;
-        }
-    }
-    let mut record = SegmentRecord {
-        seq: last.seq,
-        flags: last.flags & !FLAG_LAST,
-        u_start: last.u_end,
-        u_end: last.u_end,
-        s_start: last.s_start + last.length,
-        length: 0.0,
-        feed_start: v0,
-        durations,
-        jerks,
-    };
-    record.length = record.profile().table().end().s.max(0.0);
-    record
-}
-
-/// Distance into a stop profile at which its (falling) feed has come down to `v`.
-fn distance_at_feed(table: &SCurveTable, v: f64) -> f64 {
-    let (mut lo, mut hi) = (0.0, table.total_time());
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if table.state_at(mid).v > v {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    table.state_at(hi).s
-}
-
-/// The stop the module runs after `last` on its curve: deceleration `accel` and jerk `jerk`,
-/// compressed in time just enough to pass every stop point of the curve (`points`, `(s, feed
-/// cap)` pairs: the planner's critical points, corners, the curve end) no faster than its feed
-/// cap. Bounded work: one pass over the stop points, a 60-step bisection for each one the stop
-/// reaches too fast.
-pub fn underrun_stop(points: &[f64], last: &SegmentRecord, accel: f64, jerk: f64) -> SegmentRecord {
-    let nominal = stop_record(last, accel, jerk, 1.0);
-    let table = nominal.profile().table();
-    let (v0, s0, reach) = (nominal.feed_start, nominal.s_start, nominal.length);
-    let mut k = 1.0f64;
-    for pair in points.chunks_exact(2) {
-        if let [s, cap] = *pair {
-            // Points within a micrometre are the one the last segment ends at: passed as planned.
-            let d = s - s0;
-            if d > 1e-3 && d < reach && cap < v0 {
-                // At scale k the feed at distance d is the nominal feed at distance k d.
-                k = k.max(distance_at_feed(&table, cap) / (0.999 * d));
-            }
-        }
-    }
-    stop_record(last, accel, jerk, k)
-}
-
-/// Largest ratio of a path-block step's arc length to its chord: a step turns less than a half
-/// circle (arc / chord of a semicircle = pi / 2). Only catches arc lengths that do not belong to
-/// the positions; the planner's own arc lengths are exact.
-const ARC_PER_CHORD: f64 = core::f64::consts::FRAC_PI_2;
-
-/// A step's chord fits its arc length: no longer (to rounding), and not shorter than 2/pi of it.
-fn step_fits(chord: f64, ds: f64) -> bool {
-    chord <= ds * (1.0 + 1e-9) + 1e-9 && ds <= ARC_PER_CHORD * chord + 1e-9
-}
-
-/// The state a stop after `block` starts from: arc length, feed and tangential acceleration at
-/// its last sample, from the quadratic through its last three arc lengths (backward
-/// differences of period `dt`, centred at the last sample).
-pub fn block_end_state(block: &PathBlock, dt: f64) -> (f64, f64, f64) {
-    let n = block.len() + 1; // index of the last sample in `s_history`
-    let (s0, s1, s2) = (
-        block.s_history(n),
-        block.s_history(n.saturating_sub(1)),
-        block.s_history(n.saturating_sub(2)),
-    );
-    let a = (s0 - 2.0 * s1 + s2) / (dt * dt);
-    let v = (3.0 * s0 - 4.0 * s1 + s2) / (2.0 * dt);
-    (s0, v, a)
-}
-
-/// The stop the module runs after `block` (an underrun, hold or abort at its end): from the
-/// block's end state ([`block_end_state`]) to rest along its curve with the block's checked
-/// deceleration and jerk, both raised (deceleration by `k`, jerk by `k^2`) just enough to pass
-/// every stop point of the curve (`points`) no faster than its cap, as [`underrun_stop`] does. Returns the
-/// stop as a record (start, curve, profile) and its start acceleration (for
-/// [`SCurve::table_from`](nurbs_rtcore::SCurve::table_from)). Bounded work: for each stop point
-/// the stop reaches too fast, a 40-step bisection of `k` with a 60-step bisection inside.
-pub fn block_stop(points: &[f64], block: &PathBlock, dt: f64) -> (SegmentRecord, f64) {
-    let (s0, v0, a0) = block_end_state(block, dt);
-    let (accel, jerk) = (block.stop_accel, block.stop_jerk);
-    let profile = |k: f64| stop_from(v0, a0, accel * k, jerk * k * k);
-    let reach = profile(1.0).table_from(a0).length();
-    let mut k = 1.0f64;
-    for pair in points.chunks_exact(2) {
-        if let [s, cap] = *pair {
-            let d = s - s0;
-            let fits = |k: f64| distance_at_feed(&profile(k).table_from(a0), cap) <= 0.999 * d;
-            if d > 1e-9 && d < reach && cap < v0 && !fits(k) {
-                let (mut lo, mut hi) = (k, k * 2.0);
-                for _ in 0..40 {
-                    if fits(hi) {
-                        break;
-                    }
-                    lo = hi;
-                    hi *= 2.0;
-                }
-                for _ in 0..40 {
-                    let mid = 0.5 * (lo + hi);
-                    if fits(mid) {
-                        hi = mid;
-                    } else {
-                        lo = mid;
-                    }
-                }
-                k = hi;
-            }
-        }
-    }
-    let p = profile(k);
-    let last = block.len().saturating_sub(1);
-    let u = block.u.get(last).copied().unwrap_or(0.0);
-    let record = SegmentRecord {
-        seq: block.seq,
-        flags: block.flags & !FLAG_LAST,
-        u_start: u,
-        u_end: u,
-        s_start: s0,
-        length: p.table_from(a0).length().max(0.0),
-        feed_start: p.feed_start,
-        durations: p.durations,
-        jerks: p.jerks,
-    };
-    (record, if p.feed_start > 0.0 { a0 } else { 0.0 })
-}
-
 impl Instance {
     /// One servo period. `period_ns` is the thread's period.
     pub fn update(&mut self, period_ns: i64) {
@@ -595,7 +597,7 @@ impl Instance {
             self.fault = FaultCode::Channel;
         }
         if self.fault == FaultCode::None {
-            self.accept_geometry(channel);
+            self.follow_geometry(channel);
         }
         let (hold, abort) = (self.pins.hold.get(), self.pins.abort.get());
         let resume = self.pins.resume.get();
@@ -662,6 +664,21 @@ impl Instance {
             (channel.planned_time() - self.taken_time).max(0.0) + left
         };
         pins.buffered.set(buffered);
+        channel.progress.report(Report {
+            generation: self.geometry.generation,
+            moving: self.in_motion(),
+            curve: u32::try_from(self.current_curve()).unwrap_or(u32::MAX),
+        });
+    }
+
+    /// The first curve the motion may still use: the one it is on.
+    fn current_curve(&self) -> usize {
+        let first = self.geometry.header.first_curve as usize;
+        match self.mode {
+            Mode::Blocks if self.player.loaded => self.player.curve,
+            Mode::Segments if self.interp.record().is_some() => self.interp.curve_index(),
+            _ => first,
+        }
     }
 
     /// A motion is loaded and may still move (not finished, aborted or stopped).
@@ -682,50 +699,20 @@ impl Instance {
         }
     }
 
-    /// Take a newly published geometry (only while no motion runs), or fault.
-    fn accept_geometry(&mut self, channel: &'static Channel) {
-        let generation = channel.geometry.generation();
-        if generation == self.geometry.generation || generation & 1 == 1 {
-            return; // unchanged, or being written: look again next period
-        }
-        if self.in_motion() {
-            self.fault = FaultCode::GeometryChanged;
-            return;
-        }
-        let Some((generation, g)) = channel.geometry.snapshot() else {
-            return;
-        };
-        self.geometry.generation = 0;
-        // A large geometry (a long G1 program is thousands of curves) is checked a slice per
-        // period, so that no period runs long; a rewrite in between starts it over.
-        let first = match self.validating {
-            Some((g_at, next)) if g_at == generation => Ok(next),
-            _ => validate_header(&g).map(|()| CurvesCursor::default()),
-        };
-        let checked = first.and_then(|first| validate_curves(&g, first, VALIDATION_VALUES_PER_PERIOD));
-        self.validating = None;
-        if !channel.geometry.unchanged(generation) {
-            return; // rewritten while validating: again next period
-        }
-        match checked {
-            Ok(CurvesChecked::All) => {
-                self.geometry.values = g.values;
-                self.geometry.curves = g.curves;
-                self.geometry.cache.set(None);
-                self.set_geometry(generation, &g.header);
-            }
-            Ok(CurvesChecked::UpTo(next)) => self.validating = Some((generation, next)),
-            Err(_) => self.fault = FaultCode::Geometry,
+    /// Follows the geometry stream: a new one starts a new motion (only while none runs, else a
+    /// fault); the curves of the current one are checked a slice per period.
+    fn follow_geometry(&mut self, channel: &'static Channel) {
+        let in_motion = self.in_motion();
+        match self.geometry.follow(&channel.geometry, in_motion) {
+            Ok(Followed::New) => self.start_stream(),
+            Ok(Followed::Same) => {}
+            Err(code) => self.fault = code,
         }
     }
 
-    fn set_geometry(&mut self, generation: u32, header: &GeometryHeader) {
-        let g = &mut self.geometry;
-        g.header = *header;
-        g.tip = header.tip_axes as usize;
-        g.generation = generation;
-        // After a stop on the path (underrun or hold) the new geometry carries the plan from the
-        // stop point: it waits for the command, and its first record must start there.
+    /// A new geometry stream has been taken: a new motion (after a stop on the path, the plan
+    /// from the stop point, which waits for the command and must start there).
+    fn start_stream(&mut self) {
         if self.held.is_some() && (self.stopped || self.awaiting_resume) && !self.aborted {
             self.awaiting_resume = true;
         } else {
@@ -734,12 +721,11 @@ impl Instance {
             self.cause = StopCause::None;
         }
         self.resuming = false;
-        // A new geometry starts a new motion.
         self.interp = Interpolator::new();
         self.mode = Mode::Undecided;
         self.player = BlockPlayer::IDLE;
         self.next_seq = 0;
-        self.record_stop = RecordStop::default();
+        self.slot = SegmentSlot::default();
         self.points = StopPoints::NONE;
         self.taken_time = 0.0;
         self.stopping = false;
@@ -780,71 +766,21 @@ impl Instance {
         }
         let mut pull = Pull::Fine;
         let step = {
-            let ring = &channel.segments;
-            let no_more = self.stopping || hold || abort;
-            let resume_from = if self.resuming { self.held } else { None };
-            let next_seq = &mut self.next_seq;
-            let record_stop = &mut self.record_stop;
-            let points = &mut self.points;
-            let values = self.geometry.values;
-            let records = &mut self.records;
-            let taken_time = &mut self.taken_time;
-            let pins = &self.pins;
-            let mut next = || -> Option<SegmentRecord> {
-                if no_more || pull != Pull::Fine {
-                    return None;
-                }
-                let popped = match ring.pop() {
-                    Ok(Some(slot)) => match slot.decode() {
-                        Some(Record::Segment(r, stop)) => Ok(Some((r, stop))),
-                        _ => {
-                            pull = Pull::Fault(FaultCode::RecordKind);
-                            return None;
-                        }
-                    },
-                    Ok(None) => Ok(None),
-                    Err(e) => Err(e),
-                };
-                match popped {
-                    Ok(Some((r, _))) if r.seq != *next_seq => {
-                        pull = Pull::Fault(FaultCode::Sequence);
-                        None
-                    }
-                    Ok(Some((r, _))) if resume_from.is_some_and(|h| !starts_at(&r, &h)) => {
-                        pull = Pull::Fault(FaultCode::ResumePoint);
-                        None
-                    }
-                    Ok(Some((_, stop)))
-                        if !stop.is_valid() || points.take(values, stop.points_offset, stop.points_len).is_none() =>
-                    {
-                        pull = Pull::Fault(FaultCode::Record);
-                        None
-                    }
-                    Ok(Some((r, stop))) => match check_record(&r) {
-                        Ok(()) => {
-                            *next_seq = r.seq.wrapping_add(1);
-                            *record_stop = stop;
-                            *records = records.wrapping_add(1);
-                            *taken_time += r.profile().total_time();
-                            pins.seq.set(r.seq);
-                            Some(r)
-                        }
-                        Err(_) => {
-                            pull = Pull::Fault(FaultCode::Record);
-                            None
-                        }
-                    },
-                    Ok(None) => {
-                        pull = Pull::Empty;
-                        None
-                    }
-                    Err(_) => {
-                        pull = Pull::Fault(FaultCode::Channel);
-                        None
-                    }
-                }
+            let source = SegmentSource {
+                ring: &channel.segments,
+                geometry: &self.geometry,
+                // Hold and abort wait for the end of the group; nothing is taken during a stop.
+                no_more: self.stopping || hold || abort,
+                resume_from: if self.resuming { self.held } else { None },
+                next_seq: &mut self.next_seq,
+                slot: &mut self.slot,
+                records: &mut self.records,
+                taken_time: &mut self.taken_time,
+                seq_pin: &self.pins.seq,
+                pull: &mut pull,
             };
-            self.interp.step(&self.geometry, dt, &mut next)
+            let mut source = source;
+            self.interp.step(&self.geometry, dt, &mut || source.next())
         };
         match (step, pull) {
             (_, Pull::Fault(code)) => {
@@ -872,25 +808,22 @@ impl Instance {
             }
             (Step::Starved, _) => {
                 let Some(last) = self.interp.record().copied() else {
-                    return false; // not started yet: waiting for the first record
+                    return false; // not started yet: waiting for the first group
                 };
                 if self.stopping {
                     let held = self.held_by_interp();
                     self.stop_over(channel, last.seq, held);
                     return false;
                 }
+                // At a group's end (hold, abort, or the next group is not there): its stop, the
+                // next segment re-planned to rest, checked when the record was taken.
                 self.begin_stop(hold, abort);
-                let planned = self.record_stop;
-                if planned.stored_len > 0 {
-                    // The planner's stop sequence from the last sample (which may cross a join).
-                    let held = self.held_by_interp();
-                    let player = &mut self.player;
-                    (player.curve, player.u, player.s, player.point) = (held.curve, held.u, held.s, held.point);
-                    let cursor = StoredCursor::new(last.seq, planned.stored_offset, planned.stored_len);
-                    player.stored = Some(cursor);
-                    return self.advance_stored_stop(channel, cursor);
-                }
-                let mut stop = Some(underrun_stop(self.points.pairs, &last, planned.accel, planned.jerk));
+                let Some(stop) = self.slot.stop().copied() else {
+                    self.fault = FaultCode::Record;
+                    return false;
+                };
+                self.next_seq = stop.seq.wrapping_add(1);
+                let mut stop = Some(stop);
                 match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
                     Step::Sample(s) => {
                         self.output(&s);
@@ -920,11 +853,23 @@ impl Instance {
     fn held_by_interp(&self) -> Held {
         let c = *self.interp.cursor();
         let [x, y, z, ..] = c.point;
+        self.held_at(
+            self.interp.curve_index(),
+            c.u,
+            c.s,
+            [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
+        )
+    }
+
+    /// The machine at rest at `point`, element `curve`, parameter `u`, arc length `s`.
+    fn held_at(&self, curve: usize, u: f64, s: f64, point: [f64; 3]) -> Held {
+        let at_curve_end = self.geometry.valid(curve).is_some_and(|v| u >= v.u_max());
         Held {
-            curve: self.interp.curve_index(),
-            u: c.u,
-            s: c.s,
-            point: [x, y, if self.geometry.tip >= 3 { z } else { 0.0 }],
+            curve,
+            u,
+            s,
+            point,
+            at_curve_end,
         }
     }
 
@@ -967,17 +912,36 @@ impl Instance {
             return false;
         }
         if self.player.remaining() == 0 {
-            let block = if hold || abort {
+            // Within a group the next block is queued (the group was whole when its first block
+            // was taken) and runs whatever the commands; at a group's end the next group runs
+            // only if it is whole, on checked curves, and neither hold nor abort is on.
+            let in_group = self.player.loaded && self.player.block.group_left > 1;
+            let block = if (hold || abort) && !in_group {
                 None
             } else {
-                match channel.segments.pop() {
+                match channel.segments.peek() {
                     Ok(Some(slot)) => match slot.decode() {
-                        Some(Record::Block(b)) => Some(b),
+                        Some(Record::Block(b)) => {
+                            let whole = channel.segments.len() as u64 >= u64::from(b.group_left);
+                            let ready = in_group || (whole && b.curve_needed < self.geometry.checked);
+                            if in_group && b.group_left.wrapping_add(1) != self.player.block.group_left {
+                                self.fault = FaultCode::Record;
+                                return false;
+                            }
+                            if ready {
+                                let _ = channel.segments.pop();
+                            }
+                            ready.then_some(b)
+                        }
                         _ => {
                             self.fault = FaultCode::RecordKind;
                             return false;
                         }
                     },
+                    Ok(None) if in_group => {
+                        self.fault = FaultCode::Channel; // a queued group lost a block
+                        return false;
+                    }
                     Ok(None) => None,
                     Err(_) => {
                         self.fault = FaultCode::Channel;
@@ -1019,16 +983,11 @@ impl Instance {
     fn advance_stored_stop(&mut self, channel: &Channel, mut c: StoredCursor) -> bool {
         let p = self.player;
         if c.left == 0 {
-            let held = Held {
-                curve: p.curve,
-                u: p.u,
-                s: p.s,
-                point: p.point,
-            };
+            let held = self.held_at(p.curve, p.u, p.s, p.point);
             self.stop_over(channel, c.seq, held);
             return false;
         }
-        let values = self.geometry.values;
+        let values = self.geometry.values();
         let mut curve = p.curve;
         if c.run_left == 0 {
             let Some(run) = values.get(c.next..).and_then(StopRun::from_values) else {
@@ -1100,7 +1059,7 @@ impl Instance {
         }
         b.check().map_err(|_| FaultCode::Record)?;
         self.points
-            .take(self.geometry.values, b.points_offset, b.points_len)
+            .take(self.geometry.values(), b.points_offset, b.points_len)
             .ok_or(FaultCode::Record)?;
         let n = b.len();
         let view = self.geometry.curve(b.curve()).ok_or(FaultCode::BadRecord)?;
@@ -1112,7 +1071,7 @@ impl Instance {
         let continues = if self.resuming {
             // The plan from the stop point starts there, at rest.
             self.held
-                .is_some_and(|h| h.curve == b.curve() && h.u == b.u[0] && h.s == b.s[0] && b.s_before == [h.s, h.s])
+                .is_some_and(|h| h.is_at(b.curve(), b.u[0], b.s[0]) && b.s_before == [b.s[0], b.s[0]])
         } else if !p.loaded {
             b.s_before == [b.s[0], b.s[0]] // the motion starts at rest
         } else if b.curve() == p.curve {
@@ -1215,7 +1174,7 @@ impl Instance {
             curve: held.curve as u32,
             u: held.u,
             s: held.s,
-            point: held.point,
+            point: core::array::from_fn(|i| held.point.get(i).copied().unwrap_or(0.0)),
         });
     }
 
@@ -1233,12 +1192,12 @@ impl Instance {
 
 /// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
 fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
-    r.curve() == held.curve && r.u_start == held.u && r.s_start == held.s && r.feed_start == 0.0
+    held.is_at(r.curve(), r.u_start, r.s_start) && r.feed_start == 0.0
 }
 
 fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    (dx * dx + dy * dy + dz * dz).sqrt()
+    libm::sqrt(dx * dx + dy * dy + dz * dz)
 }
 
 /// Rounding slack for a start feed: the planner hands on a segment's computed end feed, which
@@ -1342,10 +1301,9 @@ unsafe fn create(comp_id: c_int) -> c_int {
 
     addr_of_mut!((*inst).channel).write(channel);
     addr_of_mut!((*inst).geometry).write(RtGeometry::empty());
-    addr_of_mut!((*inst).validating).write(None);
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
-    addr_of_mut!((*inst).record_stop).write(RecordStop::default());
+    addr_of_mut!((*inst).slot).write(SegmentSlot::default());
     addr_of_mut!((*inst).points).write(StopPoints::NONE);
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);

@@ -1,8 +1,8 @@
 //! The record types the channel carries: the realtime core's own [`SegmentRecord`] (Erwinski
-//! planner: S-curve segments) and [`PathBlock`] (VPOp: per-period positions), each in a tagged
-//! ring [`Slot`].
+//! planner: S-curve segments, in a [`SegmentSlot`] with the stop after it) and [`PathBlock`]
+//! (VPOp: per-period positions), each in a tagged ring [`Slot`].
 
-pub use nurbs_rtcore::records::{PathBlock, SegmentRecord, CURVE_SHIFT, FLAG_LAST};
+pub use nurbs_rtcore::records::{PathBlock, SegmentRecord, FLAG_LAST};
 
 /// Number of phases of a jerk-limited S-curve (the length of the records' phase arrays;
 /// spelled out for the C header).
@@ -18,43 +18,48 @@ pub const KIND_SEGMENT: u32 = 1;
 /// [`Slot::kind`] of a [`PathBlock`].
 pub const KIND_BLOCK: u32 = 2;
 
-/// The stop the module makes after a segment record if no further record is taken (underrun,
-/// hold, abort), as the planner chose and checked it (within the axis limits by finite
-/// differences). Every segment record carries its own: a record is never run before its stop
-/// is known, and the planner can hand records out while it is still choosing later stops.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct RecordStop {
-    /// Tangential deceleration and jerk of the module's stop (mm/s^2, mm/s^3).
-    pub accel: f64,
-    pub jerk: f64,
-    /// Non-zero: instead, the planner's stop sequence of this many positions, stored as
-    /// [`StopRun`](nurbs_rtcore::StopRun)s in the geometry arena from value `stored_offset`
-    /// (written before the record was pushed).
-    pub stored_len: u32,
-    pub stored_offset: u32,
-    /// The stop points of the record's curve: `points_len` `(s, feed cap)` pairs in the arena
-    /// from value `points_offset` (arc length from the curve start in the records' measure, mm;
-    /// feed cap, mm/s): the planner's critical points and the curve end (feed 0), which the
-    /// tangential stop must not pass faster than their cap.
-    pub points_offset: u32,
-    pub points_len: u32,
-}
-
-impl RecordStop {
-    /// The limits are positive and finite (the stored sequence is checked as it is played).
-    pub fn is_valid(&self) -> bool {
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        positive(self.accel) && positive(self.jerk)
-    }
-}
-
-/// A segment record with the stop after it: the segment payload of a [`Slot`].
+/// A segment record as the ring carries it: with the stop after it and where it stands in
+/// its group.
+///
+/// The planner hands records out in groups that end at a boundary with a stop: the next
+/// segment re-planned to end at rest from that boundary, checked by finite differences with
+/// the machine holding at its end (`nurbs_motion::planner::FinalRecord`). The
+/// records inside a group have no stop of their own: the motion may end only at a group's end.
+/// So the module takes the first record of a group only once the whole group is in the ring
+/// (`group_left` records from it on) on checked curves (up to `curve_needed`), and holds,
+/// aborts or stops for an underrun only at a group's end, by running `stop`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SegmentSlot {
     pub record: SegmentRecord,
-    pub stop: RecordStop,
+    /// The stop after this record (when `has_stop` is 1): a record of sequence number
+    /// `record.seq + 1` that ends at rest.
+    pub stop: SegmentRecord,
+    /// Records of the group from this one on (1: this record ends its group).
+    pub group_left: u32,
+    /// 1: `stop` is the stop after this record; 0: none (inside a group, or the path's last
+    /// record, which ends at rest).
+    pub has_stop: u32,
+    /// Highest curve index the rest of the group and its stop run on.
+    pub curve_needed: u32,
+    pub reserved: u32,
+}
+
+impl SegmentSlot {
+    /// The stop after this record, if it has one.
+    pub fn stop(&self) -> Option<&SegmentRecord> {
+        (self.has_stop == 1).then_some(&self.stop)
+    }
+
+    /// The group fields fit together: a group's last record has a stop or ends the path, the
+    /// others have none.
+    pub fn is_consistent(&self) -> bool {
+        let ends_group = self.group_left == 1;
+        self.group_left >= 1
+            && self.has_stop <= 1
+            && (self.has_stop == 1) == (ends_group && !self.record.is_last())
+            && self.curve_needed >= self.record.curve
+    }
 }
 
 /// The payload of a [`Slot`]; which field is meant is [`Slot::kind`]. Both are plain numbers,
@@ -79,7 +84,7 @@ pub struct Slot {
 /// A decoded slot.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Record {
-    Segment(SegmentRecord, RecordStop),
+    Segment(SegmentSlot),
     Block(PathBlock),
 }
 
@@ -95,12 +100,9 @@ impl Slot {
         }
     }
 
-    pub fn segment(record: &SegmentRecord, stop: &RecordStop) -> Slot {
+    pub fn segment(segment: &SegmentSlot) -> Slot {
         let mut slot = Slot::zeroed(KIND_SEGMENT);
-        slot.data.segment = SegmentSlot {
-            record: *record,
-            stop: *stop,
-        };
+        slot.data.segment = *segment;
         slot
     }
 
@@ -116,7 +118,7 @@ impl Slot {
         // slot is always written whole (`Slot::segment`, `Slot::block`, or zeroed memory).
         unsafe {
             match self.kind {
-                KIND_SEGMENT => Some(Record::Segment(self.data.segment.record, self.data.segment.stop)),
+                KIND_SEGMENT => Some(Record::Segment(self.data.segment)),
                 KIND_BLOCK => Some(Record::Block(self.data.block)),
                 _ => None,
             }
@@ -126,7 +128,7 @@ impl Slot {
     /// Sequence number (either kind; 0 for an unknown kind).
     pub fn seq(&self) -> u32 {
         match self.decode() {
-            Some(Record::Segment(r, _)) => r.seq,
+            Some(Record::Segment(s)) => s.record.seq,
             Some(Record::Block(b)) => b.seq,
             None => 0,
         }
@@ -158,9 +160,9 @@ impl From<&PathBlock> for Slot {
 }
 
 // The shared-memory layout is an ABI between two separately built programs: pin it.
-const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 160);
+const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 168);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
-const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 192);
-const _: () = assert!(core::mem::size_of::<PathBlock>() == 320);
-const _: () = assert!(core::mem::size_of::<Slot>() == 328);
+const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 352);
+const _: () = assert!(core::mem::size_of::<PathBlock>() == 328);
+const _: () = assert!(core::mem::size_of::<Slot>() == 360);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

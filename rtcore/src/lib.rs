@@ -8,6 +8,7 @@
 // The numerical loops mirror the indices of the published algorithms (P&T A2.3, A4.2).
 #![allow(clippy::needless_range_loop)]
 
+pub mod block_stop;
 pub mod executor;
 pub mod interp;
 pub mod math;

@@ -5,10 +5,7 @@ use crate::scurve::{SCurve, PHASES};
 
 /// This is the last segment of the toolpath: the motion ends at rest at `u_end`.
 pub const FLAG_LAST: u32 = 1;
-/// The path element (curve) a segment runs on is stored in the upper 16 bits of `flags`.
-pub const CURVE_SHIFT: u32 = 16;
-
-/// One planned segment along the curve (`#[repr(C)]`, 21 machine words, no pointers).
+/// One planned segment along the curve (`#[repr(C)]`, 168 bytes, no pointers).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SegmentRecord {
@@ -16,6 +13,9 @@ pub struct SegmentRecord {
     pub seq: u32,
     /// `FLAG_*` bits.
     pub flags: u32,
+    /// Index of the path element (curve) the segment runs on.
+    pub curve: u32,
+    pub reserved: u32,
     /// Curve parameter at the segment start and end.
     pub u_start: f64,
     pub u_end: f64,
@@ -54,7 +54,7 @@ impl SegmentRecord {
 
     /// Index of the curve (path element) this segment runs on.
     pub fn curve(&self) -> usize {
-        (self.flags >> CURVE_SHIFT) as usize
+        self.curve as usize
     }
 
     pub fn is_last(&self) -> bool {
@@ -109,8 +109,10 @@ pub const BLOCK_SAMPLES: usize = 16;
 pub struct PathBlock {
     /// Consecutive number from 0, as for segment records.
     pub seq: u32,
-    /// `FLAG_*` bits and the curve index (upper 16 bits), as for segment records.
+    /// `FLAG_*` bits, as for segment records.
     pub flags: u32,
+    /// Index of the path element (curve) of every sample.
+    pub curve: u32,
     /// Samples used (1..=[`BLOCK_SAMPLES`]).
     pub count: u32,
     /// Non-zero: the stop after this block is not the tangential one but `stop_len` planned
@@ -123,7 +125,13 @@ pub struct PathBlock {
     /// pass faster than their cap).
     pub points_offset: u32,
     pub points_len: u32,
-    pub reserved: u32,
+    /// Highest curve index the rest of the block's group and its stop run on (a stored stop
+    /// may cross joins).
+    pub curve_needed: u32,
+    /// Blocks of the group from this one on (1: the block ends its group). Only a group's last
+    /// block has a stop the planner found within the limits; the module takes a group's first
+    /// block only once the whole group is queued, and stops only at a group's end.
+    pub group_left: u32,
     pub stop_accel: f64,
     pub stop_jerk: f64,
     pub s_before: [f64; 2],
@@ -133,7 +141,7 @@ pub struct PathBlock {
 
 impl PathBlock {
     pub fn curve(&self) -> usize {
-        (self.flags >> CURVE_SHIFT) as usize
+        self.curve as usize
     }
 
     pub fn is_last(&self) -> bool {
@@ -158,11 +166,12 @@ impl PathBlock {
         }
     }
 
-    /// Structural checks that need no curve: count within the arrays, finite numbers, `u` and
-    /// `s` non-decreasing (with `s_before` before `s[0]`), positive finite stop limits.
+    /// Structural checks that need no curve: count within the arrays, group fields, finite
+    /// numbers, `u` and `s` non-decreasing (with `s_before` before `s[0]`), positive finite
+    /// stop limits.
     pub fn check(&self) -> Result<(), RecordError> {
         let n = self.count as usize;
-        if n == 0 || n > BLOCK_SAMPLES {
+        if n == 0 || n > BLOCK_SAMPLES || self.group_left == 0 || self.curve_needed < self.curve {
             return Err(RecordError::Inconsistent);
         }
         let (u, s) = (&self.u[..n], &self.s[..n]);
@@ -215,13 +224,13 @@ impl StopRun {
     }
 
     /// The header stored in `values`; `None` unless the curve index is a whole number below
-    /// 2^16, the count a whole number from 1 to 2^32 - 1 and the arc length finite.
+    /// 2^32, the count a whole number from 1 to 2^32 - 1 and the arc length finite.
     pub fn from_values(values: &[f64]) -> Option<Self> {
         let &[curve, count, s_before] = values.get(..Self::VALUES)? else {
             return None;
         };
         let whole = |x: f64, max: f64| x >= 0.0 && x <= max && x == (x as u64) as f64;
-        if !(whole(curve, u16::MAX as f64) && whole(count, u32::MAX as f64) && count >= 1.0 && s_before.is_finite()) {
+        if !(whole(curve, u32::MAX as f64) && whole(count, u32::MAX as f64) && count >= 1.0 && s_before.is_finite()) {
             return None;
         }
         Some(StopRun {

@@ -10,10 +10,11 @@ use super::nodes::{Node, NodeStream};
 use super::quick_check::{estimate, ArcGrid, Estimate, Scope};
 use super::scurve_fit::{fit_ramps, ramp_distance, reachable_feed, Ramp};
 use super::simulate::{run_segment, SimState};
+use super::window::Window;
 use super::{Limits, LimitsError, PathCurves};
 use crate::geometry::Toolpath;
 use nurbs_rtcore::executor::CurveSet;
-use nurbs_rtcore::records::{CURVE_SHIFT, FLAG_LAST};
+use nurbs_rtcore::records::FLAG_LAST;
 use nurbs_rtcore::scurve::SCurve;
 use nurbs_rtcore::SegmentRecord;
 use std::cell::Cell;
@@ -58,6 +59,31 @@ pub struct PlanStart {
     pub curve: usize,
     pub u: f64,
     pub s: f64,
+}
+
+/// A record handed out by the [`Planner`], final, with the stop that follows it if the motion
+/// must end at its end (underrun, hold, abort).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FinalRecord {
+    pub record: SegmentRecord,
+    /// The next segment re-planned to end at rest from this record's end feed, checked by finite
+    /// differences like every segment and with the machine holding at its last sample after it
+    /// ([`Planner`]): the stop after this record. `None` where the records after it must run
+    /// first (they are final together with the next record that has a stop, or the path end).
+    pub stop: Option<SegmentRecord>,
+}
+
+/// How a plan went, once the [`Planner`] has handed out its last record.
+#[derive(Clone, Debug)]
+pub struct PlanReport {
+    pub motion_time: f64,
+    /// Wall time spent planning (s) and until the first record was ready (s).
+    pub plan_time: f64,
+    pub first_record_time: f64,
+    /// Records handed out.
+    pub records: usize,
+    /// Limits as used (one value per axis).
+    pub limits: Limits,
 }
 
 /// A finished plan.
@@ -138,6 +164,15 @@ impl From<LimitsError> for PlanError {
 /// A fixed count of segments would not do: on a dense G1 polyline with rounded corners the
 /// cascades reach 39 short segments back.
 ///
+/// The settled records end at a boundary whose stop is that segment `j` re-planned to rest
+/// ([`FinalRecord::stop`]): the motion may end there at any time, within the axis limits,
+/// with no stop check of its own. The records settled together before it have no stop of their
+/// own: the module takes them only all together ([`FinalRecord`]).
+///
+/// A streamed plan keeps only what back-tracking can still reach: per-segment state before
+/// the settled records and the scans of the elements behind them are released, so memory
+/// follows the look-ahead, not the length of the path.
+///
 /// The nodes come from [`NodeStream`], which scans the path only as far as needed to commit
 /// them. [`plan`] collects this stream: a batch plan and a streamed one run the same code and
 /// differ only in when records settle.
@@ -152,17 +187,17 @@ pub struct Planner<'a> {
     nodes: NodeStream<'a>,
     /// Committed nodes, with the end feed each segment aims for and the peak feed cap of the
     /// segment starting at each.
-    bounds: Vec<Node>,
-    feeds: Vec<f64>,
-    lengths: Vec<f64>,
-    peak_caps: Vec<f64>,
+    bounds: Window<Node>,
+    feeds: Window<f64>,
+    lengths: Window<f64>,
+    peak_caps: Window<f64>,
     /// Whether `bounds` ends at the path end.
     end_known: bool,
     /// Accepted records (re-planned ones truncated), the interpolator state before each and
     /// the feed each starts with.
-    records: Vec<SegmentRecord>,
-    states: Vec<SimState>,
-    start_feeds: Vec<f64>,
+    records: Window<SegmentRecord>,
+    states: Window<SimState>,
+    start_feeds: Window<f64>,
     /// Segment being planned.
     k: usize,
     splits: usize,
@@ -173,6 +208,8 @@ pub struct Planner<'a> {
     /// Records final (never revised) and records handed out.
     settled: usize,
     emitted: usize,
+    /// The stop after the last settled record (see [`FinalRecord::stop`]).
+    settled_stop: Option<SegmentRecord>,
     /// [`PlanOptions::stream`]: settle records before the path end.
     stream: bool,
     /// The first record, and segment 1's length, for which segment 1 could not stop at its end
@@ -237,20 +274,21 @@ impl<'a> Planner<'a> {
             check_limits: strict(&limits),
             feed_cap: planning.feed,
             nodes: NodeStream::new(toolpath, planning, options, start),
-            bounds: Vec::new(),
-            feeds: Vec::new(),
-            lengths: Vec::new(),
-            peak_caps: Vec::new(),
+            bounds: Window::default(),
+            feeds: Window::default(),
+            lengths: Window::default(),
+            peak_caps: Window::default(),
             end_known: false,
-            records: Vec::new(),
-            states: vec![SimState::start(tip, limits.period)],
-            start_feeds: vec![0.0],
+            records: Window::default(),
+            states: Window::from_vec(vec![SimState::start(tip, limits.period)]),
+            start_feeds: Window::from_vec(vec![0.0]),
             k: 0,
             splits: 0,
             backtracks: 0,
             work: Cell::new(0),
             work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
             settled: 0,
+            settled_stop: None,
             first_absorber_failed: None,
             emitted: 0,
             stream: options.stream,
@@ -265,12 +303,27 @@ impl<'a> Planner<'a> {
 
     /// The next final record, planning as far as that needs; `None` after the last one.
     pub fn next_record(&mut self) -> Option<Result<SegmentRecord, PlanError>> {
+        self.next_final().map(|r| r.map(|f| f.record))
+    }
+
+    /// The next final record with the stop after it, planning as far as that needs; `None`
+    /// after the last one.
+    pub fn next_final(&mut self) -> Option<Result<FinalRecord, PlanError>> {
         while !self.failed {
             if self.emitted < self.settled {
                 self.emitted += 1;
                 self.first_record_time
                     .get_or_insert_with(|| self.started.elapsed().as_secs_f64());
-                return Some(Ok(self.records[self.emitted - 1]));
+                let record = self.records[self.emitted - 1];
+                let stop = if self.emitted == self.settled {
+                    self.settled_stop.take()
+                } else {
+                    None
+                };
+                if self.stream {
+                    self.release_settled();
+                }
+                return Some(Ok(FinalRecord { record, stop }));
             }
             if !self.commit_nodes() {
                 return None;
@@ -283,11 +336,32 @@ impl<'a> Planner<'a> {
         None
     }
 
-    /// The critical points found so far, in path order, as (curve, point) (what
-    /// [`Plan::critical_points`] reports at the end); those on the first
+    /// Takes the critical points found since the last call, in path order, as (curve, point)
+    /// (what [`Plan::critical_points`] reports); those on the first
     /// [`Planner::scanned_elements`] elements are final.
-    pub fn critical_points(&self) -> &[(usize, CriticalPoint)] {
-        &self.nodes.criticals
+    pub fn take_critical_points(&mut self) -> Vec<(usize, CriticalPoint)> {
+        std::mem::take(&mut self.nodes.criticals)
+    }
+
+    /// Forgets what back-tracking can no longer reach: the state before the settled records
+    /// (segment `settled` starts from `states[settled]`) and the scans of the elements before
+    /// the one it starts on.
+    fn release_settled(&mut self) {
+        let k = self.settled.min(self.emitted);
+        self.records.release_before(k);
+        for w in [
+            &mut self.feeds,
+            &mut self.lengths,
+            &mut self.peak_caps,
+            &mut self.start_feeds,
+        ] {
+            w.release_before(k);
+        }
+        self.bounds.release_before(k);
+        self.states.release_before(k);
+        if let Some(node) = self.bounds.get(k) {
+            self.nodes.release_elements_before(node.start_curve);
+        }
     }
 
     /// Elements scanned to their end (their critical points final).
@@ -301,16 +375,15 @@ impl<'a> Planner<'a> {
         self.nodes.is_exhausted()
     }
 
-    /// The finished plan, once [`Planner::next_record`] has returned `None`.
-    pub fn finish(self) -> Plan {
+    /// How the plan went, once [`Planner::next_record`] has returned `None`.
+    pub fn finish(self) -> PlanReport {
         // From the first setpoint to the last: the profiles plus the part-period waits at stops.
         let samples = self.states.last().map_or(0, |s| s.samples);
-        Plan {
+        PlanReport {
             motion_time: samples.saturating_sub(1) as f64 * self.limits.period,
             plan_time: self.started.elapsed().as_secs_f64(),
             first_record_time: self.first_record_time.unwrap_or(0.0),
-            critical_points: self.nodes.criticals,
-            records: self.records,
+            records: self.emitted,
             limits: self.limits,
         }
     }
@@ -356,15 +429,24 @@ impl<'a> Planner<'a> {
         }
     }
 
-    /// Whether accepted segment `j` could also stop at its end from its start feed: then a
-    /// back-tracking cascade that reaches it once the records before it are final (and cannot
-    /// be revised) is absorbed there, by that stop at worst.
-    fn can_stop_at_end(&self, j: usize, work_budget: u64) -> bool {
+    /// Segment `j` re-planned to end at rest from its start feed, if it can within the axis
+    /// limits with the machine then holding at its last sample (as the module does after a
+    /// stop): a back-tracking cascade that reaches `j` once the records before it are final
+    /// (and cannot be revised) is absorbed there, by that stop at worst, and it is the stop
+    /// after those records.
+    fn stop_at_end(&self, j: usize, work_budget: u64) -> Option<SegmentRecord> {
         let ctx = SegmentContext {
             refine: false,
             ..self.context(j, work_budget)
         };
-        solve_segment(&ctx, self.start_feeds[j], 0.0, &self.states[j]).is_ok()
+        let (stop, _) = solve_segment(&ctx, self.start_feeds[j], 0.0, &self.states[j]).ok()?;
+        holds_after(&ctx, &self.states[j], stop).then_some(stop)
+    }
+
+    /// Records before `j` are final; the stop after them is `stop`.
+    fn settle(&mut self, j: usize, stop: Option<SegmentRecord>) {
+        self.settled = j;
+        self.settled_stop = stop;
     }
 
     /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.
@@ -421,33 +503,34 @@ impl<'a> Planner<'a> {
                 // the reason for a refusal.
                 let absorbs = |this: &Self, j: usize| {
                     can_absorb(this.start_feeds[j], this.lengths[j], this.accel, this.jerk)
-                        && this.can_stop_at_end(j, budget)
+                        .then(|| this.stop_at_end(j, budget))
+                        .flatten()
                 };
                 if last {
-                    self.settled = self.k;
+                    self.settle(self.k, None);
                 } else if self.stream && self.settled == 0 {
                     // The motion waits for the first record: settle one behind as below, else
                     // at the accepted segment itself; right after the first segment, at the next
                     // one if it can stop at its end from where the first leaves it, so that the
                     // first record need not wait for the next segment's own solve (checked once
                     // for the same first record).
-                    if k > 1 && absorbs(self, k - 1) {
-                        self.settled = k - 1;
-                    } else if k > 0
-                        && !(k == 1 && self.first_absorber_failed == Some((self.records[0], self.lengths[1])))
-                        && absorbs(self, k)
+                    if let Some(stop) = (k > 1).then(|| absorbs(self, k - 1)).flatten() {
+                        self.settle(k - 1, Some(stop));
+                    } else if let Some(stop) = (k > 0
+                        && !(k == 1 && self.first_absorber_failed == Some((self.records[0], self.lengths[1]))))
+                    .then(|| absorbs(self, k))
+                    .flatten()
                     {
-                        self.settled = k;
+                        self.settle(k, Some(stop));
                     } else if k == 0 && self.commit_nodes() {
-                        if absorbs(self, 1) {
-                            self.settled = 1;
-                        } else {
-                            self.first_absorber_failed = Some((self.records[0], self.lengths[1]));
+                        match absorbs(self, 1) {
+                            Some(stop) => self.settle(1, Some(stop)),
+                            None => self.first_absorber_failed = Some((self.records[0], self.lengths[1])),
                         }
                     }
                 } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
-                    if j > self.settled && absorbs(self, j) {
-                        self.settled = j;
+                    if let Some(stop) = (j > self.settled).then(|| absorbs(self, j)).flatten() {
+                        self.settle(j, Some(stop));
                     }
                 }
             }
@@ -529,10 +612,37 @@ pub fn plan(
     on_record: &mut dyn FnMut(&SegmentRecord),
 ) -> Result<Plan, PlanError> {
     let mut planner = Planner::new(toolpath, limits, options)?;
-    for record in &mut planner {
-        on_record(&record?);
+    let (mut records, mut critical_points) = (Vec::new(), Vec::new());
+    while let Some(record) = planner.next_record() {
+        let record = record?;
+        on_record(&record);
+        records.push(record);
+        critical_points.append(&mut planner.take_critical_points());
     }
-    Ok(planner.finish())
+    critical_points.append(&mut planner.take_critical_points());
+    let report = planner.finish();
+    Ok(Plan {
+        records,
+        critical_points,
+        motion_time: report.motion_time,
+        plan_time: report.plan_time,
+        first_record_time: report.first_record_time,
+        limits: report.limits,
+    })
+}
+
+/// Whether the machine, after running `stop` (a segment ending at rest) from `from`, holds at
+/// its last sample within the axis limits: the samples of the stop and three held periods, by
+/// the finite differences of the plan continued. (The segment's own check lands a sample on
+/// its end node, which the next segment would take; a stop has no next segment.)
+fn holds_after(ctx: &SegmentContext, from: &SimState, stop: SegmentRecord) -> bool {
+    let mut state = *from;
+    state.check.reset_peaks();
+    if !run_segment(ctx.curves, ctx.limits, &mut state, stop, &mut |_| {}) {
+        return false;
+    }
+    state.check.finish(ctx.limits);
+    state.check.worst_ratio(ctx.limits) <= 1.0
 }
 
 /// Nodes inserted at most by segment splits (each one makes a segment shorter).
@@ -661,13 +771,11 @@ impl Candidate for Estimate {
 }
 
 fn make_record(ctx: &SegmentContext, profile: &SCurve) -> SegmentRecord {
-    let mut flags = (ctx.node_start.start_curve as u32) << CURVE_SHIFT;
-    if ctx.last {
-        flags |= FLAG_LAST;
-    }
     SegmentRecord {
         seq: ctx.seq,
-        flags,
+        flags: if ctx.last { FLAG_LAST } else { 0 },
+        curve: ctx.node_start.start_curve as u32,
+        reserved: 0,
         u_start: ctx.node_start.start_u,
         u_end: ctx.node_end.end_u,
         s_start: ctx.node_start.start_s,

@@ -13,8 +13,9 @@ pub mod scurve_fit;
 pub mod simulate;
 pub mod verify;
 pub mod vpop;
+mod window;
 
-pub use erwinski::{plan, Plan, PlanError, PlanOptions, Planner};
+pub use erwinski::{plan, FinalRecord, Plan, PlanError, PlanOptions, PlanReport, Planner};
 pub use limits::{Limits, LimitsError};
 
 use crate::geometry::Toolpath;

@@ -25,6 +25,7 @@ use super::erwinski::{PlanOptions, PlanStart, FEED_HEADROOM};
 use super::flf::{flf, CriticalPoint, CriticalPointSearch, FlfScan};
 use super::quick_check::ArcGrid;
 use super::scurve_fit::reachable_feed;
+use super::window::Window;
 use super::{Limits, PathCurves};
 use crate::geometry::{ArcLengthTable, Toolpath};
 use nurbs_rtcore::executor::Derivs;
@@ -100,8 +101,9 @@ pub(super) struct NodeStream<'a> {
     /// Nominal tangential acceleration and jerk of the look-ahead.
     accel: f64,
     jerk: f64,
-    /// Per element, once reached (`None` before the start element and ahead of the scan).
-    elements: Vec<Option<ElementScan>>,
+    /// Per element from the start element on, as far as the scan has reached, the front
+    /// released once the planner no longer needs it ([`NodeStream::release_elements_before`]).
+    elements: Window<ElementScan>,
     /// Element being scanned; `elements.len()` once every node is produced.
     current: usize,
     /// Produced nodes not yet committed, after the last committed one (`window[0]`), whose
@@ -132,7 +134,7 @@ impl<'a> NodeStream<'a> {
             tip: toolpath.tip_dim(),
             accel,
             jerk,
-            elements: (0..toolpath.elements.len()).map(|_| None).collect(),
+            elements: Window::starting_at(start.curve),
             current: start.curve,
             planning,
             options: options.clone(),
@@ -147,7 +149,12 @@ impl<'a> NodeStream<'a> {
 
     /// The scan of element `c` (reached by the committed nodes on it).
     pub fn element(&self, c: usize) -> &ElementScan {
-        self.elements[c].as_ref().expect("element scanned")
+        &self.elements[c]
+    }
+
+    /// Forgets the scans of the elements before `c` (no segment before it is planned again).
+    pub fn release_elements_before(&mut self, c: usize) {
+        self.elements.release_before(c.min(self.current));
     }
 
     /// Elements scanned to their end: their critical points in [`NodeStream::criticals`] are
@@ -158,7 +165,7 @@ impl<'a> NodeStream<'a> {
 
     /// Whether every node of the path has been produced (the whole path scanned).
     pub fn is_exhausted(&self) -> bool {
-        self.current == self.elements.len()
+        self.current == self.toolpath.elements.len()
     }
 
     /// The next committed node, scanning as far as that needs; `None` after the path end.
@@ -177,11 +184,11 @@ impl<'a> NodeStream<'a> {
         let c = self.current;
         let view = curves.view(c);
         let curve = &self.toolpath.elements[c].curve;
-        if self.elements[c].is_none() {
+        if self.elements.len() == c {
             self.begin_element(c, view);
         }
         let tip = self.tip;
-        let e = self.elements[c].as_mut().expect("element begun");
+        let e = &mut self.elements[c];
         let grid = &mut e.grid;
         e.scan.extend(
             view,
@@ -203,7 +210,7 @@ impl<'a> NodeStream<'a> {
         // Critical points and breaks in order of `u`, as far as no later critical point can
         // come before them (a critical point first at equal `u`).
         loop {
-            let e = self.elements[c].as_mut().expect("element begun");
+            let e = &mut self.elements[c];
             let point = e.found.front().copied();
             let brk = e.breaks.front().copied();
             let (p, fixed_cap) = match (point, brk) {
@@ -231,12 +238,12 @@ impl<'a> NodeStream<'a> {
                 ..Node::within(c, p.u, s, cap)
             });
         }
-        let e = self.elements[c].as_mut().expect("element begun");
+        let e = &mut self.elements[c];
         if e.scan.is_complete() {
             e.table.extend_past(curve, f64::INFINITY);
             let s1 = e.table.total();
             let next = c + 1;
-            let node = if next == self.elements.len() {
+            let node = if next == self.toolpath.elements.len() {
                 Node::within(c, u1, s1, 0.0)
             } else {
                 // The join: the next element starts here.
@@ -268,7 +275,7 @@ impl<'a> NodeStream<'a> {
             .copied()
             .filter(|&(u, _)| c != self.start.curve || u > self.start.u + 1e-9 * (u1 - u0))
             .collect();
-        self.elements[c] = Some(ElementScan {
+        self.elements.push(ElementScan {
             scan: FlfScan::lazy(view, self.options.samples_per_control_point),
             grid: ArcGrid::empty(self.tip),
             table: ArcLengthTable::lazy(&self.toolpath.elements[c].curve),
@@ -300,7 +307,7 @@ impl<'a> NodeStream<'a> {
         while k + 1 < self.window.len() {
             let (a, b) = (self.window[k], self.window[k + 1]);
             let c = a.start_curve;
-            let e = self.elements[c].as_ref().expect("element scanned");
+            let e = &self.elements[c];
             match e.scan.min_speed_cap_between(a.start_u, b.end_u) {
                 Some((m, u)) if m < a.cap.min(b.cap) && u > a.start_u && u < b.end_u => {
                     let s = e.table.length_to(&self.toolpath.elements[c].curve, u);

@@ -2,9 +2,10 @@
 """Check the samples of test_underrun.sh: the planner was unloaded mid-path.
 
 - the samples start as the offline plan, equal to --tol mm, up to a segment boundary;
-- then the module's own stop: the feed never rises and ends at rest (below J dt^2 / 2); with
-  --stop-from-acceleration (a stop from a path block's end, where the motion may still be
-  accelerating) the feed may rise first, but once it falls it never rises again; with
+- then the stop: the feed never rises and ends at rest (below J dt^2 / 2); with --stop-may-rise
+  (a planned stop segment, which may speed up before it brakes) or --stop-from-acceleration (a
+  stop from a path block's end, where the motion may still be accelerating) the feed may rise
+  first, but once it falls it never rises again; with
   --any-stop (a stored stop sequence: the plan's next positions, then a deceleration) the feed
   is not checked here, only by the limit check, and each axis's last step may be up to J dt^2;
 - underrun set, no fault, not done;
@@ -24,6 +25,7 @@ from samples import load_run, parse_args, planned_prefix, read_samples, sample_g
 def main():
     a = parse_args(("--jerk", dict(type=float, required=True)), ("--resumed", {}),
                    ("--stop-from-acceleration", dict(action="store_true")),
+                   ("--stop-may-rise", dict(action="store_true")),
                    ("--any-stop", dict(action="store_true")))
     rows, axes, samples, errors = load_run(a)
     planned = planned_prefix(samples, rows, axes, a.tol)
@@ -32,7 +34,7 @@ def main():
     stop = samples[planned:]
     if len(stop) < 2:
         errors.append(f"only {len(stop)} samples after the cut: no stop ramp")
-    falling = not a.stop_from_acceleration
+    falling = not (a.stop_from_acceleration or a.stop_may_rise)
     for k in range(1, 0 if a.any_stop else len(stop)):
         if stop[k]["feed"] < stop[k - 1]["feed"] - 1e-9:
             falling = True

@@ -1,7 +1,7 @@
 #!/bin/bash
 # path_test.sh TOOLPATH [PLANNER [FLAGS]]: the product end to end in real LinuxCNC. nurbs-planner
-# plans TOOLPATH (with PLANNER, erwinski or vpop; default erwinski; FLAGS, e.g. --stream, go to
-# both nurbs-planner and the offline nurbs-plan plan)
+# plans TOOLPATH (with PLANNER, erwinski or vpop; default erwinski, compared with the offline
+# `nurbs-plan plan --stream`; FLAGS go to both nurbs-planner and the offline nurbs-plan plan)
 # and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
 # thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full
 # precision. Checks (check_path.py, nurbs-plan verify): the samples are the offline
@@ -18,7 +18,9 @@ LIMITS="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $flags --out "$work/offline.csv"
+offline_flags=$flags
+[ "$planner" = erwinski ] && offline_flags="$flags --stream"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $offline_flags --out "$work/offline.csv"
 SAMPLES=$(($(wc -l <"$work/offline.csv") - 1))
 sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD --planner $planner $flags|g" \
     -e "s|@SAMPLES@|$SAMPLES|g" -e "s|@WORK@|$work|g" \

@@ -22,7 +22,7 @@ work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
 cat >"$work/plan.sh" <<SH
 #!/bin/sh
-nurbs-planner "$toolpath" $LIMITS --period $PERIOD --stream >"$work/planner.log" 2>&1
+nurbs-planner "$toolpath" $LIMITS --period $PERIOD >"$work/planner.log" 2>&1
 echo \$? >"$work/rc"
 exit 0
 SH

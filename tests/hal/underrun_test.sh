@@ -7,15 +7,17 @@
 # $LIMITS below); after 1 s it is either unloaded (SIGTERM; a second nurbs-planner is started
 # later) or frozen (SIGSTOP, by its pid; later continued with SIGCONT and it must notice the
 # published stop point by itself). nurbs_interp runs out of records mid-path and stops on the path
-# with the stop the planner checked from that segment boundary (plan_geometry.rs). The planner
-# then plans the rest of the path from rest at the stop point and queues it; `setp
-# nurbs_interp.resume 1` runs it. Checks (check_underrun.py, nurbs-plan verify): the samples are
-# the offline plan up to the cut, then a stop with a never-rising feed that ends at rest, no
+# at the end of the last group it has, with the stop the planner made and checked there (the
+# next segment re-planned to rest; VPOp: the module's stop from the block end, or a stored
+# sequence). The planner then plans the rest of the path from rest at the stop point and queues
+# it; `setp nurbs_interp.resume 1` runs it. Checks (check_underrun.py, nurbs-plan verify): the
+# samples are the offline plan (erwinski: `nurbs-plan plan --stream`, what the machine runs) up
+# to the cut, then a stop whose feed, once it falls, never rises and that ends at rest, no
 # position jump, underrun set and no fault; the resumed motion ends at C(1) at rest; the whole
 # sampled run (to the stop, then resumed) has no axial violation. STOP=any: the stop may be a
 # stored sequence (the plan's next positions, then a deceleration; e.g. across an element join),
-# whose feed need not fall monotonically: only the limit check judges it. FLAGS (e.g. --stream) go
-# to every nurbs-planner and to the offline nurbs-plan plan.
+# whose feed need not fall monotonically: only the limit check judges it. FLAGS go to every
+# nurbs-planner and to the offline nurbs-plan plan.
 here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 
@@ -41,7 +43,9 @@ LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
-nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $flags --out "$work/offline.csv"
+offline_flags=$flags
+[ "$planner" = erwinski ] && offline_flags="$flags --stream"
+nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $offline_flags --out "$work/offline.csv"
 sed -e "s|@CUT@|$cut|" -e "s|@REPLAN@|$replan|" -e "s|@TOOLPATH@|$toolpath|g" \
     -e "s|@INI@|$(realpath "$here/../../halfiles/sim.ini")|g" \
     -e "s|@MARGIN@|0.1|g" -e "s|@PLANNER@|$planner $flags|g" -e "s|@KILL_AFTER@|$kill_after|g" -e "s|@WORK@|$work|g" \
@@ -67,7 +71,8 @@ hal_session "$work/underrun.hal" "$work/halrun.log"
 cat "$work/halrun.log"
 python3 "$here/check_underrun.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
     --period $PERIOD --jerk $JERK --recorded-csv "$work/recorded.csv" --resumed "$work/resumed.txt" \
-    $([ "$planner" = vpop ] && echo --stop-from-acceleration) $([ "$stop_check" = any ] && echo --any-stop)
+    $([ "$planner" = vpop ] && echo --stop-from-acceleration || echo --stop-may-rise) \
+    $([ "$stop_check" = any ] && echo --any-stop)
 verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
 echo "$verify"
 if grep "^VIOLATION" <<<"$verify"; then

@@ -9,16 +9,17 @@ use std::ffi::CString;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::channel::{
-    Channel, CurveDesc, GeometryHeader, GeometryRef, PublishError, CHANNEL_KEY, GEOMETRY_VALUES, MAX_CURVES,
-};
-use crate::pins::{Pin, PinType};
-use crate::sys;
+use nurbs_hal::channel::{Channel, CHANNEL_KEY};
+use nurbs_hal::pins::{Pin, PinType};
+use nurbs_hal::sys;
 
-/// A HAL userspace component: `hal_init` on creation, `hal_exit` on drop.
+/// A HAL userspace component: `hal_init` on creation, `hal_exit` on drop (after releasing its
+/// reference to the channel's shared memory, so that the block is removed with the module).
 pub struct Component {
     id: c_int,
     name: String,
+    /// The channel's RTAPI shared-memory id, once attached.
+    shmem: std::cell::Cell<Option<c_int>>,
 }
 
 impl Component {
@@ -32,6 +33,7 @@ impl Component {
         Ok(Component {
             id,
             name: name.to_owned(),
+            shmem: std::cell::Cell::new(None),
         })
     }
 
@@ -72,7 +74,8 @@ impl Component {
     pub fn attach_channel(&self, timeout: Duration) -> Result<&'static Channel, String> {
         let start = Instant::now();
         loop {
-            // SAFETY: same key and size as the creator; the block stays mapped until hal_exit.
+            // SAFETY: same key and size as the creator; the block stays mapped until the
+            // reference is released (drop).
             let result = unsafe {
                 let id = sys::rtapi_shmem_new(CHANNEL_KEY, self.id, Channel::SIZE as _);
                 if id < 0 {
@@ -80,10 +83,21 @@ impl Component {
                 } else {
                     let mut p: *mut c_void = ptr::null_mut();
                     let rc = sys::rtapi_shmem_getptr(id, &mut p);
-                    if rc < 0 || p.is_null() {
+                    let attached = if rc < 0 || p.is_null() {
                         Err(format!("rtapi_shmem_getptr: {rc}"))
                     } else {
                         Channel::attach(p as *const u8).map_err(|e| format!("channel: {e:?}"))
+                    };
+                    match attached {
+                        Ok(c) => {
+                            self.shmem.set(Some(id));
+                            Ok(c)
+                        }
+                        Err(e) => {
+                            // Every rtapi_shmem_new counts a reference: give this one back.
+                            sys::rtapi_shmem_delete(id, self.id);
+                            Err(e)
+                        }
                     }
                 }
             };
@@ -98,131 +112,14 @@ impl Component {
 
 impl Drop for Component {
     fn drop(&mut self) {
-        // SAFETY: valid id; frees our pins and shared-memory mappings.
-        unsafe { sys::hal_exit(self.id) };
-    }
-}
-
-/// Collects curves into the channel's geometry layout, then publishes them.
-pub struct GeometryBuilder {
-    header: GeometryHeader,
-    curves: Vec<CurveDesc>,
-    values: Vec<f64>,
-}
-
-impl GeometryBuilder {
-    /// `tip_axes`: tool-tip coordinates (2 or 3).
-    pub fn new(tip_axes: usize) -> GeometryBuilder {
-        GeometryBuilder {
-            header: GeometryHeader {
-                tip_axes: tip_axes as u32,
-                ..GeometryHeader::default()
-            },
-            curves: Vec::new(),
-            values: Vec::new(),
-        }
-    }
-
-    /// Append one curve (becomes curve number `curve_count()` - 1 of the records).
-    pub fn add_curve(
-        &mut self,
-        degree: usize,
-        dim: usize,
-        knots: &[f64],
-        points: &[f64],
-        weights: &[f64],
-    ) -> Result<(), String> {
-        if self.curves.len() >= MAX_CURVES {
-            return Err(format!("more than {MAX_CURVES} curves (path elements)"));
-        }
-        let total = self.values.len() + knots.len() + points.len() + weights.len();
-        if total > GEOMETRY_VALUES {
-            return Err(format!(
-                "geometry needs {total} values, the channel holds {GEOMETRY_VALUES}"
-            ));
-        }
-        let mut put = |data: &[f64]| -> (u32, u32) {
-            let offset = self.values.len() as u32;
-            self.values.extend_from_slice(data);
-            (offset, data.len() as u32)
+        // SAFETY: valid ids; the channel is not used after this (its users borrow the
+        // component). hal_exit frees the pins.
+        unsafe {
+            if let Some(shmem) = self.shmem.take() {
+                sys::rtapi_shmem_delete(shmem, self.id);
+            }
+            sys::hal_exit(self.id)
         };
-        let (knots_offset, knots_len) = put(knots);
-        let (points_offset, points_len) = put(points);
-        let (weights_offset, weights_len) = put(weights);
-        self.curves.push(CurveDesc {
-            degree: degree as u32,
-            dim: dim as u32,
-            knots_offset,
-            knots_len,
-            points_offset,
-            points_len,
-            weights_offset,
-            weights_len,
-        });
-        self.header.curve_count += 1;
-        Ok(())
-    }
-
-    /// Appends plain values to the arena (e.g. stored stop sequences); returns their offset.
-    pub fn add_values(&mut self, values: &[f64]) -> Result<u32, String> {
-        if self.values.len() + values.len() > GEOMETRY_VALUES {
-            return Err(format!("{} more values do not fit the channel", values.len()));
-        }
-        let offset = self.values.len() as u32;
-        self.values.extend_from_slice(values);
-        Ok(offset)
-    }
-
-    pub fn header(&self) -> &GeometryHeader {
-        &self.header
-    }
-
-    pub fn curves(&self) -> &[CurveDesc] {
-        &self.curves
-    }
-
-    pub fn values(&self) -> &[f64] {
-        &self.values
-    }
-
-    /// The geometry as the channel will hold it.
-    pub fn layout(&self) -> GeometryRef<'_> {
-        GeometryRef {
-            header: self.header,
-            curves: &self.curves,
-            values: &self.values,
-        }
-    }
-
-    /// Validate and publish; the module takes it at its next period (if idle). Returns the
-    /// writer of the values appended behind it while the motion runs.
-    pub fn publish<'a>(&self, channel: &'a Channel) -> Result<ArenaAppender<'a>, String> {
-        channel.geometry.publish(&self.layout()).map_err(|e| match e {
-            PublishError::TooLarge => "geometry too large for the channel".to_owned(),
-            PublishError::Invalid(f) => format!("geometry refused: {f:?}"),
-        })?;
-        Ok(ArenaAppender {
-            channel,
-            next: self.values.len(),
-        })
-    }
-}
-
-/// Appends values to the published geometry's arena (stored stop sequences chosen while the
-/// motion runs), each before the record that refers to it is pushed.
-pub struct ArenaAppender<'a> {
-    channel: &'a Channel,
-    /// First free value.
-    next: usize,
-}
-
-impl ArenaAppender<'_> {
-    /// Writes `values`; returns their offset, or `None` if the arena is full.
-    pub fn put(&mut self, values: &[f64]) -> Option<u32> {
-        let offset = u32::try_from(self.next).ok()?;
-        self.channel.geometry.append(self.next, values).ok()?;
-        self.next += values.len();
-        Some(offset)
     }
 }
 

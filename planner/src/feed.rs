@@ -1,75 +1,130 @@
-//! Planner side of the geometry: what `nurbs-planner` publishes besides the curves, and the
-//! check behind it. Compiled into the `nurbs-planner` binary and into the tests (never into
-//! the realtime module's library: it needs the planner crate).
+//! What `nurbs-planner` sends, prepared from a plan: ring slots in groups that end at a stop
+//! within the axis limits, and for path blocks the arena data their stops need. Compiled into
+//! the `nurbs-planner` binary and into the tests (never into the realtime module's library: it
+//! needs the planner crate).
 //!
-//! The module's underrun stop starts at a segment boundary and is deterministic (the same
-//! [`underrun_stop`] and interpolator on the same geometry and period), so the planner can run
-//! it offline from every boundary and pick, per boundary, the largest stop deceleration and jerk
-//! whose stop stays within the axis limits by finite differences (the `nurbs-plan verify`
-//! check). That choice goes to the module with each record ([`RecordStop`] in the record's
-//! slot), so records can be handed out while the stops of later ones are still being checked
-//! ([`StopChooser`]).
+//! Segment records (the Erwinski planner, streamed): each record the planner hands out is
+//! final, and the last one of each run carries its stop, the next segment re-planned to rest
+//! and checked by the planner itself ([`FinalRecord`]). A run and its stop make a group
+//! ([`Grouper`]): the module takes a group only whole, so it stops only where a checked stop
+//! is. Path blocks (VPOp): the planner runs the module's stop from every block end and checks
+//! it by finite differences ([`choose_block_stops`]); a block whose stop it cannot bring within
+//! the limits joins the next block's group.
 
 use std::cell::{OnceCell, RefCell};
 use std::collections::{HashMap, VecDeque};
+use std::sync::mpsc::{self, Receiver, TryRecvError};
+use std::sync::Arc;
+use std::time::Instant;
 
-use nurbs_hal::channel::{RecordStop, Slot, StopPoint, GEOMETRY_VALUES};
-use nurbs_hal::module::{block_stop, underrun_stop};
-use nurbs_hal::record::{PathBlock, SegmentRecord, BLOCK_SAMPLES, CURVE_SHIFT, FLAG_LAST};
-use nurbs_hal::user::GeometryBuilder;
+use crate::writer::{GeometryWriter, Release, WriteError};
+use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
+use nurbs_hal::record::{PathBlock, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
-use nurbs_motion::planner::flf::CriticalPoint;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
-use nurbs_motion::planner::{plan, Limits, PathCurves, Plan, PlanOptions, Planner};
+use nurbs_motion::planner::{FinalRecord, Limits, PathCurves, PlanOptions, Planner};
+use nurbs_rtcore::block_stop::block_stop;
 use nurbs_rtcore::executor::{Interpolator, Step};
 use nurbs_rtcore::{CachedCurve, SpanCache, StopRun};
 
-/// Stop deceleration and jerk tried at each boundary, as fractions of the smallest axis
-/// acceleration and jerk, largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
-pub fn fractions(max_fraction: f64) -> Vec<f64> {
-    (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
+/// Which planner `nurbs-planner` runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlannerKind {
+    Erwinski,
+    Vpop,
 }
 
-/// The `(s, feed cap)` points of curve `c` the module's stop must respect: its critical points
-/// (FLF minima, corners) at the planner's FLF margin, and the curve end at rest, in order of `s`.
-pub fn curve_stop_points(
-    toolpath: &Toolpath,
-    c: usize,
-    criticals: impl Iterator<Item = CriticalPoint>,
-) -> Vec<(f64, f64)> {
-    let margin = PlanOptions::default().flf_margin;
-    let Some(e) = toolpath.elements.get(c) else {
-        return Vec::new();
-    };
-    let table = ArcLengthTable::new(&e.curve);
-    let mut stops: Vec<(f64, f64)> = criticals
-        .map(|p| (table.length_to(&e.curve, p.u), margin * p.flf.max(0.0)))
-        .collect();
-    stops.push((table.total(), 0.0));
-    stops.sort_by(|a, b| a.0.total_cmp(&b.0));
-    stops
+/// Where a plan from the module's stop point starts: there, or where the machine stands at
+/// the end of an element (not the last), at the start of the next one (the module accepts
+/// either).
+pub fn plan_start(toolpath: &Toolpath, stop: &StopPoint) -> PlanStart {
+    let curve = stop.curve as usize;
+    let next = curve + 1;
+    let at_end = toolpath
+        .elements
+        .get(curve)
+        .is_some_and(|e| stop.u >= e.curve.view().u_max());
+    match toolpath.elements.get(next) {
+        Some(e) if at_end => PlanStart {
+            curve: next,
+            u: e.curve.view().u_min(),
+            s: 0.0,
+        },
+        _ => PlanStart {
+            curve,
+            u: stop.u,
+            s: stop.s,
+        },
+    }
 }
 
-/// What a streamed plan ([`stream_plan`]) hands out, in order.
+/// Segment records that go into the ring together: a run of final records whose last one has
+/// a stop (or ends the path).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SegmentGroup {
+    pub slots: Vec<SegmentSlot>,
+    /// Motion time of the records (s).
+    pub time: f64,
+}
+
+impl SegmentGroup {
+    /// Highest curve the group and its stop run on.
+    pub fn curve_needed(&self) -> u32 {
+        self.slots.first().map_or(0, |s| s.curve_needed)
+    }
+}
+
+/// Collects a streamed plan's final records into groups.
+#[derive(Default)]
+pub struct Grouper {
+    run: Vec<FinalRecord>,
+}
+
+impl Grouper {
+    /// Takes the next final record; returns the group it completes, if it does.
+    pub fn push(&mut self, r: FinalRecord) -> Option<SegmentGroup> {
+        let ends = r.stop.is_some() || r.record.is_last();
+        self.run.push(r);
+        if !ends {
+            return None;
+        }
+        let run = std::mem::take(&mut self.run);
+        let n = run.len();
+        let mut needed = run.last().and_then(|r| r.stop).map_or(0, |s| s.curve);
+        let mut slots = vec![SegmentSlot::default(); n];
+        for (k, r) in run.iter().enumerate().rev() {
+            needed = needed.max(r.record.curve);
+            slots[k] = SegmentSlot {
+                record: r.record,
+                stop: r.stop.unwrap_or_default(),
+                group_left: (n - k) as u32,
+                has_stop: u32::from(r.stop.is_some()),
+                curve_needed: needed,
+                reserved: 0,
+            };
+        }
+        let time = run.iter().map(|r| r.record.profile().total_time()).sum();
+        Some(SegmentGroup { slots, time })
+    }
+}
+
+/// What [`stream_plan`] hands out, in order.
 #[derive(Clone, Debug)]
 pub enum PlanEvent {
-    /// The stop points of a curve, once the planner has scanned it to its end (its critical
-    /// points are final). Every curve's come before the path end.
-    StopPoints(usize, Vec<(f64, f64)>),
-    /// The next record, final.
-    Record(SegmentRecord),
+    /// The next group of final records.
+    Group(SegmentGroup),
     /// The plan is complete (a line for the log).
     Done(String),
     Failed(String),
 }
 
 /// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `toolpath`, from its
-/// start or from rest at the module's stop point `from`, and hands each record to `emit` as
-/// soon as it is final, and each curve's stop points as soon as the scan has passed the curve's
-/// end; stops early when `emit` returns false (nobody listens any more).
+/// start or from rest at the module's stop point `from`, and hands each group of final records
+/// to `emit` as soon as it is complete; stops early when `emit` returns false (nobody listens
+/// any more).
 pub fn stream_plan(
     toolpath: &Toolpath,
     limits: &Limits,
@@ -78,11 +133,7 @@ pub fn stream_plan(
 ) {
     let options = PlanOptions {
         stream: true,
-        start: from.map(|p| PlanStart {
-            curve: p.curve as usize,
-            u: p.u,
-            s: p.s,
-        }),
+        start: from.map(|p| plan_start(toolpath, p)),
         ..PlanOptions::default()
     };
     let mut planner = match Planner::new(toolpath, limits, &options) {
@@ -92,53 +143,37 @@ pub fn stream_plan(
             return;
         }
     };
-    let (mut curves_sent, mut next_critical) = (0, 0);
-    loop {
-        let next = planner.next_record();
-        let scanned = match next {
-            None => toolpath.elements.len(),
-            Some(_) => planner.scanned_elements(),
-        };
-        // Critical points come in path order: those of each newly scanned curve in a run.
-        while curves_sent < scanned {
-            let criticals = planner.critical_points();
-            let first = next_critical;
-            while criticals.get(next_critical).is_some_and(|(c, _)| *c <= curves_sent) {
-                next_critical += 1;
-            }
-            let on_curve = criticals[first..next_critical]
-                .iter()
-                .filter(|(c, _)| *c == curves_sent)
-                .map(|(_, p)| *p);
-            let points = curve_stop_points(toolpath, curves_sent, on_curve);
-            if !emit(PlanEvent::StopPoints(curves_sent, points)) {
-                return;
-            }
-            curves_sent += 1;
-        }
+    let mut grouper = Grouper::default();
+    let (mut groups, mut longest) = (0usize, 0.0f64);
+    while let Some(next) = planner.next_final() {
         match next {
-            Some(Ok(record)) => {
-                if !emit(PlanEvent::Record(record)) {
-                    return;
+            Ok(record) => {
+                // The critical points are not sent: drop them as they come.
+                drop(planner.take_critical_points());
+                if let Some(group) = grouper.push(record) {
+                    groups += 1;
+                    longest = longest.max(group.time);
+                    if !emit(PlanEvent::Group(group)) {
+                        return;
+                    }
                 }
             }
-            Some(Err(e)) => {
+            Err(e) => {
                 emit(PlanEvent::Failed(match from {
                     None => e.to_string(),
                     Some(_) => format!("re-plan from the stop point: {e}"),
                 }));
                 return;
             }
-            None => break,
         }
     }
-    let plan = planner.finish();
+    let report = planner.finish();
     emit(PlanEvent::Done(format!(
-        "streamed plan complete: {} segments, motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms",
-        plan.records.len(),
-        plan.motion_time,
-        plan.plan_time,
-        plan.first_record_time * 1e3
+        "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms",
+        report.records,
+        report.motion_time,
+        report.plan_time,
+        report.first_record_time * 1e3
     )));
 }
 
@@ -174,460 +209,10 @@ impl StopChoice {
     }
 }
 
-/// Chooses the stop after each segment record, one record at a time in plan order, so that
-/// `nurbs-planner` can hand records out while it still checks later ones.
-///
-/// Each record is run through the interpolator (the samples the module will output), then,
-/// from its last sample, the module's stop with each jerk fraction in `fractions` (largest
-/// first) and deceleration shares 1, 1/2, 1/4, 1/10 of it, until one stays within the limits
-/// by finite differences; the least violating one where none does. Where none does (e.g. a
-/// boundary at an element join, where the module's stop would have to end on its curve at
-/// once), a stop sequence that goes on along the path ([`planned_then_brake`]) is checked the
-/// same way and stored if it does better. That sequence follows the plan's next samples, so
-/// such a record is ready only once the records after it reach a state that brakes to rest
-/// (or the plan ends); the records behind it wait, in order.
-pub struct StopChooser<'t> {
-    curves: PathCurves<'t>,
-    path: JointPath<'t>,
-    limits: Limits,
-    fractions: Vec<f64>,
-    arcs: ArcLengths<'t>,
-    interp: Interpolator,
-    fd: FiniteDifferences,
-    /// Every sample so far: curve, parameter, arc length.
-    samples: Vec<(usize, f64, f64)>,
-    /// Records not handed out yet, in plan order.
-    pending: VecDeque<Pending>,
-    /// Per curve, its stop points as flat `(s, feed cap)` pairs once known, and where they are
-    /// in the arena once a record on the curve has gone out (offset, pairs).
-    points: Vec<Option<Vec<f64>>>,
-    placed: Vec<Option<(u32, u32)>>,
-    /// A whole plan's critical points, in path order: the stop points of a curve are made from
-    /// them when a record on it first comes (a streamed plan sets them instead).
-    criticals: Option<(&'t Toolpath, Vec<(usize, CriticalPoint)>)>,
-    /// No more records come.
-    finished: bool,
-    /// What the searches for stored stops found so far.
-    brakes: BrakeMemo,
-}
-
-/// A record whose stop is chosen, or being chosen.
-struct Pending {
-    record: SegmentRecord,
-    choice: StopChoice,
-    /// No tangential stop within the limits: a stored sequence is still to be tried.
-    failing: Option<Failing>,
-}
-
-/// The state at the end of a record with no tangential stop within the limits.
-#[derive(Clone, Copy)]
-struct Failing {
-    /// Samples up to the record's end.
-    end: usize,
-    fd: FiniteDifferences,
-    interp: Interpolator,
-    last: SegmentRecord,
-    /// The record ends at its curve's end at speed: no tangential stop has room there.
-    no_room: bool,
-    /// Sample from which the search for a state that brakes to rest goes on.
-    resume_at: usize,
-}
-
-impl<'t> StopChooser<'t> {
-    pub fn new(toolpath: &'t Toolpath, limits: &Limits, max_fraction: f64) -> Result<Self, String> {
-        if !(max_fraction > 0.0 && max_fraction <= 1.0) {
-            return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
-        }
-        Ok(StopChooser {
-            curves: PathCurves::new(toolpath),
-            path: JointPath::tip(toolpath),
-            limits: limits.clone(),
-            fractions: fractions(max_fraction),
-            arcs: ArcLengths::new(toolpath),
-            interp: Interpolator::new(),
-            fd: FiniteDifferences::new(limits.velocity.len(), limits.period),
-            samples: Vec::new(),
-            pending: VecDeque::new(),
-            points: vec![None; toolpath.elements.len()],
-            placed: vec![None; toolpath.elements.len()],
-            criticals: None,
-            finished: false,
-            brakes: BrakeMemo::default(),
-        })
-    }
-
-    /// The stop points of every curve come from `criticals` (a whole plan's, in path order),
-    /// each made when a record on the curve first comes.
-    pub fn with_critical_points(mut self, toolpath: &'t Toolpath, criticals: Vec<(usize, CriticalPoint)>) -> Self {
-        self.criticals = Some((toolpath, criticals));
-        self
-    }
-
-    /// Makes the stop points of `curve` from the plan's critical points, if not yet known.
-    fn ensure_stop_points(&mut self, curve: usize) {
-        if self.points.get(curve).is_none_or(Option::is_some) {
-            return;
-        }
-        if let Some((toolpath, criticals)) = &self.criticals {
-            let first = criticals.partition_point(|(c, _)| *c < curve);
-            let end = criticals.partition_point(|(c, _)| *c <= curve);
-            let points = curve_stop_points(toolpath, curve, criticals[first..end].iter().map(|(_, p)| *p));
-            self.set_stop_points(curve, &points);
-        }
-    }
-
-    /// The stop points of `curve` ([`curve_stop_points`]): needed before a record on it is pushed.
-    pub fn set_stop_points(&mut self, curve: usize, points: &[(f64, f64)]) {
-        if let Some(slot) = self.points.get_mut(curve) {
-            *slot = Some(points.iter().flat_map(|&(s, cap)| [s, cap]).collect());
-        }
-    }
-
-    /// Whether the stop points of `curve` are known (or can be made).
-    pub fn has_stop_points(&self, curve: usize) -> bool {
-        self.criticals.is_some() || self.points.get(curve).is_some_and(Option::is_some)
-    }
-
-    fn points_of(&self, curve: usize) -> &[f64] {
-        self.points.get(curve).and_then(Option::as_deref).unwrap_or(&[])
-    }
-
-    /// The module's stop after `last` with `trial` = (jerk fraction, deceleration share), run
-    /// by the interpolator from `interp` and checked by finite differences continuing `fd`;
-    /// abandoned as soon as it is worse than `bound` (it cannot be the choice then).
-    fn tangential(
-        &self,
-        (interp, fd, last): (Interpolator, FiniteDifferences, &SegmentRecord),
-        (fraction, accel_share): (f64, f64),
-        bound: f64,
-    ) -> StopChoice {
-        let limits = &self.limits;
-        let untried = StopChoice::tangential((fraction, accel_share), (limits.min_accel(), limits.min_jerk()), 0.0);
-        let mut stop = Some(underrun_stop(
-            self.points_of(last.curve()),
-            last,
-            untried.accel,
-            untried.jerk,
-        ));
-        let mut i = interp;
-        let ratio = stop_ratio(limits, fd, bound, &mut || {
-            i.step(&self.curves, limits.period, &mut || stop.take())
-        });
-        StopChoice { ratio, ..untried }
-    }
-
-    /// Takes the next record of the plan (the stop points of its curve set before).
-    pub fn push(&mut self, record: &SegmentRecord) {
-        self.ensure_stop_points(record.curve());
-        let tip = self.limits.velocity.len();
-        let mut next = Some(*record);
-        while let Step::Sample(s) = self.interp.step(&self.curves, self.limits.period, &mut || next.take()) {
-            self.fd.push(&s.point[..tip], &self.limits);
-            self.samples.push((s.curve, s.u, s.s));
-        }
-        // The full stop with no trial: what the module falls back to (reported as exceeding)
-        // if the interpolator refused the record (a plan's records never are).
-        let mut choice = StopChoice::tangential(
-            (1.0, 1.0),
-            (self.limits.min_accel(), self.limits.min_jerk()),
-            f64::INFINITY,
-        );
-        let Some(last) = self.interp.record().copied().filter(|r| r.seq == record.seq) else {
-            self.pending.push_back(Pending {
-                record: *record,
-                choice,
-                failing: None,
-            });
-            return;
-        };
-        let state = (self.interp, self.fd, &last);
-        // A record that ends at its curve's end at speed leaves the tangential stop no room (it
-        // runs on its own curve): the stored sequence, and one tangential trial only if there
-        // is none (such a trial grinds at the curve end).
-        let no_room = !last.is_last()
-            && last.curve() < self.curves.len()
-            && last.u_end >= self.curves.view(last.curve()).u_max()
-            && last.profile().table().end().v > 0.0;
-        if !no_room {
-            let mut best: Option<StopChoice> = None;
-            for trial in self.fractions.iter().flat_map(|&f| SHARES.map(|share| (f, share))) {
-                let bound = best.map_or(f64::INFINITY, |b| b.ratio.max(1.0));
-                let c = self.tangential(state, trial, bound);
-                if best.is_none_or(|b| c.ratio < b.ratio) {
-                    best = Some(c);
-                }
-                if c.ratio <= 1.0 {
-                    best = Some(c);
-                    break;
-                }
-            }
-            choice = best.unwrap_or(choice);
-        }
-        let failing = (choice.ratio > 1.0 && !last.is_last()).then_some(Failing {
-            end: self.samples.len(),
-            fd: self.fd,
-            interp: self.interp,
-            last,
-            no_room,
-            resume_at: 0,
-        });
-        self.pending.push_back(Pending {
-            record: *record,
-            choice,
-            failing,
-        });
-    }
-
-    /// No more records come: every pending record can be decided.
-    pub fn finish(&mut self) {
-        self.finished = true;
-    }
-
-    pub fn is_finished(&self) -> bool {
-        self.finished
-    }
-
-    /// The next record in plan order whose stop is decided, with that stop and the choice
-    /// behind it; `Ok(None)` while it still waits for the records after it (or none is
-    /// pending). A stored sequence goes to `arena` (returns its offset, or `None` when full:
-    /// then the tangential stop stays), and so do the stop points of a curve when its first
-    /// record goes out (an error if they do not fit: the module needs them).
-    pub fn pop_ready(
-        &mut self,
-        arena: &mut dyn FnMut(&[f64]) -> Option<u32>,
-    ) -> Result<Option<(SegmentRecord, RecordStop, StopChoice)>, String> {
-        let Some(front) = self.pending.front() else {
-            return Ok(None);
-        };
-        let mut choice = front.choice;
-        let curve = front.record.curve();
-        let (points_offset, points_len) = match self.placed.get(curve).copied().flatten() {
-            Some(placed) => placed,
-            None => {
-                let points = self.points_of(curve);
-                let offset = arena(points).ok_or("the channel's geometry arena is full")?;
-                let placed = (offset, (points.len() / 2) as u32);
-                if let Some(slot) = self.placed.get_mut(curve) {
-                    *slot = Some(placed);
-                }
-                placed
-            }
-        };
-        let mut stop = RecordStop {
-            accel: choice.accel,
-            jerk: choice.jerk,
-            stored_len: 0,
-            stored_offset: 0,
-            points_offset,
-            points_len,
-        };
-        if let Some(f) = front.failing {
-            let samples = &self.samples;
-            let path = &self.path;
-            let point = |i: usize| samples.get(i).and_then(|&(e, u, _)| path.eval_at(e, u));
-            let outcome = match f.end.checked_sub(1).and_then(point) {
-                Some(from) => stored_stop(
-                    path,
-                    &self.curves,
-                    &self.limits,
-                    (f.fd, &point, samples.len()),
-                    (f.end, from, f.resume_at),
-                    choice,
-                    &mut self.brakes,
-                ),
-                None => Ok(None),
-            };
-            let stored = match outcome {
-                Err(resume_at) if !self.finished => {
-                    if let Some(Pending { failing: Some(f), .. }) = self.pending.front_mut() {
-                        f.resume_at = resume_at;
-                    }
-                    return Ok(None);
-                }
-                Err(_) => None, // the plan ends first
-                Ok(stored) => stored,
-            };
-            let placed = stored.and_then(|stored| {
-                // In the measure of the interpolator's samples (the records').
-                self.arcs
-                    .set_anchor(stored.from.element, stored.from.u, self.samples[f.end - 1].2);
-                let offset = arena(&stop_runs(&self.arcs, stored.from, &stored.points))?;
-                Some((stored, offset))
-            });
-            match placed {
-                Some((stored, offset)) => {
-                    choice = stored.choice;
-                    stop.stored_offset = offset;
-                    stop.stored_len = stored.points.len() as u32;
-                }
-                None if f.no_room => {
-                    choice = self.tangential((f.interp, f.fd, &f.last), (1.0, 1.0), f64::INFINITY);
-                    (stop.accel, stop.jerk) = (choice.accel, choice.jerk);
-                }
-                None => {}
-            }
-        }
-        Ok(self.pending.pop_front().map(|p| (p.record, stop, choice)))
-    }
-}
-
-/// The records of a plan as ring slots, each with its checked stop, produced one at a time
-/// ([`StopChooser`]); or path blocks whose stops are all chosen already.
-pub enum Records<'t> {
-    Segments {
-        /// Records to check, in plan order (a streamed plan adds them as they come).
-        records: VecDeque<SegmentRecord>,
-        chooser: Box<StopChooser<'t>>,
-        /// No more records come.
-        complete: bool,
-    },
-    Ready(VecDeque<(Slot, f64, StopChoice)>),
-}
-
-/// What [`Records::next`] did. (Returned by value once per record: boxing the slot would
-/// allocate for each.)
-#[allow(clippy::large_enum_variant)]
-pub enum Next {
-    /// A slot ready for the ring, its motion time (s) and its stop choice.
-    Slot(Slot, f64, StopChoice),
-    /// Some work towards the next slot (call again).
-    Working,
-    /// Nothing to do until a streamed plan hands out more (its next record, or the stop points
-    /// of the curve of the next record).
-    Waiting,
-    /// Every slot has been handed out.
-    Done,
-}
-
-impl Records<'_> {
-    /// The next slot, or one record's worth of stop checks towards it. `arena`: where stored
-    /// stop sequences and stop points go (behind the published geometry).
-    pub fn next(&mut self, arena: &mut dyn FnMut(&[f64]) -> Option<u32>) -> Result<Next, String> {
-        Ok(match self {
-            Records::Ready(slots) => match slots.pop_front() {
-                Some((slot, time, choice)) => Next::Slot(slot, time, choice),
-                None => Next::Done,
-            },
-            Records::Segments {
-                records,
-                chooser,
-                complete,
-            } => {
-                if let Some((record, stop, choice)) = chooser.pop_ready(arena)? {
-                    let time = record.profile().total_time();
-                    return Ok(Next::Slot(Slot::segment(&record, &stop), time, choice));
-                }
-                if let Some(record) = records.front().copied() {
-                    if !chooser.has_stop_points(record.curve()) {
-                        return Ok(Next::Waiting);
-                    }
-                    records.pop_front();
-                    chooser.push(&record);
-                    Next::Working
-                } else if !*complete {
-                    Next::Waiting
-                } else if !chooser.is_finished() {
-                    chooser.finish();
-                    Next::Working
-                } else {
-                    Next::Done
-                }
-            }
-        })
-    }
-
-    /// Whether every record has come (a streamed plan has ended).
-    pub fn is_complete(&self) -> bool {
-        match self {
-            Records::Segments { complete, .. } => *complete,
-            Records::Ready(_) => true,
-        }
-    }
-
-    /// Takes an event of a streamed plan: a record or a curve's stop points go to the checks,
-    /// the end marks the records complete (returns its log line), a failure is an error.
-    pub fn take(&mut self, event: PlanEvent) -> Result<Option<String>, String> {
-        let Records::Segments {
-            records,
-            chooser,
-            complete,
-        } = self
-        else {
-            return Err("a streamed plan's event for path blocks".into());
-        };
-        match event {
-            PlanEvent::StopPoints(curve, points) => chooser.set_stop_points(curve, &points),
-            PlanEvent::Record(record) => records.push_back(record),
-            PlanEvent::Done(line) => {
-                *complete = true;
-                return Ok(Some(line));
-            }
-            PlanEvent::Failed(e) => return Err(e),
-        }
-        Ok(None)
-    }
-}
-
-/// The geometry `nurbs-planner` publishes for `plan` (the curves with their stop points; the
-/// stored stop sequences behind them) and every record as a slot with its checked stop (jerk
-/// fractions up to `max_fraction`), all at once; also returns the choices. (The tests' and
-/// the benchmark's form of what `nurbs-planner` streams.)
-#[allow(dead_code)]
-pub fn geometry(
-    toolpath: &Toolpath,
-    plan: &Plan,
-    max_fraction: f64,
-) -> Result<(GeometryBuilder, Vec<Slot>, Vec<StopChoice>), String> {
-    let mut g = curves_geometry(toolpath)?;
-    let mut records = Records::Segments {
-        records: plan.records.iter().copied().collect(),
-        chooser: Box::new(segment_chooser(toolpath, plan, max_fraction)?),
-        complete: true,
-    };
-    let mut stored: Vec<f64> = Vec::new();
-    let mut slots = Vec::with_capacity(plan.records.len());
-    let mut choices = Vec::with_capacity(plan.records.len());
-    {
-        let base = g.values().len();
-        let mut arena = |values: &[f64]| -> Option<u32> {
-            let offset = base + stored.len();
-            if offset + values.len() > GEOMETRY_VALUES {
-                return None;
-            }
-            stored.extend_from_slice(values);
-            u32::try_from(offset).ok()
-        };
-        loop {
-            match records.next(&mut arena)? {
-                Next::Slot(slot, _, choice) => {
-                    slots.push(slot);
-                    choices.push(choice);
-                }
-                Next::Working | Next::Waiting => {}
-                Next::Done => break,
-            }
-        }
-    }
-    g.add_values(&stored)?;
-    Ok((g, slots, choices))
-}
-
-/// The stop chooser for the records of `plan`, with the stop points of every curve from the
-/// plan's critical points ([`curve_stop_points`]).
-pub fn segment_chooser<'t>(toolpath: &'t Toolpath, plan: &Plan, max_fraction: f64) -> Result<StopChooser<'t>, String> {
-    let chooser = StopChooser::new(toolpath, &plan.limits, max_fraction)?;
-    Ok(chooser.with_critical_points(toolpath, plan.critical_points.clone()))
-}
-
-/// The curves of `toolpath`: what is published before the records (stop points and stored stop
-/// sequences are appended behind it).
-pub fn curves_geometry(toolpath: &Toolpath) -> Result<GeometryBuilder, String> {
-    let mut g = GeometryBuilder::new(toolpath.tip_dim());
-    for e in &toolpath.elements {
-        let c = &e.curve;
-        g.add_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights())?;
-    }
-    Ok(g)
+/// Stop deceleration and jerk tried at each block end, as fractions of the tangential limits,
+/// largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
+pub fn fractions(max_fraction: f64) -> Vec<f64> {
+    (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
 }
 
 /// Refuses toolpaths the module cannot run as VPOp plans: it drives the tool tip only, so a
@@ -641,7 +226,7 @@ pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
                 .into(),
         );
     }
-    if toolpath.elements.len() > 1 << (32 - CURVE_SHIFT) {
+    if u32::try_from(toolpath.elements.len()).is_err() {
         return Err("too many path elements".into());
     }
     Ok(())
@@ -745,7 +330,7 @@ fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
         let before = |k: usize| arcs.s(&points[i.saturating_sub(k)], e);
         let mut b = PathBlock {
             seq: blocks.len() as u32,
-            flags: (e as u32) << CURVE_SHIFT,
+            curve: e as u32,
             s_before: [before(2), before(1)],
             ..PathBlock::default()
         };
@@ -1232,63 +817,113 @@ pub fn block_stop_points(toolpath: &Toolpath, blocks: &[PathBlock], period: f64)
     stops
 }
 
-/// What `nurbs-planner --planner vpop` publishes for a VPOp plan: the curves (with their ends
-/// as stop points) and the blocks with their checked stops.
-pub fn block_geometry(
+/// A VPOp plan ready for the channel: its blocks in groups (a block whose stop the planner
+/// could not bring within the limits joins the next block's group), and the arena data their
+/// stops need, which the streamer writes before the block goes out and whose offsets it
+/// fills in: per block its stored stop sequence ([`StopRun`]s), per curve its stop points.
+pub struct BlockPlan {
+    pub blocks: Vec<PathBlock>,
+    /// The stored stop sequence after each block, as arena values (a group's last block only).
+    pub stored: Vec<Option<Vec<f64>>>,
+    /// Per curve, its stop points as `(s, feed cap)` pairs.
+    pub points: Vec<Vec<f64>>,
+    /// The stop choice of each block.
+    pub choices: Vec<StopChoice>,
+    /// Motion time of one block sample (s).
+    pub period: f64,
+}
+
+impl BlockPlan {
+    /// Motion time of block `k`.
+    pub fn time(&self, k: usize) -> f64 {
+        self.blocks.get(k).map_or(0.0, |b| b.len() as f64 * self.period)
+    }
+
+    /// Block ends with a stop within the limits, stored sequences among them, and the worst
+    /// ratio of those stops to an axis limit.
+    pub fn stops(&self) -> (usize, usize, f64) {
+        let ends = self.blocks.iter().filter(|b| b.group_left == 1 && !b.is_last()).count();
+        let stored = self.stored.iter().filter(|s| s.is_some()).count();
+        let worst = self
+            .blocks
+            .iter()
+            .zip(&self.choices)
+            .filter(|(b, _)| b.group_left == 1 && !b.is_last())
+            .map(|(_, c)| c.ratio)
+            .fold(0.0, f64::max);
+        (ends, stored, worst)
+    }
+}
+
+/// The blocks of `plan` with their checked stops (jerk fractions up to `max_fraction`), in
+/// groups, and the data their stops need. `anchor`: the stop point a re-plan starts from (its
+/// arc length is kept exactly).
+pub fn block_plan(
     toolpath: &Toolpath,
     plan: &VpopPlan,
     anchor: Option<&StopPoint>,
     max_fraction: f64,
-) -> Result<(GeometryBuilder, Vec<PathBlock>, Vec<StopChoice>), String> {
+) -> Result<BlockPlan, String> {
     check_tip_path(toolpath)?;
-    let mut arcs = ArcLengths::new(toolpath);
-    if let Some(a) = anchor {
-        arcs.set_anchor(a.curve as usize, a.u, a.s);
-    }
-    let mut blocks = pack_blocks(&arcs, &plan.points);
     if !(max_fraction > 0.0 && max_fraction <= 1.0) {
         return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
     }
-    let mut g = curves_geometry(toolpath)?;
-    // Each curve's stop points, in the arena once; every block refers to its curve's.
+    let mut arcs = ArcLengths::new(toolpath);
+    if let Some(a) = anchor {
+        let start = plan_start(toolpath, a);
+        arcs.set_anchor(start.curve, start.u, start.s);
+    }
+    let mut blocks = pack_blocks(&arcs, &plan.points);
     let points: Vec<Vec<f64>> = block_stop_points(toolpath, &blocks, plan.limits.period)
         .iter()
         .map(|list| list.iter().flat_map(|&(s, cap)| [s, cap]).collect())
         .collect();
-    let mut placed = Vec::with_capacity(points.len());
-    for list in &points {
-        placed.push((g.add_values(list)?, (list.len() / 2) as u32));
-    }
-    for b in &mut blocks {
-        (b.points_offset, b.points_len) = placed.get(b.curve()).copied().unwrap_or((0, 0));
-    }
-    let (mut choices, sequences) = {
-        let fractions = fractions(max_fraction);
-        choose_block_stops(toolpath, &plan.limits, &mut blocks, &points, &fractions, &plan.points)
-    };
-    // The stored stop sequences as runs per element ([`StopRun`]), in the blocks' arc-length
-    // measure. Where the arena is full, the tangential stop (and its check result) stays.
-    for ((b, c), sequence) in blocks.iter_mut().zip(&mut choices).zip(sequences) {
-        let Some(stored) = sequence else {
-            continue;
-        };
-        let values = stop_runs(&arcs, stored.from, &stored.points);
-        match g.add_values(&values) {
-            Ok(offset) => {
-                b.stop_offset = offset;
-                b.stop_len = stored.points.len() as u32;
+    let (choices, sequences) = choose_block_stops(
+        toolpath,
+        &plan.limits,
+        &mut blocks,
+        &points,
+        &fractions(max_fraction),
+        &plan.points,
+    );
+    // From the last block back: a block ends its group where its stop passed (or at the path
+    // end); the group's curves reach as far as the stored stop at its end.
+    let mut stored = vec![None; blocks.len()];
+    let (mut group_left, mut needed) = (0u32, 0u32);
+    for (k, (b, sequence)) in blocks.iter_mut().zip(sequences).enumerate().rev() {
+        let passes = choices.get(k).is_some_and(|c| c.ratio <= 1.0 + SLACK);
+        if passes || b.is_last() {
+            group_left = 1;
+            needed = b.curve;
+            if let Some(seq) = sequence.filter(|_| passes) {
+                needed = needed.max(seq.points.last().map_or(0, |p| p.element as u32));
+                stored[k] = Some(stop_runs(&arcs, seq.from, &seq.points));
+                b.stop_len = seq.points.len() as u32;
             }
-            Err(_) => *c = stored.tangential,
+        } else {
+            group_left += 1;
+            needed = needed.max(b.curve);
         }
+        b.group_left = group_left;
+        b.curve_needed = needed;
     }
-    Ok((g, blocks, choices))
+    Ok(BlockPlan {
+        blocks,
+        stored,
+        points,
+        choices,
+        period: plan.limits.period,
+    })
 }
 
 /// The VPOp plan of `toolpath` (tool tip), from its start or from rest at the stop point `from`.
 pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>) -> Result<VpopPlan, String> {
     check_tip_path(toolpath)?;
     let options = SearchOptions {
-        start: from.map(|p| (p.curve as usize, p.u)),
+        start: from.map(|p| {
+            let start = plan_start(toolpath, p);
+            (start.curve, start.u)
+        }),
         ..SearchOptions::default()
     };
     plan_tip(toolpath, limits, options).map_err(|e| match from {
@@ -1297,133 +932,393 @@ pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>)
     })
 }
 
-/// Which planner `nurbs-planner` runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PlannerKind {
-    Erwinski,
-    Vpop,
-}
-
-/// A planned motion ready for the channel: its geometry (to publish first) and its records,
-/// which come as ring slots with their checked stops.
-pub struct Motion<'t> {
-    pub geometry: GeometryBuilder,
-    pub records: Records<'t>,
-    /// Motion time of all its records (s).
-    pub motion_time: f64,
-    /// One line for the log.
-    pub summary: String,
-}
-
-/// Plans `toolpath` (from its start, or from rest at the module's stop point `from`) with
-/// `planner` and prepares what goes into the channel: segment records get their stops checked
-/// one by one as they are handed out ([`Records::next`]), path blocks all at once. One way for
-/// both record kinds.
-pub fn motion<'t>(
-    toolpath: &'t Toolpath,
-    limits: &Limits,
-    planner: PlannerKind,
-    from: Option<&StopPoint>,
-    max_fraction: f64,
-) -> Result<Motion<'t>, String> {
-    match planner {
-        PlannerKind::Erwinski => {
-            let plan = match from {
-                None => plan(toolpath, limits, &PlanOptions::default(), &mut |_| {}).map_err(|e| e.to_string())?,
-                Some(p) => plan_from_stop(toolpath, limits, p)?,
-            };
-            let summary = format!(
-                "{} segments, motion {:.6} s, planned in {:.3} s",
-                plan.records.len(),
-                plan.motion_time,
-                plan.plan_time
-            );
-            let chooser = segment_chooser(toolpath, &plan, max_fraction)?;
-            Ok(Motion {
-                geometry: curves_geometry(toolpath)?,
-                motion_time: plan.records.iter().map(|r| r.profile().total_time()).sum(),
-                records: Records::Segments {
-                    records: plan.records.into(),
-                    chooser: Box::new(chooser),
-                    complete: true,
-                },
-                summary,
-            })
-        }
-        PlannerKind::Vpop => {
-            let plan = vpop_plan(toolpath, limits, from)?;
-            let (geometry, blocks, stops) = block_geometry(toolpath, &plan, from, max_fraction)?;
-            let summary = format!(
-                "VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s",
-                plan.points.len(),
-                blocks.len(),
-                plan.motion_time,
-                plan.plan_time
-            );
-            let period = plan.limits.period;
-            Ok(Motion {
-                geometry,
-                motion_time: blocks.iter().map(|b| b.len() as f64 * period).sum(),
-                records: Records::Ready(
-                    blocks
-                        .iter()
-                        .zip(stops)
-                        .map(|(b, c)| (Slot::block(b), b.len() as f64 * period, c))
-                        .collect(),
-                ),
-                summary,
-            })
-        }
-    }
-}
-
-/// A motion whose records come from a streamed plan ([`stream_plan`], run elsewhere; its
-/// events go to [`Records::take`]): the curves to publish, and the checks waiting for records.
-/// Its motion time is unknown until the plan is complete (infinite here).
-pub fn streamed_motion<'t>(toolpath: &'t Toolpath, limits: &Limits, max_fraction: f64) -> Result<Motion<'t>, String> {
-    let limits = limits.for_axes(toolpath.tip_dim()).map_err(|e| e.to_string())?;
-    Ok(Motion {
-        geometry: curves_geometry(toolpath)?,
-        records: Records::Segments {
-            records: VecDeque::new(),
-            chooser: Box::new(StopChooser::new(toolpath, &limits, max_fraction)?),
-            complete: false,
-        },
-        motion_time: f64::INFINITY,
-        summary: "streamed plan: records go out as they are planned".into(),
-    })
-}
-
-/// Whether a motion of `total` seconds can start with the stops of its first `checked` seconds
-/// checked, the checks running at `rate` seconds of motion per second: they must stay `margin`
-/// ahead of the motion to its end, counted at half the measured rate (the stop checks share the
-/// machine with the module and everything else, and later records may cost more). Where the
-/// checks are faster than the motion that is `margin`; where slower, enough more that the motion
-/// does not catch up with them (an underrun stop on the way).
-pub fn checked_far_enough(checked: f64, total: f64, rate: f64, margin: f64) -> bool {
-    if checked >= total {
+/// Whether a motion of `total` seconds (infinite while unknown) can start with its first
+/// `ready` seconds planned, planning at `rate` seconds of motion per second: the plan must stay
+/// `margin` ahead of the motion to its end, counted at half the measured rate (the planner
+/// shares the machine with the module and everything else, and later parts may cost more).
+/// Where planning is faster than the motion that is `margin`; where slower, enough more that
+/// the motion does not catch up with it (an underrun stop on the way).
+pub fn far_enough_ahead(ready: f64, total: f64, rate: f64, margin: f64) -> bool {
+    if ready >= total {
         return true;
     }
-    if checked < margin {
+    if ready < margin {
         return false;
     }
     let rate = 0.5 * rate;
     if rate >= 1.0 {
         return true;
     }
-    rate > 0.0 && checked >= margin + (total - checked) * (1.0 - rate) / rate
+    rate > 0.0 && ready >= margin + (total - ready) * (1.0 - rate) / rate
 }
 
-/// The plan of the rest of the path from where the module stopped after an underrun (at rest,
-/// its first record starting at exactly the published element, parameter and arc length).
-pub fn plan_from_stop(toolpath: &Toolpath, limits: &Limits, stop: &StopPoint) -> Result<Plan, String> {
-    let options = PlanOptions {
-        start: Some(PlanStart {
-            curve: stop.curve as usize,
-            u: stop.u,
-            s: stop.s,
-        }),
-        ..PlanOptions::default()
-    };
-    plan(toolpath, limits, &options, &mut |_| {}).map_err(|e| format!("re-plan from the stop point: {e}"))
+/// Where a motion's groups of slots come from.
+pub enum Source {
+    /// A streamed Erwinski plan running in its own thread, and the groups it has handed out
+    /// that wait to be sent.
+    Segments {
+        events: Option<Receiver<PlanEvent>>,
+        queue: VecDeque<SegmentGroup>,
+        /// The plan has ended; its motion time.
+        total: Option<f64>,
+    },
+    /// A VPOp plan with its checked stops, sent block group by block group.
+    Blocks {
+        plan: BlockPlan,
+        next: usize,
+        /// Where each curve's stop points lie in the arena, once written.
+        points: HashMap<usize, (u32, u32)>,
+    },
+}
+
+/// Slots that go into the ring together, with the curve they need up to.
+pub struct Group {
+    slots: Vec<Slot>,
+    times: Vec<f64>,
+    curve_needed: u32,
+    /// Path blocks: the blocks' indices in the plan, and how many of them have their arena
+    /// data written (and their slots made with its offsets).
+    blocks: Vec<usize>,
+    written: usize,
+}
+
+impl Source {
+    /// The Erwinski plan of `toolpath` (from its start, or from rest at the stop point `from`)
+    /// as a stream, planned in a thread of its own.
+    pub fn streamed(toolpath: Arc<Toolpath>, limits: Limits, from: Option<StopPoint>) -> Source {
+        let (sender, receiver) = mpsc::channel();
+        std::thread::spawn(move || stream_plan(&toolpath, &limits, from.as_ref(), &mut |e| sender.send(e).is_ok()));
+        Source::Segments {
+            events: Some(receiver),
+            queue: VecDeque::new(),
+            total: None,
+        }
+    }
+
+    /// Groups planned already (a whole streamed plan: [`plan_groups`]).
+    pub fn groups(groups: Vec<SegmentGroup>) -> Source {
+        let total = groups.iter().map(|g| g.time).sum();
+        Source::Segments {
+            events: None,
+            queue: groups.into(),
+            total: Some(total),
+        }
+    }
+
+    /// A VPOp plan's blocks.
+    pub fn blocks(plan: BlockPlan) -> Source {
+        Source::Blocks {
+            plan,
+            next: 0,
+            points: HashMap::new(),
+        }
+    }
+
+    /// Motion time planned so far.
+    fn planned(&self) -> f64 {
+        match self {
+            Source::Segments { total: Some(t), .. } => *t,
+            Source::Segments { .. } => 0.0,
+            Source::Blocks { plan, .. } => plan.blocks.iter().map(|b| b.len() as f64 * plan.period).sum(),
+        }
+    }
+}
+
+/// The whole streamed plan of `toolpath` as groups, planned here (tests, benches).
+pub fn plan_groups(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    from: Option<&StopPoint>,
+) -> Result<Vec<SegmentGroup>, String> {
+    let mut groups = Vec::new();
+    let mut failed = None;
+    stream_plan(toolpath, limits, from, &mut |e| {
+        match e {
+            PlanEvent::Group(g) => groups.push(g),
+            PlanEvent::Done(_) => {}
+            PlanEvent::Failed(e) => failed = Some(e),
+        }
+        true
+    });
+    failed.map_or(Ok(groups), Err)
+}
+
+/// Streams one motion into the channel: its curves into the geometry stream, its groups of
+/// slots into the ring within the time margin.
+pub struct Streamer<'a> {
+    channel: &'a Channel,
+    toolpath: &'a Toolpath,
+    writer: GeometryWriter<'a>,
+    source: Source,
+    /// The next group to go out (its curves published as far as there was room).
+    current: Option<Group>,
+    /// Motion time of the slots pushed and not yet taken by the module, oldest first, and
+    /// their sum; slots pushed in all, and the motion time they make.
+    in_ring: VecDeque<f64>,
+    buffered: f64,
+    pub pushed: u64,
+    pub pushed_time: f64,
+    /// Motion time planned (received from the planner) and when planning began.
+    planned: f64,
+    began: Instant,
+    margin: f64,
+    /// Records may go into the ring (the start rule has held once).
+    started: bool,
+    /// Longest group sent (s of motion: how long a hold may take to begin).
+    pub longest_group: f64,
+}
+
+impl<'a> Streamer<'a> {
+    /// Begins the geometry stream of a motion of `toolpath` whose first curve is
+    /// `first_curve` (the module must run no motion), to be filled from `source` keeping
+    /// `margin` seconds queued. `began`: when its planning began (the start rule's pace).
+    pub fn new(
+        channel: &'a Channel,
+        toolpath: &'a Toolpath,
+        source: Source,
+        first_curve: usize,
+        margin: f64,
+        began: Instant,
+    ) -> Result<Self, String> {
+        let first = u32::try_from(first_curve).map_err(|_| "path element index beyond 32 bits".to_string())?;
+        let writer = GeometryWriter::begin(channel, first, toolpath.tip_dim())?;
+        channel.set_planned_time(0.0);
+        Ok(Streamer {
+            channel,
+            toolpath,
+            writer,
+            planned: source.planned(),
+            source,
+            current: None,
+            in_ring: VecDeque::new(),
+            buffered: 0.0,
+            pushed: 0,
+            pushed_time: 0.0,
+            began,
+            margin,
+            started: false,
+            longest_group: 0.0,
+        })
+    }
+
+    /// The geometry stream's writer (to limit what it uses, in tests).
+    pub fn writer(&mut self) -> &mut GeometryWriter<'a> {
+        &mut self.writer
+    }
+
+    /// Slots the module has taken.
+    fn taken(&self) -> u64 {
+        self.pushed - self.channel.segments.len() as u64
+    }
+
+    /// Motion time queued in the ring.
+    pub fn buffered(&mut self) -> f64 {
+        let queued = self.channel.segments.len();
+        while self.in_ring.len() > queued {
+            if let Some(t) = self.in_ring.pop_front() {
+                self.buffered -= t;
+            }
+        }
+        self.buffered.max(0.0)
+    }
+
+    /// Every slot has gone into the ring.
+    pub fn done(&self) -> bool {
+        self.current.is_none()
+            && match &self.source {
+                Source::Segments { events, queue, total } => events.is_none() && queue.is_empty() && total.is_some(),
+                Source::Blocks { plan, next, .. } => *next >= plan.blocks.len(),
+            }
+    }
+
+    /// Takes what the planner thread has handed out so far.
+    fn receive(&mut self) -> Result<(), String> {
+        let Source::Segments { events, queue, total } = &mut self.source else {
+            return Ok(());
+        };
+        while let Some(rx) = events {
+            match rx.try_recv() {
+                Ok(PlanEvent::Group(g)) => {
+                    self.planned += g.time;
+                    queue.push_back(g);
+                }
+                Ok(PlanEvent::Done(line)) => {
+                    eprintln!("nurbs-planner: {line}");
+                    *total = Some(self.planned);
+                    *events = None;
+                }
+                Ok(PlanEvent::Failed(e)) => return Err(e),
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => return Err("the planner thread ended before the plan did".into()),
+            }
+        }
+        Ok(())
+    }
+
+    /// The next group from the source, if one is ready.
+    fn next_group(&mut self) -> Result<Option<Group>, String> {
+        match &mut self.source {
+            Source::Segments { queue, .. } => Ok(queue.pop_front().map(|g| Group {
+                curve_needed: g.curve_needed(),
+                times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
+                slots: g.slots.iter().map(Slot::segment).collect(),
+                blocks: Vec::new(),
+                written: 0,
+            })),
+            Source::Blocks { plan, next, .. } => {
+                let first = *next;
+                if first >= plan.blocks.len() {
+                    return Ok(None);
+                }
+                let n = (plan.blocks[first].group_left as usize).max(1);
+                let range = first..(first + n).min(plan.blocks.len());
+                *next = range.end;
+                Ok(Some(Group {
+                    curve_needed: plan.blocks[first].curve_needed,
+                    times: range.clone().map(|k| plan.time(k)).collect(),
+                    slots: range.clone().map(|k| Slot::block(&plan.blocks[k])).collect(),
+                    blocks: range.collect(),
+                    written: 0,
+                }))
+            }
+        }
+    }
+
+    /// Publishes the curves up to `needed`; false if there is no room for them yet.
+    fn publish_curves(&mut self, needed: u32) -> Result<bool, String> {
+        while self.writer.next_curve() <= needed {
+            let c = self.writer.next_curve() as usize;
+            let e = self
+                .toolpath
+                .elements
+                .get(c)
+                .ok_or_else(|| format!("a record needs curve {c}, beyond the path"))?;
+            let curve = &e.curve;
+            match self.writer.publish_curve(
+                curve.degree(),
+                curve.dim(),
+                curve.knots(),
+                curve.points(),
+                curve.weights(),
+            ) {
+                Ok(()) => {}
+                Err(WriteError::Full) => return Ok(false),
+                Err(WriteError::Refused(e)) => return Err(e),
+            }
+        }
+        Ok(true)
+    }
+
+    /// Path blocks: writes the arena data of the group's blocks (their curve's stop points,
+    /// their stored stop) and fills in the offsets; false if there is no room yet.
+    fn write_block_data(&mut self, group: &mut Group) -> Result<bool, String> {
+        let Source::Blocks { plan, points, .. } = &mut self.source else {
+            return Ok(true);
+        };
+        let first_push = self.pushed;
+        while let Some(&k) = group.blocks.get(group.written) {
+            let mut b = plan.blocks[k];
+            let curve = b.curve();
+            let placed = match points.get(&curve) {
+                Some(&placed) => placed,
+                None => {
+                    let list = plan.points.get(curve).map_or(&[][..], Vec::as_slice);
+                    match self.writer.put(list, Release::Curve(b.curve)) {
+                        Ok(offset) => {
+                            let placed = (offset, (list.len() / 2) as u32);
+                            points.insert(curve, placed);
+                            placed
+                        }
+                        Err(WriteError::Full) => return Ok(false),
+                        Err(WriteError::Refused(e)) => return Err(e),
+                    }
+                }
+            };
+            (b.points_offset, b.points_len) = placed;
+            if let Some(values) = &plan.stored[k] {
+                // Needed until the module runs past the block's end.
+                match self
+                    .writer
+                    .put(values, Release::Slot(first_push + group.written as u64))
+                {
+                    Ok(offset) => b.stop_offset = offset,
+                    Err(WriteError::Full) => return Ok(false),
+                    Err(WriteError::Refused(e)) => return Err(e),
+                }
+                plan.stored[k] = None;
+            }
+            group.slots[group.written] = Slot::block(&b);
+            group.written += 1;
+        }
+        Ok(true)
+    }
+
+    /// Sends what it can: curves ahead, groups while the margin and the ring allow. Returns
+    /// whether it did anything.
+    pub fn fill(&mut self) -> Result<bool, String> {
+        let mut progressed = false;
+        loop {
+            self.receive()?;
+            self.writer.reclaim(self.taken());
+            if self.current.is_none() {
+                self.current = self.next_group()?;
+                if self.current.is_none() {
+                    return Ok(progressed);
+                }
+                progressed = true;
+            }
+            let Some(mut group) = self.current.take() else {
+                return Ok(progressed);
+            };
+            if group.slots.len() > SEGMENT_SLOTS {
+                return Err(format!(
+                    "a group of {} records without a stop between them does not fit the ring of {SEGMENT_SLOTS}",
+                    group.slots.len()
+                ));
+            }
+            let ready = self.publish_curves(group.curve_needed)? && self.write_block_data(&mut group)?;
+            if !ready && self.writer.held_values() == 0 && self.channel.segments.is_empty() {
+                return Err("a group's curves and stops do not fit the channel's arena".into());
+            }
+            let room = SEGMENT_SLOTS - self.channel.segments.len() >= group.slots.len();
+            if !(ready && room && self.may_push()) {
+                self.current = Some(group);
+                return Ok(progressed);
+            }
+            for (slot, time) in group.slots.iter().zip(&group.times) {
+                self.channel
+                    .segments
+                    .push(slot)
+                    .map_err(|e| format!("channel: {e:?}"))?;
+                self.in_ring.push_back(*time);
+                self.buffered += time;
+                self.pushed += 1;
+                self.pushed_time += time;
+            }
+            self.longest_group = self.longest_group.max(group.times.iter().sum());
+            self.channel.set_planned_time(self.pushed_time);
+            progressed = true;
+        }
+    }
+
+    /// Whether the start rule has held: records go into the ring.
+    pub fn started(&self) -> bool {
+        self.started
+    }
+
+    /// Whether the next group may go into the ring: within the margin once the motion has
+    /// started; before, once the plan can stay ahead of the motion (a plan that fails by then
+    /// moves nothing).
+    fn may_push(&mut self) -> bool {
+        if self.started {
+            return self.buffered() < self.margin;
+        }
+        let total = match &self.source {
+            Source::Segments { total, .. } => total.unwrap_or(f64::INFINITY),
+            Source::Blocks { .. } => self.planned,
+        };
+        let rate = self.planned / self.began.elapsed().as_secs_f64().max(1e-9);
+        self.started = far_enough_ahead(self.planned, total, rate, self.margin);
+        self.started
+    }
 }

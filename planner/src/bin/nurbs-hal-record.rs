@@ -12,7 +12,7 @@ use std::io::Write;
 use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
-use nurbs_hal::user::{install_signal_handlers, stopped, Component, StreamReader, StreamValue};
+use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component, StreamReader, StreamValue};
 
 /// `SAMPLER_SHMEM_KEY` of LinuxCNC's streamer.h; channel n uses key + n.
 const SAMPLER_SHMEM_KEY: i32 = 0x4853_4130;

@@ -1,0 +1,43 @@
+//! How soon a motion can start: `cargo bench -p nurbs-planner --bench start`.
+//!
+//! The streamed Erwinski plan hands out its first group of records (the first records the
+//! module may take, with the stop after them) long before the plan ends: criterion's median of
+//! the time to that first group, on G1 programs of 200 and 2,000 lines (lab set 1), beside the
+//! whole plan of the 200-line program in the same process.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use nurbs_motion::planner::Limits;
+use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent};
+
+#[path = "../tests/common/test_paths.rs"]
+#[allow(dead_code)]
+mod test_paths;
+
+fn bench_start(c: &mut Criterion) {
+    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let mut g = c.benchmark_group("start");
+    g.sample_size(10);
+    for lines in [200, 2000] {
+        let toolpath = test_paths::g1_zigzag(lines);
+        g.bench_function(format!("first group ({lines} lines)"), |b| {
+            b.iter(|| {
+                let mut first = None;
+                stream_plan(&toolpath, &limits, None, &mut |e| {
+                    if let PlanEvent::Group(group) = e {
+                        first = Some(group.slots.len());
+                    }
+                    first.is_none()
+                });
+                first.expect("a first group")
+            })
+        });
+    }
+    let toolpath = test_paths::g1_zigzag(200);
+    g.bench_function("whole plan (200 lines)", |b| {
+        b.iter(|| plan_groups(&toolpath, &limits, None).unwrap().len())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_start);
+criterion_main!(benches);

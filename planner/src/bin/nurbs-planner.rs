@@ -1,0 +1,366 @@
+//! `nurbs-planner`: the userspace planner component (`loadusr -W nurbs-planner ...`).
+//!
+//! Reads a toolpath (JSON, G-code or DXF), plans it, and streams it to the realtime module
+//! `nurbs_interp` through the shared-memory channel while the motion runs: the curves as the
+//! records need them, and the records in groups that end at a checked stop, keeping at most
+//! `--margin` seconds of motion queued ahead of the module (and never more than the ring
+//! holds). Memory stays bounded by that look-ahead whatever the program's length.
+//!
+//! ```text
+//! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
+//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop]
+//!               [--round-corners auto|on|off] [--stop-fraction F]
+//! ```
+//! The default `erwinski` planner runs as a stream in a thread of its own
+//! (`nurbs-plan plan --stream` plans the same records): each record goes out once it is final,
+//! with the stop after the last record of each group (the next segment re-planned to rest,
+//! checked by the planner like every segment). The motion starts as soon as the plan can stay
+//! ahead of it. `--planner vpop` plans with VPOp (one tool-tip position per servo period,
+//! 2-/3-axis paths) before the motion, checks the module's stop from every block end, and sends
+//! the positions as path blocks, which the module outputs exactly.
+//! With `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
+//! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given on
+//! the command line win. The period must equal the servo thread's for the motion to be the one
+//! the planner checked.
+//!
+//! Pins: `nurbs-planner.ready` (bit out: first records queued), `.running` (bit out: records
+//! remain to be sent), `.error` (bit out), `.records-sent` (u32 out), `.buffered` (float out,
+//! s: motion time queued in the ring).
+//! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send), at any stage.
+//!
+//! Resume after a hold or an underrun: when the module has stopped on the path it publishes the
+//! stop point in the channel. A planner that starts then, or that is running when it happens,
+//! plans the rest of the path from rest at exactly that point and streams it; the module runs
+//! it when `nurbs_interp.hold` is released (hold) or on a rising edge of `nurbs_interp.resume`
+//! (underrun). (To start a different job instead, abort first: `nurbs_interp.abort` clears the
+//! stop point.)
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use clap::Parser;
+use nurbs_hal::channel::{Channel, StopPoint};
+use nurbs_hal::sys::HAL_OUT;
+use nurbs_motion::cli::corners::{prepare, RoundCorners};
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::Limits;
+use nurbs_motion::readers::read_toolpath;
+use nurbs_planner::feed::{self, PlannerKind, Source, Streamer};
+use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "nurbs-planner",
+    about = "Plan a NURBS toolpath and stream it to nurbs_interp"
+)]
+struct Args {
+    /// Toolpath (.json, .ngc/.nc/.gcode/.tap, .dxf).
+    toolpath: PathBuf,
+    /// Programmed feed F (mm/s).
+    #[arg(long)]
+    feed: Option<f64>,
+    /// Axial acceleration limit(s) (mm/s^2), comma-separated in axis order.
+    #[arg(long, value_delimiter = ',')]
+    accel: Option<Vec<f64>>,
+    /// Axial jerk limit(s) (mm/s^3).
+    #[arg(long, value_delimiter = ',')]
+    jerk: Option<Vec<f64>>,
+    /// Axial velocity limit(s) (mm/s); default: the feed.
+    #[arg(long, value_delimiter = ',')]
+    vel: Option<Vec<f64>>,
+    /// Chord error tolerance (mm).
+    #[arg(long = "chord-tol")]
+    chord_tol: Option<f64>,
+    /// Servo period (s); must equal the servo thread's.
+    #[arg(long)]
+    period: Option<f64>,
+    /// LinuxCNC INI file for the period and limits not given as flags.
+    #[arg(long)]
+    ini: Option<PathBuf>,
+    /// Motion time (s) to keep queued ahead of the module.
+    #[arg(long, default_value_t = 2.0)]
+    margin: f64,
+    /// VPOp: largest tangential deceleration and jerk of the module's stop after a path block,
+    /// as a fraction of what the axes allow along the path there. The planner runs the stop
+    /// from every block end and lowers it where the axis limits need it.
+    #[arg(long, default_value_t = 1.0)]
+    stop_fraction: f64,
+    /// Planner: `erwinski` (S-curve segments, streamed as records) or `vpop` (per-period
+    /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
+    #[arg(long, value_enum, default_value_t = Planner::Erwinski)]
+    planner: Planner,
+    /// G1 corners: `auto` rounds them within the chord tolerance when the whole path is a
+    /// straight-line program (as `nurbs-plan plan` does), `on` requires that, `off` stops at
+    /// every corner.
+    #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
+    round_corners: RoundCorners,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum Planner {
+    Erwinski,
+    Vpop,
+}
+
+/// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).
+struct Ini {
+    entries: Vec<(String, String, String)>,
+}
+
+impl Ini {
+    fn read(path: &Path) -> Result<Ini, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut section = String::new();
+        let mut entries = Vec::new();
+        for line in text.lines() {
+            let line = line.trim();
+            if line.starts_with('#') || line.starts_with(';') || line.is_empty() {
+                continue;
+            }
+            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+                section = name.trim().to_owned();
+            } else if let Some((k, v)) = line.split_once('=') {
+                entries.push((section.clone(), k.trim().to_owned(), v.trim().to_owned()));
+            }
+        }
+        Ok(Ini { entries })
+    }
+
+    fn number(&self, section: &str, key: &str) -> Result<Option<f64>, String> {
+        match self.entries.iter().find(|(s, k, _)| s == section && k == key) {
+            None => Ok(None),
+            Some((_, _, v)) => v
+                .parse()
+                .map(Some)
+                .map_err(|_| format!("[{section}]{key} = {v} is not a number")),
+        }
+    }
+
+    /// One value per axis (X, Y[, Z]) if every axis has it.
+    fn per_axis(&self, key: &str, axes: usize) -> Result<Option<Vec<f64>>, String> {
+        let mut out = Vec::new();
+        for axis in ["AXIS_X", "AXIS_Y", "AXIS_Z"].iter().take(axes) {
+            match self.number(axis, key)? {
+                Some(v) => out.push(v),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
+}
+
+fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
+    let ini = args.ini.as_deref().map(Ini::read).transpose()?;
+    let from_ini = |section: &str, key: &str| -> Result<Option<f64>, String> {
+        ini.as_ref().map_or(Ok(None), |i| i.number(section, key))
+    };
+    let axis_ini =
+        |key: &str| -> Result<Option<Vec<f64>>, String> { ini.as_ref().map_or(Ok(None), |i| i.per_axis(key, axes)) };
+    let period = match args.period {
+        Some(p) => p,
+        None => from_ini("EMCMOT", "SERVO_PERIOD")?
+            .map(|ns| ns / 1e9)
+            .ok_or("no period: give --period or --ini with [EMCMOT]SERVO_PERIOD")?,
+    };
+    let need = |v: Option<Vec<f64>>, what: &str| v.ok_or(format!("no {what} limit given"));
+    let vel = args.vel.clone().or(axis_ini("MAX_VELOCITY")?);
+    let feed = match args.feed.or(from_ini("NURBS", "FEED")?) {
+        Some(f) => f,
+        None => vel
+            .as_ref()
+            .and_then(|v| v.iter().copied().reduce(f64::min))
+            .ok_or("no feed: give --feed, [NURBS]FEED or axis velocities")?,
+    };
+    Limits {
+        feed,
+        velocity: vel.unwrap_or_else(|| vec![feed]),
+        acceleration: need(args.accel.clone().or(axis_ini("MAX_ACCELERATION")?), "acceleration")?,
+        jerk: need(args.jerk.clone().or(axis_ini("MAX_JERK")?), "jerk")?,
+        chord_tolerance: args
+            .chord_tol
+            .or(from_ini("NURBS", "CHORD_TOLERANCE")?)
+            .ok_or("no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE")?,
+        period,
+    }
+    .for_axes(axes)
+    .map_err(|e| e.to_string())
+}
+
+/// Plans the whole path, or the rest of it from the module's stop point `from`, begins its
+/// geometry stream once the module runs no motion, and queues the first records.
+fn start_motion<'a>(
+    args: &Args,
+    shared: &'a Arc<Toolpath>,
+    limits: &Limits,
+    channel: &'a Channel,
+    from: Option<&StopPoint>,
+) -> Result<Streamer<'a>, String> {
+    if let Some(p) = from {
+        eprintln!(
+            "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
+            match p.cause {
+                1 => "underrun",
+                2 => "hold",
+                _ => "?",
+            },
+            p.curve,
+            p.u,
+            p.seq
+        );
+    }
+    let toolpath: &'a Toolpath = shared;
+    let began = Instant::now();
+    let source = match PlannerKind::from(args.planner) {
+        // The planner runs in a thread of its own; its groups wait until the stream has begun.
+        PlannerKind::Erwinski => Source::streamed(Arc::clone(shared), limits.clone(), from.copied()),
+        PlannerKind::Vpop => {
+            let plan = feed::vpop_plan(toolpath, limits, from)?;
+            let blocks = feed::block_plan(toolpath, &plan, from, args.stop_fraction)?;
+            let (ends, stored, worst) = blocks.stops();
+            eprintln!(
+                "nurbs-planner: VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
+                plan.points.len(),
+                blocks.blocks.len(),
+                plan.motion_time,
+                plan.plan_time,
+                began.elapsed().as_secs_f64() - plan.plan_time
+            );
+            Source::blocks(blocks)
+        }
+    };
+    // A motion of an earlier planner may still be queued or running: the module empties the
+    // ring once that motion is over (finished, aborted or stopped), and refuses a new stream
+    // while it runs.
+    let waited = Instant::now();
+    while !channel.segments.is_empty() || channel.progress.read().moving {
+        if stopped() {
+            return Err("stopped by signal before the motion started".into());
+        }
+        if waited.elapsed() > Duration::from_secs(10) {
+            return Err("the module still runs a motion (records queued or moving)".into());
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if let Some(p) = from {
+        // An abort while we planned withdraws the stop point: then the plan is not wanted.
+        if channel.stop.read().is_none_or(|now| now.epoch != p.epoch) {
+            return Err("the stop point was withdrawn (abort) while planning from it".into());
+        }
+    }
+    let first_curve = from.map_or(0, |p| feed::plan_start(toolpath, p).curve);
+    let mut streamer = Streamer::new(channel, toolpath, source, first_curve, args.margin, began)?;
+    // Queue what the start rule and the margin allow before hal_ready: `loadusr -W` returns
+    // with the motion under way.
+    while !streamer.done() && !(streamer.started() && streamer.buffered() >= args.margin) {
+        if stopped() {
+            return Err("stopped by signal before the motion started".into());
+        }
+        if !streamer.fill()? {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    let queued = streamer.buffered();
+    eprintln!(
+        "nurbs-planner: first {} records ({queued:.3} s of motion) queued after {:.3} s",
+        streamer.pushed,
+        began.elapsed().as_secs_f64()
+    );
+    Ok(streamer)
+}
+
+impl From<Planner> for PlannerKind {
+    fn from(p: Planner) -> PlannerKind {
+        match p {
+            Planner::Erwinski => PlannerKind::Erwinski,
+            Planner::Vpop => PlannerKind::Vpop,
+        }
+    }
+}
+
+fn run(args: &Args) -> Result<(), String> {
+    let programmed = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
+    let limits = limits(args, programmed.tip_dim())?;
+    // The same path `nurbs-plan plan` plans with the same chord tolerance (and `verify` checks).
+    let prepared = prepare(&args.toolpath, args.round_corners, limits.chord_tolerance).map_err(|e| e.to_string())?;
+    if let Some(r) = &prepared.rounding {
+        eprintln!(
+            "nurbs-planner: {} G1 corners rounded within {} mm (deviation {:.6} mm)",
+            r.corners, limits.chord_tolerance, r.max_deviation
+        );
+    }
+    let toolpath = Arc::new(prepared.toolpath);
+    if args.planner == Planner::Vpop {
+        // Before touching HAL: a clear refusal, not a half-started component.
+        feed::check_tip_path(&toolpath)?;
+    }
+
+    let comp = Component::new("nurbs-planner")?;
+    let ready = comp.pin::<bool>("ready", HAL_OUT)?;
+    let running = comp.pin::<bool>("running", HAL_OUT)?;
+    let error = comp.pin::<bool>("error", HAL_OUT)?;
+    let sent_pin = comp.pin::<u32>("records-sent", HAL_OUT)?;
+    let buffered_pin = comp.pin::<f64>("buffered", HAL_OUT)?;
+    let result = (|| {
+        let channel = comp.attach_channel(Duration::from_secs(5))?;
+        // The module may be standing where an underrun stopped it: then plan from there.
+        let mut from = channel.stop.read();
+        let mut streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
+        let show = |s: &mut Streamer| {
+            sent_pin.set(s.pushed as u32);
+            running.set(!s.done());
+            let b = s.buffered();
+            buffered_pin.set(b);
+        };
+        show(&mut streamer);
+        ready.set(true);
+        comp.ready()?;
+        let mut reported = false;
+        while !stopped() {
+            // A stop while we stream (hold, or an underrun: we were too slow): re-plan from where
+            // the module stands; the module runs it after the command.
+            if let Some(p) = channel.stop.read() {
+                if from.is_none_or(|f| f.epoch != p.epoch) {
+                    from = Some(p);
+                    drop(streamer);
+                    streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
+                    reported = false;
+                }
+            }
+            let progressed = streamer.fill()?;
+            show(&mut streamer);
+            if streamer.done() && !reported {
+                eprintln!(
+                    "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s)",
+                    streamer.pushed, streamer.pushed_time, streamer.longest_group
+                );
+                reported = true;
+            }
+            if !progressed {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+        Ok(())
+    })();
+    if result.is_err() {
+        error.set(true);
+        running.set(false);
+    }
+    result
+}
+
+fn main() -> ExitCode {
+    install_signal_handlers();
+    let args = Args::parse();
+    match run(&args) {
+        Ok(()) => {
+            eprintln!("nurbs-planner: stopped by signal, exiting cleanly");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("nurbs-planner: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

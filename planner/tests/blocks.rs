@@ -1,0 +1,248 @@
+//! VPOp plans as path blocks through the realtime module on the mock HAL: exact positions,
+//! the stop at block group ends (the module's tangential stop or a stored sequence) within the
+//! axis limits, resume, and malformed blocks.
+
+mod common;
+
+use std::time::Instant;
+
+use common::test_paths::rounded_polyline;
+use common::*;
+use nurbs_hal::channel::{PathBlock, Slot, StopPoint};
+use nurbs_hal::module::FaultCode;
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::vpop::VpopPlan;
+use nurbs_planner::feed::{block_plan, plan_start, vpop_plan, BlockPlan, Source, Streamer};
+
+struct BlockJob {
+    job: Job,
+    plan: VpopPlan,
+}
+
+/// The VPOp plan of `toolpath` at lab set 1 and its blocks; no block ends a group with a stop
+/// outside the limits.
+fn block_job(toolpath: Toolpath) -> BlockJob {
+    let limits = lab1(toolpath.tip_dim()).for_axes(toolpath.tip_dim()).unwrap();
+    let plan = vpop_plan(&toolpath, &limits, None).unwrap();
+    let blocks = blocks_of(&toolpath, &plan, None);
+    let (ends, stored, worst) = blocks.stops();
+    println!(
+        "{} blocks, {ends} group ends with a stop ({stored} stored), worst {worst:.9}",
+        blocks.blocks.len()
+    );
+    assert!(worst <= 1.0 + 1e-6);
+    BlockJob {
+        job: Job {
+            toolpath,
+            limits,
+            groups: Vec::new(),
+            samples: Vec::new(),
+        },
+        plan,
+    }
+}
+
+fn blocks_of(toolpath: &Toolpath, plan: &VpopPlan, from: Option<&StopPoint>) -> BlockPlan {
+    block_plan(toolpath, plan, from, 1.0).unwrap()
+}
+
+fn block_streamer<'a>(l: &'a Loaded, bj: &'a BlockJob, blocks: BlockPlan, first: usize) -> Streamer<'a> {
+    Streamer::new(
+        l.channel,
+        &bj.job.toolpath,
+        Source::blocks(blocks),
+        first,
+        f64::INFINITY,
+        Instant::now(),
+    )
+    .unwrap()
+}
+
+/// One sample per planned period at VPOp's parameter and (to 1e-9 mm) position.
+fn assert_positions(got: &[Out], plan: &VpopPlan) {
+    assert_eq!(got.len(), plan.points.len(), "one sample per planned period");
+    for (k, (g, p)) in got.iter().zip(&plan.points).enumerate() {
+        assert_eq!((g.u, g.curve), (p.u, p.element), "sample {k}: parameter");
+        let d = (g.q[0] - p.tip[0]).hypot(g.q[1] - p.tip[1]);
+        assert!(d <= 1e-9, "sample {k}: {d:e} mm from the VPOp position");
+    }
+}
+
+/// The trident and a rounded polyline (blocks start anew at every element): the module plays
+/// VPOp's positions across every join, the run verifies, and no period allocates.
+#[test]
+fn vpop_blocks_run_exactly_the_planned_positions() {
+    let _guard = lock_module();
+    for toolpath in [job("trident.json").toolpath, rounded_polyline()] {
+        let bj = block_job(toolpath);
+        let l = load();
+        let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &bj.plan, None), 0);
+        let got = run_to_rest(&mut s, bj.plan.points.len() + 50);
+        assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"));
+        assert_positions(&got, &bj.plan);
+        assert_eq!(violations(&bj.job, &got, true), Vec::<String>::new());
+        assert_eq!(float("nurbs_interp.buffered"), 0.0);
+    }
+}
+
+/// Only the groups up to block `cut` arrive: the module stops after the group end at or
+/// before it, within the limits, at rest; VPOp re-plans from the stop point and the resume
+/// command runs it to C(1), the whole run within the limits.
+fn underrun_and_resume(bj: &BlockJob, cut: usize) {
+    let l = load();
+    let mut blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
+    // The groups that end at or before `cut`.
+    let mut end = 0;
+    while end < blocks.blocks.len() && end + blocks.blocks[end].group_left as usize <= cut + 1 {
+        end += blocks.blocks[end].group_left as usize;
+    }
+    blocks.blocks.truncate(end);
+    blocks.stored.truncate(end);
+    blocks.choices.truncate(end);
+    let mut s = block_streamer(&l, bj, blocks, 0);
+    let mut got = run_to_rest(&mut s, bj.plan.points.len() + 20_000);
+    let stop = stop_point(l.channel).expect("no stop point");
+    assert!(bit("nurbs_interp.underrun") && !bit("nurbs_interp.fault"));
+    assert_eq!(
+        violations(&bj.job, &got, false),
+        Vec::<String>::new(),
+        "stop after block {cut}"
+    );
+    for _ in 0..5 {
+        period();
+    }
+    let plan = vpop_plan(&bj.job.toolpath, &bj.job.limits, Some(&stop)).unwrap();
+    let rest = blocks_of(&bj.job.toolpath, &plan, Some(&stop));
+    let first = plan_start(&bj.job.toolpath, &stop).curve;
+    drop(s);
+    let mut s = block_streamer(&l, bj, rest, first);
+    set_bit("nurbs_interp.resume", true);
+    hold_position(&mut got);
+    got.extend(run_to_rest(&mut s, bj.plan.points.len() + 20_000));
+    set_bit("nurbs_interp.resume", false);
+    assert!(
+        bit("nurbs_interp.done") && !bit("nurbs_interp.fault"),
+        "block {cut}: resumed to the end"
+    );
+    assert_eq!(violations(&bj.job, &got, true), Vec::<String>::new(), "block {cut}");
+}
+
+/// Underruns at the fastest block ends of the trident and of the rounded polyline (there the
+/// stops are stored sequences that may cross a join).
+#[test]
+fn an_underrun_at_a_block_end_stops_within_the_limits_and_resumes() {
+    let _guard = lock_module();
+    for toolpath in [job("trident.json").toolpath, rounded_polyline()] {
+        let bj = block_job(toolpath);
+        let blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
+        let feed = |k: usize| nurbs_rtcore::block_stop::block_end_state(&blocks.blocks[k], PERIOD).1;
+        let mut ends: Vec<usize> = (2..blocks.blocks.len() - 2)
+            .filter(|&k| blocks.blocks[k].group_left == 1)
+            .collect();
+        ends.sort_by(|&a, &b| feed(b).total_cmp(&feed(a)));
+        let stored = ends.iter().copied().find(|&k| blocks.stored[k].is_some());
+        for cut in ends.iter().copied().take(2).chain(stored) {
+            underrun_and_resume(&bj, cut);
+        }
+    }
+}
+
+/// Hold mid-path: the module plays on to the end of the group it is in and stops there; the
+/// re-plan from the stop point runs on release.
+#[test]
+fn hold_stops_at_the_group_end_and_resumes() {
+    let _guard = lock_module();
+    let bj = block_job(job("trident.json").toolpath);
+    let l = load();
+    let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &bj.plan, None), 0);
+    let hold_at = bj.plan.points.len() / 2;
+    let mut got = run(
+        &mut s,
+        bj.plan.points.len() + 20_000,
+        &mut |k| {
+            if k == hold_at {
+                set_bit("nurbs_interp.hold", true)
+            }
+        },
+        &mut |_| bit("nurbs_interp.held"),
+    );
+    let stop = stop_point(l.channel).expect("a hold stop point");
+    assert_eq!(stop.cause, 2);
+    assert_eq!(violations(&bj.job, &got, false), Vec::<String>::new());
+    for _ in 0..5 {
+        period();
+    }
+    let plan = vpop_plan(&bj.job.toolpath, &bj.job.limits, Some(&stop)).unwrap();
+    let first = plan_start(&bj.job.toolpath, &stop).curve;
+    drop(s);
+    let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &plan, Some(&stop)), first);
+    run(&mut s, 100, &mut |_| {}, &mut |_| false);
+    assert!(bit("nurbs_interp.resume-ready"));
+    set_bit("nurbs_interp.hold", false);
+    hold_position(&mut got);
+    got.extend(run_to_rest(&mut s, bj.plan.points.len() + 20_000));
+    assert!(bit("nurbs_interp.done"));
+    assert_eq!(violations(&bj.job, &got, true), Vec::<String>::new());
+}
+
+/// Malformed blocks fault with the position held: NaN, a parameter outside the curve or going
+/// back, arc lengths going back or not continuing the previous block, a sequence gap, no
+/// samples, group fields that do not fit.
+#[test]
+fn bad_blocks_are_refused_with_the_position_held() {
+    let _guard = lock_module();
+    let bj = block_job(job("trident.json").toolpath);
+    type Tamper = fn(&mut PathBlock);
+    let cases: [(&str, Tamper, FaultCode); 8] = [
+        ("NaN", |b| b.u[3] = f64::NAN, FaultCode::Record),
+        (
+            "u beyond the curve",
+            |b| b.u[b.count as usize - 1] = 2.0,
+            FaultCode::BlockPath,
+        ),
+        ("u back", |b| b.u[3] = b.u[0] - 1e-3, FaultCode::Record),
+        ("s back", |b| b.s[3] = b.s[0] - 1.0, FaultCode::Record),
+        ("not continuing", |b| b.s_before[0] -= 0.5, FaultCode::BlockPath),
+        ("sequence", |b| b.seq += 1, FaultCode::Sequence),
+        ("no samples", |b| b.count = 0, FaultCode::Record),
+        ("group", |b| b.group_left = 0, FaultCode::Record),
+    ];
+    for (name, tamper, code) in cases {
+        let l = load();
+        let mut blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
+        let k = (blocks.blocks.len() / 2..)
+            .find(|&k| blocks.blocks[k].group_left == 1)
+            .unwrap();
+        tamper(&mut blocks.blocks[k]);
+        let mut s = block_streamer(&l, &bj, blocks, 0);
+        run(&mut s, bj.plan.points.len() + 100, &mut |_| {}, &mut |_| {
+            bit("nurbs_interp.fault")
+        });
+        assert_eq!(u32_pin("nurbs_interp.fault-code"), code as u32, "{name}");
+        let held = out().q;
+        for _ in 0..50 {
+            period();
+            assert!(!bit("nurbs_interp.active"), "{name}: moved after the fault");
+        }
+        assert_eq!(out().q, held);
+    }
+    // A segment slot in a block motion.
+    let l = load();
+    let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &bj.plan, None), 0);
+    run(&mut s, 50, &mut |_| {}, &mut |_| false);
+    let mut queue: Vec<Slot> = Vec::new();
+    while let Ok(Some(slot)) = l.channel.segments.pop() {
+        queue.push(slot);
+    }
+    queue[0].kind = nurbs_hal::record::KIND_SEGMENT;
+    for q in &queue {
+        l.channel.segments.push(q).unwrap();
+    }
+    for _ in 0..bj.plan.points.len() {
+        period();
+        if bit("nurbs_interp.fault") {
+            break;
+        }
+    }
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::RecordKind as u32);
+}

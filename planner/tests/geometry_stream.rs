@@ -1,0 +1,170 @@
+//! The geometry stream on the mock HAL: curves checked a slice per period, refused when bad,
+//! and a program longer than the descriptor ring and the arena run through both, reused as
+//! the module passes them.
+
+mod common;
+
+use std::time::Instant;
+
+use common::test_paths::{g1_zigzag, long_spline};
+use common::*;
+use nurbs_hal::channel::{CurveDesc, GeometryHeader, CURVE_SLOTS};
+use nurbs_hal::module::{FaultCode, VALIDATION_VALUES_PER_PERIOD};
+use nurbs_planner::feed::{Source, Streamer};
+use nurbs_planner::writer::{GeometryWriter, WriteError};
+
+/// Many small curves (a 150-line G1 program, 299 elements) and one curve larger than a
+/// period's slice: the module checks at most [`VALIDATION_VALUES_PER_PERIOD`] values per
+/// period, so the motion starts only once the curves of its first group are checked: as many
+/// periods later as their values need.
+#[test]
+fn curves_are_checked_a_slice_per_period() {
+    let _guard = lock_module();
+    for (name, job) in [
+        ("zigzag", job_of(g1_zigzag(150))),
+        ("long spline", job_of(long_spline(3000))),
+    ] {
+        let l = load();
+        let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim()).unwrap();
+        let mut values = 0;
+        for e in &job.toolpath.elements {
+            let c = &e.curve;
+            w.publish_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights())
+                .unwrap();
+            // Knots, coordinates and weights once, interior knots once more.
+            values += c.knots().len() + c.points().len() + 2 * c.weights().len() - c.degree() - 1;
+        }
+        let slots: Vec<_> = job.groups.iter().flat_map(|g| g.slots.clone()).collect();
+        for s in &slots {
+            l.channel.segments.push(&nurbs_hal::channel::Slot::segment(s)).unwrap();
+        }
+        let needed = slots[0].curve_needed as usize;
+        let first_values: usize = job.toolpath.elements[..=needed]
+            .iter()
+            .map(|e| {
+                let c = &e.curve;
+                c.knots().len() + c.points().len() + 2 * c.weights().len() - c.degree() - 1
+            })
+            .sum();
+        let mut waited = 0;
+        while !bit("nurbs_interp.active") && waited < 10_000 {
+            period();
+            waited += 1;
+        }
+        let expected = first_values.div_ceil(VALIDATION_VALUES_PER_PERIOD);
+        println!("{name}: {values} values in all; moving in period {waited} ({first_values} values before)");
+        assert!(
+            waited >= expected && waited <= expected + 1,
+            "{name}: {waited} periods, expected {expected}"
+        );
+        assert!(!bit("nurbs_interp.fault"));
+    }
+}
+
+/// A curve that does not check (a negative weight) faults the module (geometry) when it is
+/// reached, before anything moves on it; a header the module cannot run is refused on both
+/// sides; a new stream during the motion faults (geometry changed).
+#[test]
+fn bad_curves_and_streams_are_refused() {
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let l = load();
+    let w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let c = &job.toolpath.elements[0].curve;
+    let mut weights = c.weights().to_vec();
+    weights[2] = -1.0;
+    assert!(matches!(
+        GeometryWriter::begin(l.channel, 0, 2).unwrap().publish_curve(
+            c.degree(),
+            c.dim(),
+            c.knots(),
+            c.points(),
+            &weights
+        ),
+        Err(WriteError::Refused(_))
+    ));
+    drop(w);
+    // The same curve past the writer's check, straight into the stream.
+    let w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let data: Vec<f64> = c.knots().iter().chain(c.points()).chain(&weights).copied().collect();
+    l.channel.geometry.write_values(0, &data).unwrap();
+    let (k, p) = (c.knots().len() as u32, c.points().len() as u32);
+    let desc = CurveDesc {
+        index: 0,
+        degree: c.degree() as u32,
+        dim: 2,
+        knots_offset: 0,
+        knots_len: k,
+        points_offset: k,
+        points_len: p,
+        weights_offset: k + p,
+        weights_len: weights.len() as u32,
+        reserved: 0,
+    };
+    l.channel.geometry.publish_unchecked(&desc);
+    for s in &job.groups[0].slots {
+        l.channel.segments.push(&nurbs_hal::channel::Slot::segment(s)).unwrap();
+    }
+    for _ in 0..10 {
+        period();
+    }
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::Geometry as u32);
+    assert_eq!(u32_pin("nurbs_interp.records"), 0);
+    drop(w);
+    drop(l);
+    // Four tip axes, or joints: refused by the stream itself.
+    let l = load();
+    for header in [
+        GeometryHeader {
+            tip_axes: 4,
+            ..GeometryHeader::default()
+        },
+        GeometryHeader {
+            tip_axes: 3,
+            joints: 5,
+            ..GeometryHeader::default()
+        },
+    ] {
+        assert!(l.channel.geometry.begin(&header).is_err());
+    }
+    // A new stream in the middle of a motion.
+    let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+    run(&mut s, 100, &mut |_| {}, &mut |_| false);
+    assert!(bit("nurbs_interp.active"));
+    let _w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    period();
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::GeometryChanged as u32);
+}
+
+/// A G1 program longer than what the writer may use (here limited to 64 descriptors in flight
+/// and 3,000 arena values, some 100 curves: as a program longer than the channel runs through
+/// [`CURVE_SLOTS`] and the whole arena): the curves go in as the records need them and reuse
+/// slots and values the module has passed; the module plays the offline streamed setpoints bit
+/// for bit.
+#[test]
+fn a_program_longer_than_the_channel_reuses_it() {
+    let _guard = lock_module();
+    let job = job_of(g1_zigzag(400));
+    assert!(job.toolpath.elements.len() > 64 * 10);
+    let l = load();
+    let mut s = Streamer::new(
+        l.channel,
+        &job.toolpath,
+        Source::groups(job.groups.clone()),
+        0,
+        0.2,
+        Instant::now(),
+    )
+    .unwrap();
+    s.writer().limit(3000, 64);
+    let got = run(&mut s, job.samples.len() + 100, &mut |_| {}, &mut |_| {
+        bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held")
+    });
+    assert_exact("zigzag 400", &got, &job.samples, 2);
+    assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+    println!(
+        "{} elements through 64 descriptor slots and 3,000 arena values ({} of {CURVE_SLOTS} slots and the whole arena on the machine)",
+        job.toolpath.elements.len(),
+        64
+    );
+}

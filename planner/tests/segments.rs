@@ -1,0 +1,538 @@
+//! Segment records (the Erwinski planner's streamed plan) through the realtime module on the
+//! mock HAL: exact playback, the stop at every group end (underrun, hold, abort) within the axis
+//! limits, resume, and faults.
+
+mod common;
+
+use std::time::Instant;
+
+use common::test_paths::g1_zigzag;
+use common::*;
+use nurbs_hal::channel::Slot;
+use nurbs_hal::mock;
+use nurbs_hal::module::FaultCode;
+use nurbs_hal::record::{SegmentSlot, KIND_BLOCK};
+use nurbs_hal::sys;
+use nurbs_planner::feed::{plan_groups, Source, Streamer};
+use nurbs_planner::writer::GeometryWriter;
+
+#[test]
+fn module_creates_its_pins_and_function() {
+    let _guard = lock_module();
+    let l = load();
+    let names = mock::pin_names();
+    for pin in [
+        "enable",
+        "pos-cmd-x",
+        "pos-cmd-y",
+        "pos-cmd-z",
+        "feed",
+        "u",
+        "curve",
+        "active",
+        "done",
+        "fault",
+        "fault-code",
+        "underrun",
+        "underruns",
+        "records",
+        "seq",
+        "buffered",
+        "hold",
+        "abort",
+        "resume",
+        "resume-ready",
+        "held",
+    ] {
+        assert!(
+            names.contains(&format!("nurbs_interp.{pin}")),
+            "missing {pin}: {names:?}"
+        );
+    }
+    assert_eq!(mock::pin_dir("nurbs_interp.enable"), Some(sys::HAL_IN));
+    assert_eq!(mock::pin_dir("nurbs_interp.pos-cmd-x"), Some(sys::HAL_OUT));
+    assert!(mock::funct("nurbs_interp.update").is_some());
+    drop(l);
+    assert!(mock::funct("nurbs_interp.update").is_none());
+    assert_eq!(mock::component_ready("nurbs_interp"), None);
+}
+
+/// A path of several elements (line, NURBS, line), the 5-axis open pocket (3 tip axes of a
+/// 6-D curve) and G1 programs with their corners rounded, streamed as `nurbs-planner` streams
+/// them: the module's position, feed, u and curve are the offline streamed setpoints bit for
+/// bit, every element runs, the run passes the project's limit check, and no period allocates.
+#[test]
+fn the_module_plays_the_offline_streamed_setpoints_bit_for_bit() {
+    let _guard = lock_module();
+    let dir = std::env::temp_dir().join(format!("nurbs-planner-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let ngc = dir.join("line-trident-line.ngc");
+    std::fs::write(
+        &ngc,
+        "G21 G17 G90 G64\nG0 X0 Y0\nF60000\nG1 X10 Y0\nG5.2 X20 Y27 P1 L4\nX12 Y8 P1\nX10 Y20 P1\n\
+         X8 Y8 P1\nX0 Y27 P1\nX10 Y0 P1\nG5.3\nG1 X0 Y0\nM2\n",
+    )
+    .unwrap();
+    let jobs = [
+        ("trident", job("trident.json")),
+        ("butterfly", job("butterfly.json")),
+        ("line-trident-line", job(ngc.to_str().unwrap())),
+        ("open_pocket", job("open_pocket.json")),
+        ("star_g1", job("star_g1.ngc")),
+        ("G1 zigzag", job_of(g1_zigzag(150))),
+    ];
+    for (name, job) in jobs {
+        let l = load();
+        let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+        let got = run_to_rest(&mut s, job.samples.len() + 100);
+        assert_exact(name, &got, &job.samples, job.toolpath.tip_dim());
+        assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault") && !bit("nurbs_interp.underrun"));
+        assert_eq!(u32_pin("nurbs_interp.records") as u64, s.pushed);
+        assert_eq!(float("nurbs_interp.buffered"), 0.0);
+        let curves: std::collections::BTreeSet<usize> = got.iter().map(|o| o.curve).collect();
+        assert_eq!(curves.len(), job.toolpath.elements.len(), "{name}: every element runs");
+        assert_eq!(violations(&job, &got, true), Vec::<String>::new(), "{name}");
+        println!(
+            "{name}: {} samples, {} groups, {} elements",
+            got.len(),
+            job.groups.len(),
+            curves.len()
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The planner falls behind after group `g` (only the groups before it arrive): the module
+/// stops at the end of group `g - 1` with its stop and publishes where it stands.
+fn stop_after(job: &Job, g: usize) -> (Loaded, Vec<Out>, nurbs_hal::channel::StopPoint) {
+    let l = load();
+    let mut s = streamer(&l, &job.toolpath, job.groups[..g].to_vec(), 0);
+    let got = run_to_rest(&mut s, job.samples.len() + 20_000);
+    let stop = stop_point(l.channel).expect("no stop point published");
+    (l, got, stop)
+}
+
+/// At every group end of the trident, of a rounded G1 program and at the butterfly's fastest:
+/// an underrun stops on the path with the stop the planner made there, within the axis limits
+/// (the project's check on the samples up to the stop and the held position after), at rest,
+/// with the samples up to the group end those of the plan.
+#[test]
+fn an_underrun_at_any_group_end_stops_within_the_limits() {
+    let _guard = lock_module();
+    let butterfly = job("butterfly.json");
+    let fastest = (1..butterfly.groups.len())
+        .max_by(|&a, &b| {
+            let end = |g: usize| {
+                butterfly.groups[g - 1]
+                    .slots
+                    .last()
+                    .unwrap()
+                    .record
+                    .profile()
+                    .table()
+                    .end()
+                    .v
+            };
+            end(a).total_cmp(&end(b))
+        })
+        .unwrap();
+    let cases = [
+        ("trident", job("trident.json"), None),
+        ("star_g1", job("star_g1.ngc"), None),
+        ("butterfly", butterfly, Some(fastest)),
+    ];
+    let mut stops = 0;
+    for (name, job, only) in cases {
+        let ends: Vec<usize> = match only {
+            Some(g) => vec![g],
+            None => (1..job.groups.len()).collect(),
+        };
+        for g in ends {
+            let (l, got, stop) = stop_after(&job, g);
+            let planned: usize = job.groups[..g]
+                .iter()
+                .flat_map(|gr| &gr.slots)
+                .map(|s| s.record.profile().total_time())
+                .sum::<f64>()
+                .div_euclid(PERIOD) as usize;
+            let prefix = got
+                .iter()
+                .zip(&job.samples)
+                .take_while(|(o, e)| o.q[0] == e.point[0] && o.q[1] == e.point[1])
+                .count();
+            assert!(
+                prefix >= planned.saturating_sub(1),
+                "{name} group {g}: {prefix} planned samples of {planned}"
+            );
+            assert_eq!(violations(&job, &got, false), Vec::<String>::new(), "{name} group {g}");
+            let last = got.last().unwrap();
+            let rest = job.limits.min_jerk() * PERIOD * PERIOD / 2.0;
+            assert!(
+                last.feed.abs() <= rest,
+                "{name} group {g}: not at rest ({} mm/s)",
+                last.feed
+            );
+            assert!(bit("nurbs_interp.underrun") && bit("nurbs_interp.held") && !bit("nurbs_interp.fault"));
+            assert_eq!([stop.point[0], stop.point[1]], [last.q[0], last.q[1]]);
+            assert_eq!(stop.cause, 1);
+            // Held: no further sample, the position stays.
+            for _ in 0..10 {
+                assert!(!period());
+                assert!(!bit("nurbs_interp.active"));
+            }
+            assert_eq!(out().q, last.q);
+            drop(l);
+            stops += 1;
+        }
+    }
+    println!("{stops} underrun stops checked");
+}
+
+/// Underrun, resume: the planner re-plans the rest of the path from the stop point (a new
+/// geometry stream from that element); nothing moves until the resume command, a command
+/// without data is dropped; then the motion runs to C(1), and the whole sampled run (the stop's
+/// samples followed directly by the resumed ones, as a sampler records them) passes the check.
+#[test]
+fn an_underrun_resumes_from_the_stop_point_on_command() {
+    let _guard = lock_module();
+    for (name, job) in [("trident", job("trident.json")), ("star_g1", job("star_g1.ngc"))] {
+        let g = job.groups.len() / 2;
+        let (l, mut got, stop) = stop_after(&job, g);
+        let held = out().q;
+        // A resume command without data does nothing.
+        set_bit("nurbs_interp.resume", true);
+        for _ in 0..50 {
+            period();
+        }
+        set_bit("nurbs_interp.resume", false);
+        assert!(!bit("nurbs_interp.active") && !bit("nurbs_interp.resume-ready"));
+        for _ in 0..5 {
+            period(); // the module empties the ring of the stopped motion
+        }
+        let from = nurbs_planner::feed::plan_start(&job.toolpath, &stop);
+        let rest = plan_groups(&job.toolpath, &job.limits, Some(&stop)).unwrap();
+        let mut s = Streamer::new(
+            l.channel,
+            &job.toolpath,
+            Source::groups(rest),
+            from.curve,
+            f64::INFINITY,
+            Instant::now(),
+        )
+        .unwrap();
+        // Data but no command: the machine stays.
+        let waiting = run(&mut s, 400, &mut |_| {}, &mut |_| false);
+        assert!(waiting.is_empty());
+        assert!(bit("nurbs_interp.resume-ready") && bit("nurbs_interp.underrun"));
+        assert_eq!(out().q, held);
+        set_bit("nurbs_interp.resume", true);
+        let resumed = run_to_rest(&mut s, job.samples.len() + 20_000);
+        set_bit("nurbs_interp.resume", false);
+        assert!(bit("nurbs_interp.done"), "{name}: did not resume to the end");
+        assert!(!bit("nurbs_interp.fault") && !bit("nurbs_interp.underrun"));
+        assert!(stop_point(l.channel).is_none());
+        // Where the machine stands (exactly, or within the module's resume tolerance where it
+        // stands at an element's end and the plan starts on the next element).
+        let gap = (0..3).map(|i| (resumed[0].q[i] - held[i]).abs()).fold(0.0, f64::max);
+        assert!(
+            gap <= nurbs_hal::module::RESUME_TOLERANCE,
+            "{name}: the resumed motion starts {gap} mm from where the machine stands"
+        );
+        let end = job.samples.last().unwrap();
+        let last = resumed.last().unwrap();
+        assert_eq!(
+            [last.q[0], last.q[1], last.feed],
+            [end.point[0], end.point[1], 0.0],
+            "{name}"
+        );
+        hold_position(&mut got);
+        got.extend(resumed);
+        assert_eq!(violations(&job, &got, true), Vec::<String>::new(), "{name}");
+    }
+}
+
+/// After a stop, a plan that does not start where the machine stands (the whole path again,
+/// from C(0)) is refused with a fault and the position is held.
+#[test]
+fn a_resume_from_elsewhere_is_refused() {
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let (l, _, _) = stop_after(&job, job.groups.len() / 2);
+    let held = out().q;
+    for _ in 0..5 {
+        period();
+    }
+    let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+    set_bit("nurbs_interp.resume", true);
+    let got = run(&mut s, 100, &mut |_| {}, &mut |_| bit("nurbs_interp.fault"));
+    assert!(got.is_empty());
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::ResumePoint as u32);
+    assert_eq!(out().q, held);
+}
+
+/// Hold raised at many periods of the butterfly and of a G1 program: the module goes on to the
+/// end of the group it is in, runs that group's stop, and comes to rest within the limits; the
+/// running planner re-plans from there, and releasing the hold runs the rest to C(1), the whole
+/// run within the limits. Abort stops the same way and discards the queue.
+#[test]
+fn hold_and_abort_stop_at_the_group_end_within_the_limits() {
+    let _guard = lock_module();
+    for (name, job) in [("butterfly", job("butterfly.json")), ("zigzag", job("zigzag_g1.ngc"))] {
+        let n = job.samples.len();
+        for hold_at in [n / 10, n / 3, n / 2, 3 * n / 4] {
+            let l = load();
+            let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+            let mut got = run(
+                &mut s,
+                n + 20_000,
+                &mut |k| {
+                    if k == hold_at {
+                        set_bit("nurbs_interp.hold", true)
+                    }
+                },
+                &mut |_| bit("nurbs_interp.held") || bit("nurbs_interp.done"),
+            );
+            if bit("nurbs_interp.done") {
+                // Held during the last group: the motion ends at C(1).
+                set_bit("nurbs_interp.hold", false);
+                assert_exact(name, &got, &job.samples, 2);
+                continue;
+            }
+            let stop = stop_point(l.channel).expect("a hold stop point");
+            assert_eq!(stop.cause, 2);
+            let at_rest = got.len();
+            let latency = (at_rest - hold_at) as f64 * PERIOD;
+            assert_eq!(
+                violations(&job, &got, false),
+                Vec::<String>::new(),
+                "{name} hold at {hold_at}"
+            );
+            for _ in 0..5 {
+                period();
+            }
+            let from = nurbs_planner::feed::plan_start(&job.toolpath, &stop);
+            let rest = plan_groups(&job.toolpath, &job.limits, Some(&stop)).unwrap();
+            drop(s);
+            let mut s = Streamer::new(
+                l.channel,
+                &job.toolpath,
+                Source::groups(rest),
+                from.curve,
+                f64::INFINITY,
+                Instant::now(),
+            )
+            .unwrap();
+            let waiting = run(&mut s, 100, &mut |_| {}, &mut |_| false);
+            assert!(waiting.is_empty() && bit("nurbs_interp.resume-ready"));
+            set_bit("nurbs_interp.hold", false);
+            hold_position(&mut got);
+            got.extend(run_to_rest(&mut s, n + 20_000));
+            assert!(bit("nurbs_interp.done") && !bit("nurbs_interp.fault"), "{name}");
+            assert_eq!(
+                violations(&job, &got, true),
+                Vec::<String>::new(),
+                "{name} hold at {hold_at}"
+            );
+            println!("{name}: hold at period {hold_at}: at rest after {latency:.3} s, resumed to C(1)");
+        }
+        // Abort: the same stop, then the queue is gone and nothing resumes.
+        let l = load();
+        let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+        let got = run(
+            &mut s,
+            n + 20_000,
+            &mut |k| {
+                if k == n / 3 {
+                    set_bit("nurbs_interp.abort", true)
+                }
+            },
+            &mut |_| bit("nurbs_interp.held"),
+        );
+        assert_eq!(violations(&job, &got, false), Vec::<String>::new(), "{name} abort");
+        for _ in 0..5 {
+            period();
+        }
+        assert!(l.channel.segments.is_empty() && stop_point(l.channel).is_none());
+        set_bit("nurbs_interp.abort", false);
+        for _ in 0..100 {
+            period();
+            assert!(!bit("nurbs_interp.active"));
+        }
+    }
+}
+
+/// The raw stream of a job: every curve published, nothing else.
+fn raw_stream<'a>(l: &'a Loaded, job: &Job) -> GeometryWriter<'a> {
+    let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim()).unwrap();
+    for e in &job.toolpath.elements {
+        let c = &e.curve;
+        w.publish_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights())
+            .unwrap();
+    }
+    w
+}
+
+fn slots_of(job: &Job) -> Vec<SegmentSlot> {
+    job.groups.iter().flat_map(|g| g.slots.clone()).collect()
+}
+
+/// The module takes a group only whole: with all but its last record queued nothing moves
+/// (before the first record) or the motion stops at the group end before it (underrun); the
+/// last record arriving lets it go on.
+#[test]
+fn a_group_is_taken_only_whole() {
+    let _guard = lock_module();
+    let job = job("zigzag_g1.ngc");
+    let long = job.groups.iter().position(|g| g.slots.len() >= 3).unwrap();
+    let slots = slots_of(&job);
+    let first: usize = job.groups[..long].iter().map(|g| g.slots.len()).sum();
+    let l = load();
+    let _w = raw_stream(&l, &job);
+    let push = |range: std::ops::Range<usize>| {
+        for s in &slots[range] {
+            l.channel.segments.push(&Slot::segment(s)).unwrap();
+        }
+    };
+    if long == 0 {
+        push(0..job.groups[0].slots.len() - 1);
+        for _ in 0..100 {
+            period();
+            assert!(!bit("nurbs_interp.active"), "started before its first group was whole");
+        }
+        return;
+    }
+    // Everything before the long group, and that group but for its last record.
+    let group_end = first + job.groups[long].slots.len();
+    push(0..group_end - 1);
+    let mut got = Vec::new();
+    for _ in 0..job.samples.len() + 20_000 {
+        period();
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+        if bit("nurbs_interp.held") {
+            break;
+        }
+    }
+    assert!(bit("nurbs_interp.underrun"), "stopped before the incomplete group");
+    assert_eq!(
+        u32_pin("nurbs_interp.records") as usize,
+        first,
+        "took none of the incomplete group"
+    );
+    assert_eq!(violations(&job, &got, false), Vec::<String>::new());
+}
+
+/// Malformed slots fault with the position held: a sequence gap, a record that does not check,
+/// a stop that is not a record ending at rest after it, group fields that do not fit, a path
+/// block in a segment motion.
+#[test]
+fn malformed_slots_fault_and_hold() {
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let slots = slots_of(&job);
+    let with_stop = slots.iter().position(|s| s.has_stop == 1).unwrap();
+    type Tamper = fn(&mut SegmentSlot);
+    let cases: [(&str, Tamper, FaultCode); 8] = [
+        ("sequence", |s| s.record.seq += 1, FaultCode::Sequence),
+        ("NaN", |s| s.record.durations[3] = f64::NAN, FaultCode::Record),
+        ("length", |s| s.record.length *= 2.0, FaultCode::Record),
+        ("curve beyond the group's", |s| s.record.curve = 7, FaultCode::Record),
+        ("stop sequence", |s| s.stop.seq += 5, FaultCode::Record),
+        ("stop not at rest", |s| s.stop.jerks = [0.0; 7], FaultCode::Record),
+        ("inner stop", |s| s.group_left = 2, FaultCode::Record),
+        ("no stop", |s| s.has_stop = 0, FaultCode::Record),
+    ];
+    for (name, tamper, code) in cases {
+        let l = load();
+        let _w = raw_stream(&l, &job);
+        let mut bad = slots.clone();
+        tamper(&mut bad[with_stop]);
+        for s in &bad[..=with_stop] {
+            l.channel.segments.push(&Slot::segment(s)).unwrap();
+        }
+        for _ in 0..job.samples.len() {
+            period();
+            if bit("nurbs_interp.fault") {
+                break;
+            }
+        }
+        assert_eq!(u32_pin("nurbs_interp.fault-code"), code as u32, "{name}");
+        let held = out().q;
+        for s in &slots[with_stop + 1..] {
+            let _ = l.channel.segments.push(&Slot::segment(s));
+        }
+        for _ in 0..100 {
+            period();
+            assert!(!bit("nurbs_interp.active"), "{name}: moved after the fault");
+        }
+        assert_eq!(out().q, held, "{name}");
+    }
+    // A path block in a segment motion.
+    let l = load();
+    let _w = raw_stream(&l, &job);
+    l.channel.segments.push(&Slot::segment(&slots[0])).unwrap();
+    let mut block = Slot::segment(&slots[1]);
+    block.kind = KIND_BLOCK;
+    l.channel.segments.push(&block).unwrap();
+    for _ in 0..job.samples.len() {
+        period();
+        if bit("nurbs_interp.fault") {
+            break;
+        }
+    }
+    assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::RecordKind as u32);
+}
+
+/// The plan streamed from its own thread while the module runs (as `nurbs-planner` runs it):
+/// the module starts once the start rule holds, runs with no underrun and equals the offline
+/// streamed plan bit for bit.
+#[test]
+fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
+    let _guard = lock_module();
+    let job = job_of(g1_zigzag(60));
+    let l = load();
+    let path = std::sync::Arc::new(job.toolpath.clone());
+    let source = Source::streamed(path, job.limits.clone(), None);
+    let began = Instant::now();
+    let mut s = Streamer::new(l.channel, &job.toolpath, source, 0, 0.5, began).unwrap();
+    // The module at 8 times the real pace (the planner is far faster than that here).
+    let mut pace = |k: usize| {
+        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 8.0 {
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+    };
+    let got = run(&mut s, job.samples.len() + 200_000, &mut pace, &mut |_| {
+        bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held")
+    });
+    assert_exact("streamed zigzag", &got, &job.samples, 2);
+    assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+}
+
+/// A new geometry stream starts a new motion after a motion that is done, stopped by an
+/// underrun (and aborted), or aborted before it started: each runs the whole trident exactly.
+#[test]
+fn a_new_stream_starts_a_new_motion_after_done_underrun_or_abort() {
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let l = load();
+    let whole = |l: &Loaded| {
+        let mut s = streamer(l, &job.toolpath, job.groups.clone(), 0);
+        let got = run_to_rest(&mut s, job.samples.len() + 100);
+        assert_exact("trident", &got, &job.samples, 2);
+    };
+    whole(&l);
+    // Done, then a new motion.
+    whole(&l);
+    // An underrun stop, aborted, then a new motion.
+    {
+        let mut s = streamer(&l, &job.toolpath, job.groups[..2].to_vec(), 0);
+        run_to_rest(&mut s, job.samples.len());
+        assert!(bit("nurbs_interp.held"));
+    }
+    set_bit("nurbs_interp.abort", true);
+    period();
+    set_bit("nurbs_interp.abort", false);
+    period();
+    whole(&l);
+}

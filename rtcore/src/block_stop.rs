@@ -1,0 +1,103 @@
+//! The module's stop after a path block (VPOp plans: per-period positions), as pure functions:
+//! the realtime module runs them on the servo thread and the planner runs the same code to
+//! check the stop from every block end.
+
+use crate::records::{PathBlock, SegmentRecord, FLAG_LAST};
+use crate::scurve::{stop_from, SCurveTable};
+
+/// Distance into a stop profile at which its (falling) feed has come down to `v` (a 60-step
+/// bisection).
+fn distance_at_feed(table: &SCurveTable, v: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, table.total_time());
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        if table.state_at(mid).v > v {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    table.state_at(hi).s
+}
+
+/// Largest ratio of a path-block step's arc length to its chord: a step turns less than a half
+/// circle (arc / chord of a semicircle = pi / 2). Only catches arc lengths that do not belong to
+/// the positions; the planner's own arc lengths are exact.
+const ARC_PER_CHORD: f64 = core::f64::consts::FRAC_PI_2;
+
+/// A step's chord fits its arc length: no longer (to rounding), and not shorter than 2/pi of it.
+pub fn step_fits(chord: f64, ds: f64) -> bool {
+    chord <= ds * (1.0 + 1e-9) + 1e-9 && ds <= ARC_PER_CHORD * chord + 1e-9
+}
+
+/// The state a stop after `block` starts from: arc length, feed and tangential acceleration at
+/// its last sample, from the quadratic through its last three arc lengths (backward
+/// differences of period `dt`, centred at the last sample).
+pub fn block_end_state(block: &PathBlock, dt: f64) -> (f64, f64, f64) {
+    let n = block.len() + 1; // index of the last sample in `s_history`
+    let (s0, s1, s2) = (
+        block.s_history(n),
+        block.s_history(n.saturating_sub(1)),
+        block.s_history(n.saturating_sub(2)),
+    );
+    let a = (s0 - 2.0 * s1 + s2) / (dt * dt);
+    let v = (3.0 * s0 - 4.0 * s1 + s2) / (2.0 * dt);
+    (s0, v, a)
+}
+
+/// The stop the module runs after `block` (an underrun, hold or abort at its end): from the
+/// block's end state ([`block_end_state`]) to rest along its curve with the block's checked
+/// deceleration and jerk, both raised (deceleration by `k`, jerk by `k^2`) just enough to pass
+/// every stop point of the curve (`points`, `(s, feed cap)` pairs) no faster than its cap.
+/// Returns the stop as a record (start, curve, profile) and its start acceleration (for
+/// [`SCurve::table_from`](crate::SCurve::table_from)). Bounded work: for each stop point the
+/// stop reaches too fast, a 40-step bisection of `k` with a 60-step bisection inside.
+pub fn block_stop(points: &[f64], block: &PathBlock, dt: f64) -> (SegmentRecord, f64) {
+    let (s0, v0, a0) = block_end_state(block, dt);
+    let (accel, jerk) = (block.stop_accel, block.stop_jerk);
+    let profile = |k: f64| stop_from(v0, a0, accel * k, jerk * k * k);
+    let reach = profile(1.0).table_from(a0).length();
+    let mut k = 1.0f64;
+    for pair in points.chunks_exact(2) {
+        if let [s, cap] = *pair {
+            let d = s - s0;
+            let fits = |k: f64| distance_at_feed(&profile(k).table_from(a0), cap) <= 0.999 * d;
+            if d > 1e-9 && d < reach && cap < v0 && !fits(k) {
+                let (mut lo, mut hi) = (k, k * 2.0);
+                for _ in 0..40 {
+                    if fits(hi) {
+                        break;
+                    }
+                    lo = hi;
+                    hi *= 2.0;
+                }
+                for _ in 0..40 {
+                    let mid = 0.5 * (lo + hi);
+                    if fits(mid) {
+                        hi = mid;
+                    } else {
+                        lo = mid;
+                    }
+                }
+                k = hi;
+            }
+        }
+    }
+    let p = profile(k);
+    let last = block.len().saturating_sub(1);
+    let u = block.u.get(last).copied().unwrap_or(0.0);
+    let record = SegmentRecord {
+        seq: block.seq,
+        flags: block.flags & !FLAG_LAST,
+        curve: block.curve,
+        reserved: 0,
+        u_start: u,
+        u_end: u,
+        s_start: s0,
+        length: p.table_from(a0).length().max(0.0),
+        feed_start: p.feed_start,
+        durations: p.durations,
+        jerks: p.jerks,
+    };
+    (record, if p.feed_start > 0.0 { a0 } else { 0.0 })
+}
