@@ -3,8 +3,10 @@ use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
 use crate::planner::axial::{FiniteDifferences, MAX_AXES};
-use crate::planner::simulate::{setpoints_with, Interpolation};
-use crate::planner::{plan, PlanOptions};
+use crate::planner::corner::{Deviation, ProgramPolyline};
+use crate::planner::simulate::{run_segment, setpoints_with, Interpolation, SimState};
+use crate::planner::{FinalRecord, PathCurves, PlanOptions, Planner};
+use nurbs_rtcore::executor::Sample;
 use std::io::Write;
 use std::path::Path;
 
@@ -98,74 +100,101 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         stream: args.stream,
         ..PlanOptions::default()
     };
-    // A streamed plan hands records out before it ends: on the machine they would be running.
-    let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
-    let plan = plan(toolpath, &limits, &options, &mut |r| {
-        handed_out += 1;
-        handed_out_time += r.profile().total_time();
-    })
-    .map_err(|e| match args.stream {
-        true => {
-            let plural = if handed_out == 1 { "" } else { "s" };
-            format!("{e} ({handed_out} record{plural} had been handed out: {handed_out_time:.3} s of motion)")
-        }
-        false => e.to_string(),
-    })?;
-    let samples = setpoints_with(toolpath, &plan.limits, &plan.records, args.interp);
     let tip = toolpath.tip_dim();
     let names = ["x", "y", "z"];
-    let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
-    writeln!(out, "t,u,{},feed,element", names[..tip].join(","))?;
-    let mut check = FiniteDifferences::new(tip, plan.limits.period);
-    for (j, s) in samples.iter().enumerate() {
-        // `{:?}` prints the shortest string that parses back to the same f64.
-        write!(out, "{:?},{:?}", j as f64 * plan.limits.period, s.u)?;
-        for c in &s.point[..tip] {
-            write!(out, ",{c:?}")?;
+    let curves = PathCurves::new(toolpath);
+    // RK2-PC setpoints are written as each record comes (a program of any length in constant
+    // memory); the comparison methods and the plot need them all.
+    let keep = args.plot.is_some() || args.interp != Interpolation::Rk2pc;
+    let mut sink = SetpointSink::create(args.out, &names[..tip], &limits, prepared.program.as_ref(), !keep)?;
+    let mut planner = Planner::new(toolpath, &limits, &options)?;
+    let mut state = SimState::start(tip, limits.period);
+    let (mut records, mut critical_points, mut groups) = (Vec::new(), Vec::new(), Groups::default());
+    let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
+    while let Some(next) = planner.next_final() {
+        let f = next.map_err(|e| match args.stream {
+            // A streamed plan hands records out before it ends: on the machine they would be running.
+            true => {
+                let plural = if handed_out == 1 { "" } else { "s" };
+                format!("{e} ({handed_out} record{plural} had been handed out: {handed_out_time:.3} s of motion)")
+            }
+            false => e.to_string(),
+        })?;
+        handed_out += 1;
+        handed_out_time += f.record.profile().total_time();
+        groups.push(&f);
+        let found = planner.take_critical_points();
+        if args.plot.is_some() {
+            critical_points.extend(found);
+        } else {
+            groups.critical_points += found.len();
         }
-        writeln!(out, ",{:?},{}", s.feed, s.curve)?;
-        check.push(&s.point[..tip], &plan.limits);
+        if keep {
+            records.push(f.record);
+        } else {
+            let sink = &mut sink;
+            let mut error = None;
+            run_segment(&curves, &limits, &mut state, f.record, &mut |s| {
+                if let Err(e) = sink.push(s) {
+                    error.get_or_insert(e);
+                }
+            });
+            error.map_or(Ok(()), Err)?;
+        }
     }
-    check.finish(&plan.limits);
-    out.flush()?;
-    let motion_time = (samples.len().saturating_sub(1)) as f64 * plan.limits.period;
+    groups.critical_points += planner.take_critical_points().len() + critical_points.len();
+    let report = planner.finish();
+    if keep {
+        for s in setpoints_with(toolpath, &report.limits, &records, args.interp) {
+            sink.push(&s)?;
+        }
+    }
+    let out = sink.finish()?;
+    let motion_time = out.rows.saturating_sub(1) as f64 * report.limits.period;
     eprintln!(
         "planned {} segments, {} critical points: motion {:.6} s ({} setpoints), planning {:.3} ms{}",
-        plan.records.len(),
-        plan.critical_points.len(),
+        report.records,
+        groups.critical_points,
         motion_time,
-        samples.len(),
-        plan.plan_time * 1e3,
+        out.rows,
+        report.plan_time * 1e3,
         if args.stream {
-            format!(" (first segment final after {:.3} ms)", plan.first_record_time * 1e3)
+            format!(
+                " (first segment final after {:.3} ms; {} groups, the longest {:.3} s of motion)",
+                report.first_record_time * 1e3,
+                groups.count,
+                groups.longest
+            )
         } else {
             String::new()
         }
     );
-    let deviation = prepared.deviation_from_program(samples.iter().map(|s| &s.point[..tip]));
-    if let Some(line) = prepared.describe(deviation, plan.limits.chord_tolerance) {
+    if let Some(line) = prepared.describe(out.deviation, report.limits.chord_tolerance) {
         eprintln!("{line}");
     }
     if let Some(path) = args.summary {
         let summary = with_fields(
-            summary_common(&args, "erwinski", &plan.limits, &check, tip),
+            summary_common(&args, "erwinski", &report.limits, &out.check, tip),
             serde_json::json!({
                 "motion_time_s": motion_time,
-                "profile_time_s": plan.motion_time,
-                "plan_time_s": plan.plan_time,
-                "first_segment_time_s": plan.first_record_time,
+                "profile_time_s": report.motion_time,
+                "plan_time_s": report.plan_time,
+                "first_segment_time_s": report.first_record_time,
                 "interpolation": format!("{:?}", args.interp).to_lowercase(),
                 "streamed": args.stream,
-                "segments": plan.records.len(),
-                "critical_points": plan.critical_points.len(),
-                "setpoints": samples.len(),
+                "segments": report.records,
+                "critical_points": groups.critical_points,
+                "setpoints": out.rows,
+                "groups": groups.count,
+                "longest_group_s": groups.longest,
             }),
         );
-        let summary = with_fields(summary, prepared.summary_fields(deviation));
+        let summary = with_fields(summary, prepared.summary_fields(out.deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
     if let Some(path) = args.plot {
-        let points: Vec<PlotSample> = samples
+        let points: Vec<PlotSample> = out
+            .samples
             .iter()
             .map(|s| {
                 let mut q = [0.0; MAX_AXES];
@@ -180,18 +209,111 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             .collect();
         let profile = Profile {
             toolpath,
-            limits: &plan.limits,
+            limits: &report.limits,
             axes: &names[..tip],
             rotary_from: tip,
             samples: &points,
             flf: true,
-            critical_points: &plan.critical_points,
-            title: plot_title(&args, "erwinski planner", &plan.limits, motion_time),
+            critical_points: &critical_points,
+            title: plot_title(&args, "erwinski planner", &report.limits, motion_time),
         };
         write_png(path, &profile)?;
         eprintln!("plot written to {}", path.display());
     }
     Ok(())
+}
+
+/// Groups of final records (the records between two stops, [`FinalRecord`]): how many, and
+/// the longest in motion time (how long a hold may wait for a stop).
+#[derive(Default)]
+struct Groups {
+    count: usize,
+    longest: f64,
+    running: f64,
+    critical_points: usize,
+}
+
+impl Groups {
+    fn push(&mut self, f: &FinalRecord) {
+        self.running += f.record.profile().total_time();
+        if f.stop.is_some() || f.record.is_last() {
+            self.count += 1;
+            self.longest = self.longest.max(self.running);
+            self.running = 0.0;
+        }
+    }
+}
+
+/// Where setpoints go: the CSV, the finite-difference check, the distance to the programmed
+/// polyline, and (when asked) a copy of every sample.
+struct SetpointSink<'a> {
+    out: std::io::BufWriter<std::fs::File>,
+    limits: &'a crate::planner::Limits,
+    axes: usize,
+    check: FiniteDifferences,
+    program: Option<(&'a ProgramPolyline, Deviation)>,
+    rows: usize,
+    samples: Option<Vec<Sample>>,
+}
+
+/// What a [`SetpointSink`] took.
+struct Written {
+    rows: usize,
+    check: FiniteDifferences,
+    deviation: Option<f64>,
+    samples: Vec<Sample>,
+}
+
+impl<'a> SetpointSink<'a> {
+    fn create(
+        path: &Path,
+        names: &[&str],
+        limits: &'a crate::planner::Limits,
+        program: Option<&'a ProgramPolyline>,
+        streaming: bool,
+    ) -> Result<Self, Box<dyn std::error::Error>> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(out, "t,u,{},feed,element", names.join(","))?;
+        Ok(SetpointSink {
+            out,
+            limits,
+            axes: names.len(),
+            check: FiniteDifferences::new(names.len(), limits.period),
+            program: program.map(|p| (p, Deviation::default())),
+            rows: 0,
+            samples: (!streaming).then(Vec::new),
+        })
+    }
+
+    fn push(&mut self, s: &Sample) -> std::io::Result<()> {
+        let q = &s.point[..self.axes];
+        // `{:?}` prints the shortest string that parses back to the same f64.
+        write!(self.out, "{:?},{:?}", self.rows as f64 * self.limits.period, s.u)?;
+        for c in q {
+            write!(self.out, ",{c:?}")?;
+        }
+        writeln!(self.out, ",{:?},{}", s.feed, s.curve)?;
+        self.check.push(q, self.limits);
+        if let Some((polyline, d)) = &mut self.program {
+            d.push(polyline, q);
+        }
+        if let Some(all) = &mut self.samples {
+            all.push(*s);
+        }
+        self.rows += 1;
+        Ok(())
+    }
+
+    fn finish(mut self) -> std::io::Result<Written> {
+        self.check.finish(self.limits);
+        self.out.flush()?;
+        Ok(Written {
+            rows: self.rows,
+            check: self.check,
+            deviation: self.program.map(|(_, d)| d.worst),
+            samples: self.samples.unwrap_or_default(),
+        })
+    }
 }
 
 /// `--planner vpop`: the tool-tip path planned by constraint intersection at the servo period

@@ -1,52 +1,100 @@
 use super::corners::{prepare, Prepared, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::LimitArgs;
-use crate::planner::verify::{verify, Row};
+use crate::planner::corner::Deviation;
+use crate::planner::verify::{verify, Row, Verifier};
 use crate::planner::PathCurves;
 use std::path::Path;
 
-/// Reads a setpoint CSV written by `plan` (columns t,u,x,y[,z] then optional extras; an
-/// `element` column selects the path element, 0 otherwise).
-pub fn read_rows(path: &Path, tip: usize) -> Result<Vec<Row>, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines
-        .next()
-        .ok_or_else(|| format!("{}: empty file", path.display()))?
-        .split(',')
-        .collect();
-    let col = |name: &str| header.iter().position(|h| h.trim() == name);
-    let (Some(ct), Some(cu)) = (col("t"), col("u")) else {
-        return Err(format!("{}: header must start with t,u,x,y", path.display()));
-    };
-    let axes: Vec<usize> = ["x", "y", "z"][..tip]
-        .iter()
-        .map(|n| col(n).ok_or_else(|| format!("{}: no column {n}", path.display())))
-        .collect::<Result<_, _>>()?;
-    let ce = col("element");
-    let mut rows = Vec::new();
-    for (i, line) in lines.enumerate() {
-        if line.trim().is_empty() {
-            continue;
-        }
-        let f: Vec<&str> = line.split(',').collect();
-        let num = |c: usize| -> Result<f64, String> {
-            f.get(c)
-                .and_then(|v| v.trim().parse::<f64>().ok())
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| format!("{}:{}: column {} is not a number", path.display(), i + 2, c + 1))
+/// The rows of a setpoint CSV written by `plan` (columns t,u,x,y[,z] then optional extras; an
+/// `element` column selects the path element, 0 otherwise), read one line at a time.
+pub struct RowReader {
+    path: std::path::PathBuf,
+    lines: std::io::Lines<std::io::BufReader<std::fs::File>>,
+    line: usize,
+    t: usize,
+    u: usize,
+    axes: Vec<usize>,
+    element: Option<usize>,
+}
+
+impl RowReader {
+    pub fn open(path: &Path, tip: usize) -> Result<Self, String> {
+        use std::io::BufRead;
+        let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut lines = std::io::BufReader::new(file).lines();
+        let header: Vec<String> = lines
+            .next()
+            .ok_or_else(|| format!("{}: empty file", path.display()))?
+            .map_err(|e| format!("{}: {e}", path.display()))?
+            .split(',')
+            .map(|h| h.trim().to_owned())
+            .collect();
+        let col = |name: &str| header.iter().position(|h| h == name);
+        let (Some(t), Some(u)) = (col("t"), col("u")) else {
+            return Err(format!("{}: header must start with t,u,x,y", path.display()));
         };
-        rows.push(Row {
-            t: num(ct)?,
-            u: num(cu)?,
-            curve: match ce {
-                Some(c) => num(c)? as usize,
-                None => 0,
-            },
-            q: axes.iter().map(|&c| num(c)).collect::<Result<_, _>>()?,
-        });
+        let axes: Vec<usize> = ["x", "y", "z"][..tip]
+            .iter()
+            .map(|n| col(n).ok_or_else(|| format!("{}: no column {n}", path.display())))
+            .collect::<Result<_, _>>()?;
+        Ok(RowReader {
+            path: path.to_owned(),
+            lines,
+            line: 1,
+            t,
+            u,
+            axes,
+            element: col("element"),
+        })
     }
-    Ok(rows)
+}
+
+impl Iterator for RowReader {
+    type Item = Result<Row, String>;
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            self.line += 1;
+            let line = match self.lines.next()? {
+                Ok(line) => line,
+                Err(e) => return Some(Err(format!("{}: {e}", self.path.display()))),
+            };
+            if line.trim().is_empty() {
+                continue;
+            }
+            let f: Vec<&str> = line.split(',').collect();
+            let num = |c: usize| -> Result<f64, String> {
+                f.get(c)
+                    .and_then(|v| v.trim().parse::<f64>().ok())
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        format!(
+                            "{}:{}: column {} is not a number",
+                            self.path.display(),
+                            self.line,
+                            c + 1
+                        )
+                    })
+            };
+            let row = (|| {
+                Ok(Row {
+                    t: num(self.t)?,
+                    u: num(self.u)?,
+                    curve: match self.element {
+                        Some(c) => num(c)? as usize,
+                        None => 0,
+                    },
+                    q: self.axes.iter().map(|&c| num(c)).collect::<Result<_, String>>()?,
+                })
+            })();
+            return Some(row);
+        }
+    }
+}
+
+/// Every row of a setpoint CSV ([`RowReader`]).
+pub fn read_rows(path: &Path, tip: usize) -> Result<Vec<Row>, String> {
+    RowReader::open(path, tip)?.collect()
 }
 
 /// Columns `names` of a CSV with a header, as numbers.
@@ -201,12 +249,17 @@ fn check_program_deviation<'a>(
     violations: &mut Vec<String>,
 ) -> Option<f64> {
     let deviation = prepared.deviation_from_program(tips);
+    report_deviation(deviation, tolerance, violations);
+    deviation
+}
+
+/// A violation when the largest distance to the programmed polyline exceeds --chord-tol.
+fn report_deviation(deviation: Option<f64>, tolerance: f64, violations: &mut Vec<String>) {
     if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + crate::planner::verify::SLACK)) {
         violations.push(format!(
             "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}"
         ));
     }
-    deviation
 }
 
 /// One line on the programmed feeds, when the toolpath has them.
@@ -243,16 +296,21 @@ pub fn run(
         setpoints.display()
     ))?;
     let limits = limits.limits(toolpath.tip_dim())?;
-    let rows = read_rows(setpoints, toolpath.tip_dim())?;
-    let curves = PathCurves::new(toolpath);
-    let mut report = verify(&curves, &limits, &rows);
     let tip = toolpath.tip_dim();
-    let deviation = check_program_deviation(
-        &prepared,
-        rows.iter().map(|r| &r.q[..tip]),
-        limits.chord_tolerance,
-        &mut report.violations,
-    );
+    let curves = PathCurves::new(toolpath);
+    // A row at a time: a setpoint file of any length in constant memory.
+    let mut verifier = Verifier::new(&curves, &limits);
+    let mut deviation = prepared.program.as_ref().map(|p| (p, Deviation::default()));
+    for row in RowReader::open(setpoints, tip)? {
+        let row = row?;
+        verifier.push(&row);
+        if let Some((p, d)) = &mut deviation {
+            d.push(p, &row.q[..tip]);
+        }
+    }
+    let mut report = verifier.finish();
+    let deviation = deviation.map(|(_, d)| d.worst);
+    report_deviation(deviation, limits.chord_tolerance, &mut report.violations);
     println!(
         "{} setpoints ({:.6} s): max |v| {:?}, |a| {:?}, |jerk| {:?}; max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
         report.rows,

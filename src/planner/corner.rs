@@ -317,23 +317,52 @@ impl ProgramPolyline {
     /// checked against the segments next to the previous point's nearest one and only scanned
     /// against all segments when that cannot rule it out.
     pub fn max_distance<'a>(&self, points: impl IntoIterator<Item = &'a [f64]>) -> f64 {
-        let segs = self.vertices.len().saturating_sub(1).max(1);
-        let mut worst: f64 = 0.0;
-        let mut hint = 0usize;
+        let mut d = Deviation::default();
         for x in points {
-            let near = (hint.saturating_sub(1)..(hint + 3).min(segs))
-                .map(|i| self.segment(i, x))
-                .fold(f64::INFINITY, f64::min);
-            if near <= worst {
-                continue;
-            }
-            let (best, d) = (0..segs)
-                .map(|i| (i, self.segment(i, x)))
-                .fold((hint, f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
-            hint = best;
-            worst = worst.max(d);
+            d.push(self, x);
         }
-        worst
+        d.worst
+    }
+}
+
+/// [`ProgramPolyline::max_distance`] a point at a time (for setpoints that are not kept).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Deviation {
+    /// The largest distance so far.
+    pub worst: f64,
+    hint: usize,
+}
+
+impl Deviation {
+    pub fn push(&mut self, polyline: &ProgramPolyline, x: &[f64]) {
+        let segs = polyline.vertices.len().saturating_sub(1).max(1);
+        // Setpoints run along the polyline: follow them from the last nearest segment downhill
+        // (a setpoint may be many short segments on), and scan every segment only when that
+        // cannot rule the point out (the path may pass near an earlier part of itself).
+        let d = |i: usize| polyline.segment(i, x);
+        let (mut i, mut near) = (self.hint.min(segs - 1), d(self.hint.min(segs - 1)));
+        for step in [1isize, -1] {
+            loop {
+                let j = i as isize + step;
+                if j < 0 || j as usize >= segs {
+                    break;
+                }
+                let dj = d(j as usize);
+                if dj >= near {
+                    break;
+                }
+                (i, near) = (j as usize, dj);
+            }
+        }
+        self.hint = i;
+        if near <= self.worst {
+            return;
+        }
+        let (best, dmin) = (0..segs)
+            .map(|i| (i, d(i)))
+            .fold((i, near), |a, b| if b.1 < a.1 { b } else { a });
+        self.hint = best;
+        self.worst = self.worst.max(dmin);
     }
 }
 

@@ -77,7 +77,8 @@ pub struct FinalRecord {
 #[derive(Clone, Debug)]
 pub struct PlanReport {
     pub motion_time: f64,
-    /// Wall time spent planning (s) and until the first record was ready (s).
+    /// Wall time spent planning (in [`Planner::next_final`], s) and from [`Planner::new`]
+    /// until the first record was ready (s).
     pub plan_time: f64,
     pub first_record_time: f64,
     /// Records handed out.
@@ -217,6 +218,9 @@ pub struct Planner<'a> {
     first_absorber_failed: Option<(SegmentRecord, f64)>,
     failed: bool,
     started: Instant,
+    /// Time spent planning (in [`Planner::next_final`]), what the caller does between calls
+    /// not counted (s).
+    busy: f64,
     first_record_time: Option<f64>,
     /// Nominal tangential acceleration and jerk.
     accel: f64,
@@ -294,6 +298,7 @@ impl<'a> Planner<'a> {
             stream: options.stream,
             failed: false,
             started,
+            busy: 0.0,
             first_record_time: None,
             accel: limits.min_accel(),
             jerk: limits.min_jerk(),
@@ -309,6 +314,13 @@ impl<'a> Planner<'a> {
     /// The next final record with the stop after it, planning as far as that needs; `None`
     /// after the last one.
     pub fn next_final(&mut self) -> Option<Result<FinalRecord, PlanError>> {
+        let began = Instant::now();
+        let next = self.plan_next();
+        self.busy += began.elapsed().as_secs_f64();
+        next
+    }
+
+    fn plan_next(&mut self) -> Option<Result<FinalRecord, PlanError>> {
         while !self.failed {
             if self.emitted < self.settled {
                 self.emitted += 1;
@@ -381,7 +393,7 @@ impl<'a> Planner<'a> {
         let samples = self.states.last().map_or(0, |s| s.samples);
         PlanReport {
             motion_time: samples.saturating_sub(1) as f64 * self.limits.period,
-            plan_time: self.started.elapsed().as_secs_f64(),
+            plan_time: self.busy,
             first_record_time: self.first_record_time.unwrap_or(0.0),
             records: self.emitted,
             limits: self.limits,

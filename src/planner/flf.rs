@@ -123,6 +123,14 @@ pub struct CriticalPoint {
     pub flf: f64,
 }
 
+/// Closest spacing of FLF samples on a curve's control polygon (mm): far below any chord
+/// tolerance or servo step that matters, and far above what a 0.02 mm G1 line at 500 samples
+/// per control point would get.
+pub const MIN_SAMPLE_SPACING: f64 = 1e-4;
+
+/// FLF samples per control point at least, however short the curve.
+pub const MIN_SAMPLES_PER_POINT: usize = 16;
+
 /// FLF samples over a curve: `u[i]`, `value[i]` (full FLF) and `speed[i]` (speed caps only).
 ///
 /// The samples can be taken lazily, front to back ([`FlfScan::lazy`], [`FlfScan::extend`]);
@@ -144,10 +152,32 @@ impl FlfScan {
         scan
     }
 
-    /// The scan of step 1 with no samples taken yet.
+    /// The scan of step 1 with no samples taken yet: `per_point` samples per control point,
+    /// but on a short curve no closer than [`MIN_SAMPLE_SPACING`] on its control polygon (at
+    /// least [`MIN_SAMPLES_PER_POINT`] per control point): the paper's density was chosen for
+    /// curves of tens of millimetres, and a 0.02 mm G1 line would otherwise get 1,000 samples.
     pub fn lazy(curve: &CurveView, per_point: usize) -> Self {
+        let n = curve.control_point_count();
+        // The tool tip's polygon (a 6-D curve's top coordinates come after its first three).
+        let (dim, stride) = (curve.dim().min(3), curve.dim().max(1));
+        let p = curve.points();
+        let polygon: f64 = (1..n)
+            .map(|k| {
+                (0..dim)
+                    .map(|i| (p[k * stride + i] - p[(k - 1) * stride + i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
+            .sum();
+        let by_length = (polygon / MIN_SAMPLE_SPACING).ceil();
+        let floor = n * MIN_SAMPLES_PER_POINT;
+        let steps = if by_length.is_finite() && by_length < (n * per_point) as f64 {
+            (by_length as usize).max(floor).min(n * per_point)
+        } else {
+            n * per_point
+        };
         FlfScan {
-            steps: (curve.control_point_count() * per_point).max(2),
+            steps: steps.max(2),
             ..FlfScan::default()
         }
     }

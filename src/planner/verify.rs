@@ -34,58 +34,77 @@ pub struct Report {
 pub const SLACK: f64 = 1e-6;
 
 pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
-    let tip = limits.velocity.len();
-    let mut report = Report {
-        rows: rows.len(),
-        ..Default::default()
-    };
-    if rows.is_empty() {
-        report.violations.push("no setpoints".into());
-        return report;
-    }
-    let mut fd = FiniteDifferences::new(tip, limits.period);
+    let mut v = Verifier::new(curves, limits);
     for r in rows {
-        fd.push(&r.q, limits);
+        v.push(r);
     }
-    fd.finish(limits);
-    report.peaks = fd.peaks;
-    for i in 0..tip {
-        for (name, peak, limit) in [
-            ("velocity", fd.peaks.vel[i], limits.velocity[i]),
-            ("acceleration", fd.peaks.acc[i], limits.acceleration[i]),
-            ("jerk", fd.peaks.jerk[i], limits.jerk[i]),
-        ] {
-            if peak > limit * (1.0 + SLACK) {
-                report
-                    .violations
-                    .push(format!("axis {i}: {name} {peak:.6} exceeds limit {limit}"));
-            }
+    v.finish()
+}
+
+/// [`verify`] a row at a time, in constant memory (a setpoint file of any length).
+pub struct Verifier<'a> {
+    curves: &'a PathCurves<'a>,
+    limits: &'a Limits,
+    tip: usize,
+    fd: FiniteDifferences,
+    report: Report,
+    /// The first and the previous row.
+    first: Option<Row>,
+    prev: Option<Row>,
+    /// Violations found row by row, in order; the first row on an element that does not exist
+    /// ends the row checks.
+    row_violations: Vec<String>,
+    missing: Option<String>,
+}
+
+impl<'a> Verifier<'a> {
+    pub fn new(curves: &'a PathCurves<'a>, limits: &'a Limits) -> Self {
+        let tip = limits.velocity.len();
+        Verifier {
+            curves,
+            limits,
+            tip,
+            fd: FiniteDifferences::new(tip, limits.period),
+            report: Report::default(),
+            first: None,
+            prev: None,
+            row_violations: Vec::new(),
+            missing: None,
         }
     }
-    let point = |r: &Row| -> Option<nurbs_rtcore::Vector> { curves.curve(r.curve).map(|c| c.point(r.u)) };
-    use nurbs_rtcore::executor::CurveSet;
-    let mut prev: Option<&Row> = None;
-    for r in rows {
-        let Some(p) = point(r) else {
-            report
-                .violations
-                .push(format!("t={}: element {} does not exist", r.t, r.curve));
-            return report;
+
+    pub fn push(&mut self, r: &Row) {
+        use nurbs_rtcore::executor::CurveSet;
+        let (limits, tip) = (self.limits, self.tip);
+        self.report.rows += 1;
+        self.fd.push(&r.q, limits);
+        if self.first.is_none() {
+            self.first = Some(r.clone());
+        }
+        if self.missing.is_some() {
+            self.prev = Some(r.clone());
+            return;
+        }
+        let Some(p) = self.curves.curve(r.curve).map(|c| c.point(r.u)) else {
+            self.missing = Some(format!("t={}: element {} does not exist", r.t, r.curve));
+            self.prev = Some(r.clone());
+            return;
         };
+        let report = &mut self.report;
         let mut q = [0.0; nurbs_rtcore::MAX_DIM];
         q[..tip].copy_from_slice(&r.q[..tip]);
         let d = norm(&sub(&p, &q), tip);
         report.max_distance_to_curve = report.max_distance_to_curve.max(d);
-        if let Some(a) = prev {
+        if let Some(a) = &self.prev {
             let mut qa = [0.0; nurbs_rtcore::MAX_DIM];
             qa[..tip].copy_from_slice(&a.q[..tip]);
             let step = norm(&sub(&q, &qa), tip);
             report.max_feed = report.max_feed.max(step / limits.period);
-            if let Some(programmed) = programmed_feed(curves, a.curve, r.curve) {
+            if let Some(programmed) = programmed_feed(self.curves, a.curve, r.curve) {
                 let ratio = step / limits.period / programmed;
                 if ratio > 1.0 + SLACK && report.max_programmed_feed_ratio <= 1.0 + SLACK {
                     // The first overrun: where it starts.
-                    report.violations.push(format!(
+                    self.row_violations.push(format!(
                         "t={}: feed {:.6} exceeds the programmed feed {programmed} of element {}",
                         r.t,
                         step / limits.period,
@@ -95,47 +114,80 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
                 report.max_programmed_feed_ratio = report.max_programmed_feed_ratio.max(ratio);
             }
             if a.curve == r.curve && r.u > a.u {
-                let view = curves.curve(r.curve).unwrap();
-                report.max_chord_error = report.max_chord_error.max(chord_error(&view, tip, a.u, r.u, &qa, &q));
+                if let Some(view) = self.curves.curve(r.curve) {
+                    report.max_chord_error = report.max_chord_error.max(chord_error(&view, tip, a.u, r.u, &qa, &q));
+                }
             }
         }
-        prev = Some(r);
+        self.prev = Some(r.clone());
     }
-    if report.max_feed > limits.feed * (1.0 + SLACK) {
+
+    pub fn finish(mut self) -> Report {
+        use nurbs_rtcore::executor::CurveSet;
+        let (limits, tip) = (self.limits, self.tip);
+        let mut report = std::mem::take(&mut self.report);
+        let (Some(first_row), Some(last_row)) = (self.first.take(), self.prev.take()) else {
+            report.violations.push("no setpoints".into());
+            return report;
+        };
+        let mut fd = self.fd;
+        fd.finish(limits);
+        report.peaks = fd.peaks;
+        for i in 0..tip {
+            for (name, peak, limit) in [
+                ("velocity", fd.peaks.vel[i], limits.velocity[i]),
+                ("acceleration", fd.peaks.acc[i], limits.acceleration[i]),
+                ("jerk", fd.peaks.jerk[i], limits.jerk[i]),
+            ] {
+                if peak > limit * (1.0 + SLACK) {
+                    report
+                        .violations
+                        .push(format!("axis {i}: {name} {peak:.6} exceeds limit {limit}"));
+                }
+            }
+        }
+        report.violations.append(&mut self.row_violations);
+        if let Some(missing) = self.missing {
+            report.violations.push(missing);
+            return report;
+        }
+        if report.max_feed > limits.feed * (1.0 + SLACK) {
+            report
+                .violations
+                .push(format!("feed {:.6} exceeds {}", report.max_feed, limits.feed));
+        }
+        if report.max_chord_error > limits.chord_tolerance * (1.0 + SLACK) {
+            report.violations.push(format!(
+                "chord error {:.3e} exceeds {}",
+                report.max_chord_error, limits.chord_tolerance
+            ));
+        }
+        if report.max_distance_to_curve > 1e-6 {
+            report.violations.push(format!(
+                "a setpoint is {:.3e} mm off the curve",
+                report.max_distance_to_curve
+            ));
+        }
+        let curves = self.curves;
+        let first = curves.curve(0).map(|c| c.point(c.u_min()));
+        let last = curves.curve(curves.len() - 1).map(|c| c.point(c.u_max()));
+        let end_gap = |row: &Row, p: Option<nurbs_rtcore::Vector>| -> f64 {
+            let mut q = [0.0; nurbs_rtcore::MAX_DIM];
+            q[..tip].copy_from_slice(&row.q[..tip]);
+            p.map_or(f64::INFINITY, |p| norm(&sub(&p, &q), tip))
+        };
+        if end_gap(&first_row, first) > 1e-9 {
+            report
+                .violations
+                .push("the first setpoint is not the start of the path".into());
+        }
+        if end_gap(&last_row, last) > 1e-9 {
+            report
+                .violations
+                .push("the last setpoint is not the end of the path".into());
+        }
         report
-            .violations
-            .push(format!("feed {:.6} exceeds {}", report.max_feed, limits.feed));
     }
-    if report.max_chord_error > limits.chord_tolerance * (1.0 + SLACK) {
-        report.violations.push(format!(
-            "chord error {:.3e} exceeds {}",
-            report.max_chord_error, limits.chord_tolerance
-        ));
-    }
-    if report.max_distance_to_curve > 1e-6 {
-        report.violations.push(format!(
-            "a setpoint is {:.3e} mm off the curve",
-            report.max_distance_to_curve
-        ));
-    }
-    let first = curves.curve(0).map(|c| c.point(c.u_min()));
-    let last = curves.curve(curves.len() - 1).map(|c| c.point(c.u_max()));
-    let end_gap = |row: &Row, p: Option<nurbs_rtcore::Vector>| -> f64 {
-        let mut q = [0.0; nurbs_rtcore::MAX_DIM];
-        q[..tip].copy_from_slice(&row.q[..tip]);
-        p.map_or(f64::INFINITY, |p| norm(&sub(&p, &q), tip))
-    };
-    if end_gap(&rows[0], first) > 1e-9 {
-        report
-            .violations
-            .push("the first setpoint is not the start of the path".into());
-    }
-    if end_gap(rows.last().unwrap(), last) > 1e-9 {
-        report
-            .violations
-            .push("the last setpoint is not the end of the path".into());
-    }
-    report
 }
 
 /// The feed a step from element `from` to element `to` may not exceed: the highest programmed
