@@ -126,6 +126,10 @@ typedef struct SegmentRecord {
    */
   double jerks[PHASES];
 } SegmentRecord;
+/**
+ * 64-bit words of a record ([`SegmentRecord::to_words`]).
+ */
+#define SegmentRecord_WORDS 21
 
 /**
  * A run of per-period path positions on one curve (`#[repr(C)]`, no pointers): what a planner
@@ -220,6 +224,14 @@ typedef struct SegmentSlot {
    * Highest curve index the rest of the group and its stop run on.
    */
   uint32_t curve_needed;
+  /**
+   * The stop goes on after `stop` with `chain_len` more records (a stop chain over short
+   * segments), stored as words ([`SegmentRecord::to_words`], each word the bits of an
+   * `f64`) in the geometry arena from value `chain_offset`, written before the slot was
+   * pushed.
+   */
+  uint32_t chain_offset;
+  uint32_t chain_len;
   uint32_t reserved;
 } SegmentSlot;
 

@@ -691,6 +691,8 @@ mod tests {
                 group_left: 1 + seq % 4,
                 has_stop: u32::from(seq.is_multiple_of(4)),
                 curve_needed: seq,
+                chain_offset: 3 * seq,
+                chain_len: seq % 5,
                 reserved: 0,
             })
         }

@@ -309,6 +309,8 @@ pub struct Instance {
     next_seq: u32,
     /// The last segment record taken, with its stop and group (checked when taken).
     slot: SegmentSlot,
+    /// During a segment stop: the rest of its stop chain in the arena.
+    chain: ChainCursor,
     /// The stop points of the last block taken, validated (with the arena offset and length
     /// they came as: blocks on one curve share them, checked once).
     points: StopPoints,
@@ -342,6 +344,42 @@ pub struct Instance {
     period: f64,
     /// Path-block motion: the block being output.
     player: BlockPlayer,
+}
+
+/// Where the rest of a stop chain is read ([`SegmentSlot::chain_offset`]).
+#[derive(Clone, Copy, Debug, Default)]
+struct ChainCursor {
+    /// Arena index of the next record's first word.
+    next: usize,
+    /// Records left.
+    left: u32,
+    /// Sequence number the next one must carry.
+    seq: u32,
+}
+
+impl ChainCursor {
+    /// The next record of the chain, checked (sequence and structure); `Err` if it is
+    /// malformed or outside the arena, `Ok(None)` after the last.
+    fn next(&mut self, values: &[f64]) -> Result<Option<SegmentRecord>, FaultCode> {
+        if self.left == 0 {
+            return Ok(None);
+        }
+        let end = self.next.checked_add(SegmentRecord::WORDS).ok_or(FaultCode::Record)?;
+        let words = values.get(self.next..end).ok_or(FaultCode::Record)?;
+        let mut bits = [0u64; SegmentRecord::WORDS];
+        for (b, v) in bits.iter_mut().zip(words) {
+            *b = v.to_bits();
+        }
+        let r = SegmentRecord::from_words(&bits).ok_or(FaultCode::Record)?;
+        let last = self.left == 1;
+        if r.seq != self.seq || check_record(&r).is_err() || (last && !ends_at_rest(&r)) {
+            return Err(FaultCode::Record);
+        }
+        self.next = end;
+        self.left -= 1;
+        self.seq = r.seq.wrapping_add(1);
+        Ok(Some(r))
+    }
 }
 
 /// Where the interpolator takes segment records from: the ring, a group at a time.
@@ -437,7 +475,8 @@ impl SegmentSource<'_> {
             return Err(FaultCode::Record);
         }
         if let Some(stop) = next.stop() {
-            let at_rest = stop.profile().table().end().v <= FEED_ROUNDING;
+            // A one-record stop ends at rest; a chain's last record does (checked as it comes).
+            let at_rest = next.chain_len > 0 || ends_at_rest(stop);
             let ok = stop.seq == r.seq.wrapping_add(1) && stop.curve <= next.curve_needed && at_rest;
             if !ok || check_record(stop).is_err() {
                 return Err(FaultCode::Record);
@@ -726,6 +765,7 @@ impl Instance {
         self.player = BlockPlayer::IDLE;
         self.next_seq = 0;
         self.slot = SegmentSlot::default();
+        self.chain = ChainCursor::default();
         self.points = StopPoints::NONE;
         self.taken_time = 0.0;
         self.stopping = false;
@@ -765,7 +805,17 @@ impl Instance {
             return self.advance_blocks(channel, dt, hold, abort);
         }
         let mut pull = Pull::Fine;
-        let step = {
+        let step = if self.stopping {
+            // A stop chain goes on from the arena; a one-record stop has nothing more.
+            let (values, chain, pull) = (self.geometry.values(), &mut self.chain, &mut pull);
+            self.interp.step(&self.geometry, dt, &mut || match chain.next(values) {
+                Ok(r) => r,
+                Err(code) => {
+                    *pull = Pull::Fault(code);
+                    None
+                }
+            })
+        } else {
             let source = SegmentSource {
                 ring: &channel.segments,
                 geometry: &self.geometry,
@@ -823,8 +873,27 @@ impl Instance {
                     return false;
                 };
                 self.next_seq = stop.seq.wrapping_add(1);
+                self.chain = ChainCursor {
+                    next: self.slot.chain_offset as usize,
+                    left: self.slot.chain_len,
+                    seq: self.next_seq,
+                };
+                // The stop record, then (within the same period if it is that short) its chain.
                 let mut stop = Some(stop);
-                match self.interp.step(&self.geometry, dt, &mut || stop.take()) {
+                let (values, chain, mut failed) = (self.geometry.values(), &mut self.chain, None);
+                let step = self.interp.step(&self.geometry, dt, &mut || {
+                    stop.take().or_else(|| {
+                        chain.next(values).unwrap_or_else(|code| {
+                            failed = Some(code);
+                            None
+                        })
+                    })
+                });
+                if let Some(code) = failed {
+                    self.fault = code;
+                    return false;
+                }
+                match step {
                     Step::Sample(s) => {
                         self.output(&s);
                         true
@@ -1190,6 +1259,11 @@ impl Instance {
     }
 }
 
+/// True if `r` ends at rest (to rounding): the last record of a stop.
+fn ends_at_rest(r: &SegmentRecord) -> bool {
+    r.profile().table().end().v <= FEED_ROUNDING
+}
+
 /// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
 fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
     held.is_at(r.curve(), r.u_start, r.s_start) && r.feed_start == 0.0
@@ -1304,6 +1378,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
     addr_of_mut!((*inst).slot).write(SegmentSlot::default());
+    addr_of_mut!((*inst).chain).write(ChainCursor::default());
     addr_of_mut!((*inst).points).write(StopPoints::NONE);
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);

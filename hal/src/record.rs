@@ -42,6 +42,12 @@ pub struct SegmentSlot {
     pub has_stop: u32,
     /// Highest curve index the rest of the group and its stop run on.
     pub curve_needed: u32,
+    /// The stop goes on after `stop` with `chain_len` more records (a stop chain over short
+    /// segments), stored as words ([`SegmentRecord::to_words`], each word the bits of an
+    /// `f64`) in the geometry arena from value `chain_offset`, written before the slot was
+    /// pushed.
+    pub chain_offset: u32,
+    pub chain_len: u32,
     pub reserved: u32,
 }
 
@@ -58,6 +64,7 @@ impl SegmentSlot {
         self.group_left >= 1
             && self.has_stop <= 1
             && (self.has_stop == 1) == (ends_group && !self.record.is_last())
+            && (self.has_stop == 1 || self.chain_len == 0)
             && self.curve_needed >= self.record.curve
     }
 }
@@ -162,7 +169,7 @@ impl From<&PathBlock> for Slot {
 // The shared-memory layout is an ABI between two separately built programs: pin it.
 const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 168);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
-const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 352);
+const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 360);
 const _: () = assert!(core::mem::size_of::<PathBlock>() == 328);
-const _: () = assert!(core::mem::size_of::<Slot>() == 360);
+const _: () = assert!(core::mem::size_of::<Slot>() == 368);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

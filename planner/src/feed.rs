@@ -17,9 +17,9 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::Instant;
 
-use crate::writer::{GeometryWriter, Release, WriteError};
-use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
-use nurbs_hal::record::{PathBlock, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
+use crate::writer::{GeometryWriter, Release, WriteError, MAX_CURVE_INDEX};
+use nurbs_hal::channel::{Channel, Slot, StopPoint, ARENA_VALUES, SEGMENT_SLOTS};
+use nurbs_hal::record::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
@@ -66,6 +66,9 @@ pub fn plan_start(toolpath: &Toolpath, stop: &StopPoint) -> PlanStart {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct SegmentGroup {
     pub slots: Vec<SegmentSlot>,
+    /// The stop's records after its first (in the last slot), as arena values: they go into the
+    /// arena before the group into the ring ([`SegmentSlot::chain_offset`]).
+    pub chain: Vec<f64>,
     /// Motion time of the records (s).
     pub time: f64,
 }
@@ -86,28 +89,36 @@ pub struct Grouper {
 impl Grouper {
     /// Takes the next final record; returns the group it completes, if it does.
     pub fn push(&mut self, r: FinalRecord) -> Option<SegmentGroup> {
-        let ends = r.stop.is_some() || r.record.is_last();
+        let ends = !r.stop.is_empty() || r.record.is_last();
         self.run.push(r);
         if !ends {
             return None;
         }
         let run = std::mem::take(&mut self.run);
         let n = run.len();
-        let mut needed = run.last().and_then(|r| r.stop).map_or(0, |s| s.curve);
+        let stop = run.last().map_or(&[][..], |r| r.stop.as_slice());
+        let mut needed = stop.iter().map(|s| s.curve).max().unwrap_or(0);
+        let chain: Vec<f64> = stop
+            .iter()
+            .skip(1)
+            .flat_map(|r| r.to_words().map(f64::from_bits))
+            .collect();
         let mut slots = vec![SegmentSlot::default(); n];
         for (k, r) in run.iter().enumerate().rev() {
             needed = needed.max(r.record.curve);
             slots[k] = SegmentSlot {
                 record: r.record,
-                stop: r.stop.unwrap_or_default(),
+                stop: r.stop.first().copied().unwrap_or_default(),
                 group_left: (n - k) as u32,
-                has_stop: u32::from(r.stop.is_some()),
+                has_stop: u32::from(!r.stop.is_empty()),
                 curve_needed: needed,
+                chain_offset: 0,
+                chain_len: r.stop.len().saturating_sub(1) as u32,
                 reserved: 0,
             };
         }
         let time = run.iter().map(|r| r.record.profile().total_time()).sum();
-        Some(SegmentGroup { slots, time })
+        Some(SegmentGroup { slots, chain, time })
     }
 }
 
@@ -215,6 +226,30 @@ pub fn fractions(max_fraction: f64) -> Vec<f64> {
     (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
 }
 
+/// Refuses, before any planning, a toolpath the channel cannot carry: a path element whose
+/// curve has more values than the channel's arena, or more elements than a stream's curve
+/// indices. Everything else streams, however long the program.
+pub fn check_fits(toolpath: &Toolpath) -> Result<(), String> {
+    if toolpath.elements.len() > MAX_CURVE_INDEX as usize + 1 {
+        return Err(format!(
+            "{} path elements: the channel carries at most {} in one motion",
+            toolpath.elements.len(),
+            MAX_CURVE_INDEX as usize + 1
+        ));
+    }
+    for (i, e) in toolpath.elements.iter().enumerate() {
+        let c = &e.curve;
+        let values = c.knots().len() + c.points().len() + c.weights().len();
+        if values > ARENA_VALUES {
+            let line = e.source_line.map_or(String::new(), |l| format!(" (line {l})"));
+            return Err(format!(
+                "path element {i}{line} has {values} knots, coordinates and weights: more than the channel's arena of {ARENA_VALUES} values holds"
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Refuses toolpaths the module cannot run as VPOp plans: it drives the tool tip only, so a
 /// path with a tool-axis (top) curve would need the machine's joint kinematics in the module.
 pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
@@ -225,9 +260,6 @@ pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
                     run through it; plan 2-/3-axis tool-tip paths"
                 .into(),
         );
-    }
-    if u32::try_from(toolpath.elements.len()).is_err() {
-        return Err("too many path elements".into());
     }
     Ok(())
 }
@@ -980,6 +1012,8 @@ pub struct Group {
     /// data written (and their slots made with its offsets).
     blocks: Vec<usize>,
     written: usize,
+    /// Segment records: the stop chain of the last slot, still to be written to the arena.
+    chain: Option<Vec<f64>>,
 }
 
 impl Source {
@@ -1164,6 +1198,7 @@ impl<'a> Streamer<'a> {
                 slots: g.slots.iter().map(Slot::segment).collect(),
                 blocks: Vec::new(),
                 written: 0,
+                chain: (!g.chain.is_empty()).then_some(g.chain),
             })),
             Source::Blocks { plan, next, .. } => {
                 let first = *next;
@@ -1179,6 +1214,7 @@ impl<'a> Streamer<'a> {
                     slots: range.clone().map(|k| Slot::block(&plan.blocks[k])).collect(),
                     blocks: range.collect(),
                     written: 0,
+                    chain: None,
                 }))
             }
         }
@@ -1206,6 +1242,28 @@ impl<'a> Streamer<'a> {
                 Err(WriteError::Refused(e)) => return Err(e),
             }
         }
+        Ok(true)
+    }
+
+    /// Writes a segment group's stop chain into the arena and its offset into the last slot;
+    /// false if there is no room yet.
+    fn write_chain(&mut self, group: &mut Group) -> Result<bool, String> {
+        let Some(values) = &group.chain else {
+            return Ok(true);
+        };
+        let last = group.slots.len() - 1;
+        // Needed until the module runs past the group's end.
+        let release = Release::Slot(self.pushed + last as u64);
+        let offset = match self.writer.put(values, release) {
+            Ok(offset) => offset,
+            Err(WriteError::Full) => return Ok(false),
+            Err(WriteError::Refused(e)) => return Err(e),
+        };
+        if let Some(Record::Segment(mut s)) = group.slots[last].decode() {
+            s.chain_offset = offset;
+            group.slots[last] = Slot::segment(&s);
+        }
+        group.chain = None;
         Ok(true)
     }
 
@@ -1276,7 +1334,9 @@ impl<'a> Streamer<'a> {
                     group.slots.len()
                 ));
             }
-            let ready = self.publish_curves(group.curve_needed)? && self.write_block_data(&mut group)?;
+            let ready = self.publish_curves(group.curve_needed)?
+                && self.write_block_data(&mut group)?
+                && self.write_chain(&mut group)?;
             if !ready && self.writer.held_values() == 0 && self.channel.segments.is_empty() {
                 return Err("a group's curves and stops do not fit the channel's arena".into());
             }

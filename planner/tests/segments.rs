@@ -6,7 +6,7 @@ mod common;
 
 use std::time::Instant;
 
-use common::test_paths::g1_zigzag;
+use common::test_paths::{dense_arc, g1_zigzag};
 use common::*;
 use nurbs_hal::channel::Slot;
 use nurbs_hal::mock;
@@ -186,6 +186,46 @@ fn an_underrun_at_any_group_end_stops_within_the_limits() {
         }
     }
     println!("{stops} underrun stops checked");
+}
+
+/// A dense G1 program (600 lines of 0.02 mm): no single segment can stop, so the planner's
+/// stops are chains of segments (the rest of each in the arena). The module plays the plan
+/// exactly, and an underrun at several chain group ends stops within the limits.
+#[test]
+fn stop_chains_on_a_dense_g1_program() {
+    let _guard = lock_module();
+    let job = job_of(dense_arc(600));
+    let chains: Vec<usize> = (0..job.groups.len())
+        .filter(|&g| job.groups[g].slots.last().is_some_and(|s| s.chain_len > 0))
+        .collect();
+    let longest = job.groups.iter().map(|g| g.time).fold(0.0, f64::max);
+    println!(
+        "{} groups, {} ending in a stop chain, the longest {longest:.3} s",
+        job.groups.len(),
+        chains.len()
+    );
+    assert!(chains.len() >= 3, "the dense program's stops should be chains");
+    let l = load();
+    let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+    let got = run_to_rest(&mut s, job.samples.len() + 100);
+    assert_eq!(
+        (u32_pin("nurbs_interp.fault-code"), u32_pin("nurbs_interp.underruns")),
+        (0, 0)
+    );
+    assert_exact("dense arc", &got, &job.samples, 2);
+    drop(s);
+    drop(l);
+    for &g in chains.iter().step_by((chains.len() / 3).max(1)).take(3) {
+        let (_l, got, _) = stop_after(&job, g + 1);
+        assert_eq!(
+            violations(&job, &got, false),
+            Vec::<String>::new(),
+            "chain after group {g}"
+        );
+        let rest = job.limits.min_jerk() * PERIOD * PERIOD / 2.0;
+        assert!(got.last().unwrap().feed.abs() <= rest, "group {g}: not at rest");
+        assert!(bit("nurbs_interp.held") && !bit("nurbs_interp.fault"));
+    }
 }
 
 /// Underrun, resume: the planner re-plans the rest of the path from the stop point (a new

@@ -44,6 +44,58 @@ pub enum RecordError {
 }
 
 impl SegmentRecord {
+    /// 64-bit words of a record ([`SegmentRecord::to_words`]).
+    pub const WORDS: usize = 21;
+
+    /// The record as words (the four 32-bit fields in two, then the numbers' bits), e.g. to
+    /// store it in an arena of `f64` by their bits.
+    pub fn to_words(&self) -> [u64; Self::WORDS] {
+        let ids = [
+            u64::from(self.seq) | (u64::from(self.flags) << 32),
+            u64::from(self.curve) | (u64::from(self.reserved) << 32),
+        ];
+        let numbers = [self.u_start, self.u_end, self.s_start, self.length, self.feed_start];
+        let bits = numbers
+            .iter()
+            .chain(&self.durations)
+            .chain(&self.jerks)
+            .map(|v| v.to_bits());
+        let mut w = [0u64; Self::WORDS];
+        for (slot, v) in w.iter_mut().zip(ids.into_iter().chain(bits)) {
+            *slot = v;
+        }
+        w
+    }
+
+    /// The record of [`SegmentRecord::to_words`]; `None` if `words` is shorter. No indexing
+    /// that can fail (the module reads stop chains with it).
+    pub fn from_words(words: &[u64]) -> Option<Self> {
+        let [ids, curve, u_start, u_end, s_start, length, feed_start, phases @ ..] = words.get(..Self::WORDS)? else {
+            return None;
+        };
+        let f = |b: &u64| f64::from_bits(*b);
+        let mut r = SegmentRecord {
+            seq: *ids as u32,
+            flags: (*ids >> 32) as u32,
+            curve: *curve as u32,
+            reserved: (*curve >> 32) as u32,
+            u_start: f(u_start),
+            u_end: f(u_end),
+            s_start: f(s_start),
+            length: f(length),
+            feed_start: f(feed_start),
+            ..SegmentRecord::default()
+        };
+        let (durations, jerks) = phases.split_at(PHASES.min(phases.len()));
+        for (d, w) in r.durations.iter_mut().zip(durations) {
+            *d = f(w);
+        }
+        for (j, w) in r.jerks.iter_mut().zip(jerks) {
+            *j = f(w);
+        }
+        Some(r)
+    }
+
     pub fn profile(&self) -> SCurve {
         SCurve {
             feed_start: self.feed_start,
@@ -238,5 +290,30 @@ impl StopRun {
             count: count as usize,
             s_before,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_record_survives_its_words_bit_for_bit() {
+        let r = SegmentRecord {
+            seq: 7,
+            flags: FLAG_LAST,
+            curve: 123_456,
+            reserved: 9,
+            u_start: 0.25,
+            u_end: 0.5,
+            s_start: -0.0,
+            length: 1.0 / 3.0,
+            feed_start: f64::MIN_POSITIVE,
+            durations: [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0],
+            jerks: [-1.0, 0.0, 1.0, 1e300, -1e-300, 2.5, f64::NAN],
+        };
+        let back = SegmentRecord::from_words(&r.to_words()).unwrap();
+        assert_eq!(back.to_words(), r.to_words());
+        assert!(SegmentRecord::from_words(&r.to_words()[..20]).is_none());
     }
 }

@@ -236,7 +236,7 @@ struct Groups {
 impl Groups {
     fn push(&mut self, f: &FinalRecord) {
         self.running += f.record.profile().total_time();
-        if f.stop.is_some() || f.record.is_last() {
+        if !f.stop.is_empty() || f.record.is_last() {
             self.count += 1;
             self.longest = self.longest.max(self.running);
             self.running = 0.0;

@@ -63,14 +63,16 @@ pub struct PlanStart {
 
 /// A record handed out by the [`Planner`], final, with the stop that follows it if the motion
 /// must end at its end (underrun, hold, abort).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct FinalRecord {
     pub record: SegmentRecord,
-    /// The next segment re-planned to end at rest from this record's end feed, checked by finite
-    /// differences like every segment and with the machine holding at its last sample after it
-    /// ([`Planner`]): the stop after this record. `None` where the records after it must run
-    /// first (they are final together with the next record that has a stop, or the path end).
-    pub stop: Option<SegmentRecord>,
+    /// The stop after this record: the next segment re-planned to end at rest from this
+    /// record's end feed, or where no single segment can stop (dense G1 programs) the next
+    /// segments re-planned as a chain to rest; checked by finite differences like every segment
+    /// and with the machine holding at its last sample after it ([`Planner`]). Empty where the
+    /// records after it must run first (they are final together with the next record that has
+    /// a stop, or the path end).
+    pub stop: Vec<SegmentRecord>,
 }
 
 /// How a plan went, once the [`Planner`] has handed out its last record.
@@ -210,7 +212,11 @@ pub struct Planner<'a> {
     settled: usize,
     emitted: usize,
     /// The stop after the last settled record (see [`FinalRecord::stop`]).
-    settled_stop: Option<SegmentRecord>,
+    settled_stop: Vec<SegmentRecord>,
+    /// A stop chain the last settle rests on: its first segment and each record with the
+    /// state after it, adopted as the plan if a cascade reaches that segment (see
+    /// [`Planner::stop_chain`]); dropped when a split changes the nodes under it.
+    chain: Option<(usize, Vec<(SegmentRecord, SimState)>)>,
     /// [`PlanOptions::stream`]: settle records before the path end.
     stream: bool,
     /// The first record, and segment 1's length, for which segment 1 could not stop at its end
@@ -236,6 +242,17 @@ fn can_absorb(feed: f64, length: f64, accel: f64, jerk: f64) -> bool {
 
 /// Segments accepted after an absorbing one before the records before it are final.
 const ABSORBER_LOOK_BEHIND: usize = 1;
+
+/// Motion time (s) of records not final before a stop chain settles them.
+const CHAIN_AFTER: f64 = 0.1;
+/// Segments a stop chain stays behind the planning front: back-tracking cascades on dense G1
+/// programs reach some 40 short segments back, and a cascade that reaches a chain makes the
+/// plan stop there.
+const CHAIN_LOOK_BEHIND: usize = 64;
+/// The same before the first record: the motion waits for it.
+const FIRST_CHAIN_LOOK_BEHIND: usize = 16;
+/// Most segments of a stop chain.
+const CHAIN_MAX: usize = 256;
 
 impl<'a> Planner<'a> {
     /// Checks the inputs; no planning happens before the first [`Planner::next_record`].
@@ -292,7 +309,8 @@ impl<'a> Planner<'a> {
             work: Cell::new(0),
             work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
             settled: 0,
-            settled_stop: None,
+            settled_stop: Vec::new(),
+            chain: None,
             first_absorber_failed: None,
             emitted: 0,
             stream: options.stream,
@@ -328,9 +346,9 @@ impl<'a> Planner<'a> {
                     .get_or_insert_with(|| self.started.elapsed().as_secs_f64());
                 let record = self.records[self.emitted - 1];
                 let stop = if self.emitted == self.settled {
-                    self.settled_stop.take()
+                    std::mem::take(&mut self.settled_stop)
                 } else {
-                    None
+                    Vec::new()
                 };
                 if self.stream {
                     self.release_settled();
@@ -458,7 +476,97 @@ impl<'a> Planner<'a> {
     /// Records before `j` are final; the stop after them is `stop`.
     fn settle(&mut self, j: usize, stop: Option<SegmentRecord>) {
         self.settled = j;
-        self.settled_stop = stop;
+        self.settled_stop = stop.into_iter().collect();
+        self.chain = None;
+    }
+
+    /// Segments `j..` re-planned from `j`'s start feed to rest at the first node far enough
+    /// for the nominal braking distance (at most [`CHAIN_MAX`] segments, all committed), each
+    /// aiming at the feed a backward pass from rest allows: the stop after the records before
+    /// `j` where no single segment can stop (the short segments of a dense G1 program). Each
+    /// segment is solved and checked as every segment is, and the machine holding after the
+    /// last; `None` if one fails. Returns the records with the state after each.
+    fn stop_chain(&self, j: usize, work_budget: u64) -> Option<Vec<(SegmentRecord, SimState)>> {
+        let v0 = self.start_feeds[j];
+        let braking = 2.0 * ramp_distance(v0, 0.0, self.accel, self.jerk);
+        let (mut m, mut room) = (j, 0.0);
+        while room < braking {
+            if m + 1 >= self.bounds.len() || m >= j + CHAIN_MAX {
+                return None;
+            }
+            room += self.lengths[m];
+            m += 1;
+        }
+        // Target end feeds: rest at node m, and what a ramp from each next one allows.
+        let mut targets = vec![0.0; m - j + 1];
+        for i in (j + 1..m).rev() {
+            let cap = self.feeds[i];
+            targets[i - j] = cap.min(reachable_feed(
+                targets[i - j + 1],
+                self.lengths[i],
+                self.accel,
+                self.jerk,
+                cap,
+            ));
+        }
+        let (mut v, mut state) = (v0, self.states[j]);
+        let mut chain = Vec::with_capacity(m - j);
+        for i in j..m {
+            let ctx = SegmentContext {
+                refine: false,
+                ..self.context(i, work_budget)
+            };
+            let (record, next) = solve_segment(&ctx, v, targets[i - j + 1], &state).ok()?;
+            if i + 1 == m && !holds_after(&ctx, &state, record) {
+                return None;
+            }
+            v = record.profile().table().end().v.max(0.0);
+            state = next;
+            chain.push((record, next));
+        }
+        Some(chain)
+    }
+
+    /// A cascade asks segment `k`, the first not handed out, to start slower: if the last
+    /// settle rests on a stop chain from `k`, the plan takes it (a stop at its end).
+    fn adopt_chain(&mut self, k: usize) {
+        let Some((first, chain)) = self.chain.take().filter(|(first, _)| *first == k) else {
+            return;
+        };
+        self.records.truncate(first);
+        self.states.truncate(first + 1);
+        self.start_feeds.truncate(first + 1);
+        for (record, state) in chain {
+            self.records.push(record);
+            self.states.push(state);
+            self.start_feeds.push(record.profile().table().end().v.max(0.0));
+        }
+        self.k = self.records.len();
+    }
+
+    /// Where the records since the last settle make more than [`CHAIN_AFTER`] of motion (no
+    /// segment among them can absorb a cascade alone), settles [`CHAIN_LOOK_BEHIND`] segments
+    /// behind the front on a stop chain, so that the motion can start, and stop, without
+    /// waiting for the whole run.
+    fn settle_on_a_chain(&mut self, budget: u64) {
+        // The first record waits for the machine: a chain closer to the front settles it.
+        let behind = if self.settled == 0 {
+            FIRST_CHAIN_LOOK_BEHIND
+        } else {
+            CHAIN_LOOK_BEHIND
+        };
+        let Some(j) = self.k.checked_sub(behind).filter(|&j| j > self.settled) else {
+            return;
+        };
+        let unsettled: f64 = (self.settled..j).map(|i| self.records[i].profile().total_time()).sum();
+        if unsettled < CHAIN_AFTER && self.settled > 0 {
+            return;
+        }
+        if let Some(chain) = self.stop_chain(j, budget) {
+            self.settled = j;
+            self.settled_stop = chain.iter().map(|(r, _)| *r).collect();
+            self.chain = Some((j, chain));
+        }
     }
 
     /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.
@@ -491,9 +599,15 @@ impl<'a> Planner<'a> {
             )
         {
             // Back-tracking would revise a record handed out: this segment stops instead (the
-            // step-8 lowering of the end feed gives up before it reaches rest).
-            if let Ok(stop) = solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]) {
-                outcome = Ok(stop);
+            // step-8 lowering of the end feed gives up before it reaches rest), or the stop
+            // chain the settle rests on runs.
+            match solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]) {
+                Ok(stop) => outcome = Ok(stop),
+                Err(_) if self.chain.as_ref().is_some_and(|(first, _)| *first == k) => {
+                    self.adopt_chain(k);
+                    return Ok(());
+                }
+                Err(_) => {}
             }
         }
         let last = ctx.last;
@@ -545,12 +659,18 @@ impl<'a> Planner<'a> {
                         self.settle(j, Some(stop));
                     }
                 }
+                if self.stream && !last {
+                    self.settle_on_a_chain(budget);
+                }
             }
             Err(SegmentFailure::Split { u, cap }) if self.splits < MAX_SPLITS => {
                 // Step 4 in reverse: a point inside the segment needs a lower feed than the
                 // profile gives it (a speed cap between FLF samples, or the fall towards a
                 // cusp outrunning its chord cap): it becomes a node of its own.
                 self.splits += 1;
+                if self.chain.as_ref().is_some_and(|(first, c)| k < first + c.len()) {
+                    self.chain = None; // its segments are not the plan's any more
+                }
                 let s = element.table.length_to(&self.toolpath.elements[c].curve, u);
                 let end_s = self.bounds[k + 1].end_s;
                 self.bounds.insert(k + 1, Node::within(c, u, s, cap));

@@ -46,7 +46,6 @@ use nurbs_hal::sys::HAL_OUT;
 use nurbs_motion::cli::corners::{prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::Limits;
-use nurbs_motion::readers::read_toolpath;
 use nurbs_planner::feed::{self, PlannerKind, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 
@@ -151,6 +150,18 @@ impl Ini {
     }
 }
 
+/// The chord tolerance: `--chord-tol`, else `[NURBS]CHORD_TOLERANCE` of the INI.
+fn chord_tolerance(args: &Args) -> Result<f64, String> {
+    let ini = args.ini.as_deref().map(Ini::read).transpose()?;
+    match args.chord_tol {
+        Some(t) => Ok(t),
+        None => ini
+            .as_ref()
+            .map_or(Ok(None), |i| i.number("NURBS", "CHORD_TOLERANCE"))?
+            .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE".into()),
+    }
+}
+
 fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
     let ini = args.ini.as_deref().map(Ini::read).transpose()?;
     let from_ini = |section: &str, key: &str| -> Result<Option<f64>, String> {
@@ -178,10 +189,7 @@ fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
         velocity: vel.unwrap_or_else(|| vec![feed]),
         acceleration: need(args.accel.clone().or(axis_ini("MAX_ACCELERATION")?), "acceleration")?,
         jerk: need(args.jerk.clone().or(axis_ini("MAX_JERK")?), "jerk")?,
-        chord_tolerance: args
-            .chord_tol
-            .or(from_ini("NURBS", "CHORD_TOLERANCE")?)
-            .ok_or("no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE")?,
+        chord_tolerance: chord_tolerance(args)?,
         period,
     }
     .for_axes(axes)
@@ -216,8 +224,27 @@ fn start_motion<'a>(
         // The planner runs in a thread of its own; its groups wait until the stream has begun.
         PlannerKind::Erwinski => Source::streamed(Arc::clone(shared), limits.clone(), from.copied()),
         PlannerKind::Vpop => {
-            let plan = feed::vpop_plan(toolpath, limits, from)?;
-            let blocks = feed::block_plan(toolpath, &plan, from, args.stop_fraction)?;
+            // The whole VPOp plan and its stop checks come before the motion: in a thread, so
+            // that a signal still ends the planner at once.
+            let (path, plan_limits, start, fraction) =
+                (Arc::clone(shared), limits.clone(), from.copied(), args.stop_fraction);
+            let (sender, receiver) = std::sync::mpsc::channel();
+            std::thread::spawn(move || {
+                let planned = feed::vpop_plan(&path, &plan_limits, start.as_ref()).and_then(|plan| {
+                    feed::block_plan(&path, &plan, start.as_ref(), fraction).map(|blocks| (plan, blocks))
+                });
+                let _ = sender.send(planned);
+            });
+            let (plan, blocks) = loop {
+                match receiver.recv_timeout(Duration::from_millis(20)) {
+                    Ok(planned) => break planned?,
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) if stopped() => {
+                        return Err("stopped by signal while planning".into())
+                    }
+                    Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                    Err(e) => return Err(format!("the VPOp planner thread ended: {e}")),
+                }
+            };
             let (ends, stored, worst) = blocks.stops();
             eprintln!(
                 "nurbs-planner: VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
@@ -280,10 +307,10 @@ impl From<Planner> for PlannerKind {
 }
 
 fn run(args: &Args) -> Result<(), String> {
-    let programmed = read_toolpath(&args.toolpath).map_err(|e| e.to_string())?;
-    let limits = limits(args, programmed.tip_dim())?;
-    // The same path `nurbs-plan plan` plans with the same chord tolerance (and `verify` checks).
-    let prepared = prepare(&args.toolpath, args.round_corners, limits.chord_tolerance).map_err(|e| e.to_string())?;
+    // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
+    // prepares it with the same tolerance (and `verify` checks it).
+    let prepared = prepare(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
+    let limits = limits(args, prepared.toolpath.tip_dim())?;
     if let Some(r) = &prepared.rounding {
         eprintln!(
             "nurbs-planner: {} G1 corners rounded within {} mm (deviation {:.6} mm)",
@@ -291,10 +318,14 @@ fn run(args: &Args) -> Result<(), String> {
         );
     }
     let toolpath = Arc::new(prepared.toolpath);
+    // Before touching HAL: a clear refusal, not a half-started component.
+    feed::check_fits(&toolpath)?;
     if args.planner == Planner::Vpop {
-        // Before touching HAL: a clear refusal, not a half-started component.
         feed::check_tip_path(&toolpath)?;
     }
+    // Until here a signal ends the process at once (nothing to clean up); from here on it is
+    // a request the loops below honour, so that the component and the channel are released.
+    install_signal_handlers();
 
     let comp = Component::new("nurbs-planner")?;
     let ready = comp.pin::<bool>("ready", HAL_OUT)?;
@@ -351,7 +382,6 @@ fn run(args: &Args) -> Result<(), String> {
 }
 
 fn main() -> ExitCode {
-    install_signal_handlers();
     let args = Args::parse();
     match run(&args) {
         Ok(()) => {

@@ -43,3 +43,23 @@ pub fn rounded_polyline() -> Toolpath {
         .unwrap()
         .toolpath
 }
+
+/// A dense G1 program as CAM writes one: `lines` lines of 0.02 mm along a circle of 5 mm
+/// radius (a turn of 0.004 rad at each vertex), its corners rounded within 0.001 mm. No single
+/// segment of its plan is long enough to stop in: the planner's stops are chains.
+pub fn dense_arc(lines: usize) -> Toolpath {
+    let (r, step) = (5.0, 0.02);
+    let vertices: Vec<Vec<f64>> = (0..=lines)
+        .map(|k| {
+            let a = k as f64 * step / r;
+            vec![r * a.sin(), r * (1.0 - a.cos())]
+        })
+        .collect();
+    let mut knots = vec![0.0, 0.0];
+    knots.extend((1..lines).map(|k| k as f64));
+    knots.extend([lines as f64; 2]);
+    let polyline = Toolpath::single(ElementKind::Polyline, Nurbs::new(1, knots, &vertices, None).unwrap());
+    nurbs_motion::planner::corner::round_toolpath(&polyline, 0.001)
+        .unwrap()
+        .toolpath
+}
