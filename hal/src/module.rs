@@ -10,29 +10,8 @@
 //! evaluation) and writes the output pins. It never allocates, locks, calls the OS or panics
 //! (no indexing that can fail); failures are pins (fault, fault-code, underrun), not errors.
 //!
-//! Pins:
-//!
-//! | pin | type | dir | unit | meaning |
-//! | --- | --- | --- | --- | --- |
-//! | `nurbs_interp.enable` | bit | in | | run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine) |
-//! | `nurbs_interp.hold` | bit | in | | feed hold: at the next boundary with a stop, the planner's stop to rest on the path; released, the plan from the stop point runs (see below) |
-//! | `nurbs_interp.abort` | bit | in | | stop as for hold, then discard the queue; the motion is over until a planner publishes a new geometry |
-//! | `nurbs_interp.resume` | bit | in | | after an underrun stop: a rising edge starts the plan from the stop point once one is queued (`resume-ready`); an edge without it is ignored |
-//! | `nurbs_interp.pos-cmd-x`, `-y`, `-z` | float | out | mm | axis position commands (`-z` is 0 on a 2-D path) |
-//! | `nurbs_interp.feed` | float | out | mm/s | path feed at this sample |
-//! | `nurbs_interp.u` | float | out | | curve parameter |
-//! | `nurbs_interp.curve` | u32 | out | | index of the path element (curve) |
-//! | `nurbs_interp.active` | bit | out | | a new sample was produced this period |
-//! | `nurbs_interp.done` | bit | out | | the last segment has been completed (at rest at its end) |
-//! | `nurbs_interp.fault` | bit | out | | malformed channel, geometry or record, or a resumed plan that does not start where the machine stands; latched, outputs hold |
-//! | `nurbs_interp.fault-code` | u32 | out | | why ([`FaultCode`]) |
-//! | `nurbs_interp.underrun` | bit | out | | the planner fell behind; the module stops or stopped on the path; set until the resumed motion starts (or an abort) |
-//! | `nurbs_interp.held` | bit | out | | at rest on the path after a stop (hold, underrun or abort), not moving |
-//! | `nurbs_interp.resume-ready` | bit | out | | stopped (hold or underrun) and a plan from the stop point is queued: releasing `hold` / a `resume` edge starts it |
-//! | `nurbs_interp.underruns` | u32 | out | | underrun stops so far |
-//! | `nurbs_interp.records` | u32 | out | | records taken so far |
-//! | `nurbs_interp.seq` | u32 | out | | sequence number of the last record taken |
-//! | `nurbs_interp.buffered` | float | out | s | motion time queued ahead of the current sample |
+//! Its pins, fault codes and the stop and resume protocol, for integrators:
+//! `docs/integration.md` (the pins are created in `create`).
 //!
 //! Every stop is a planned stop. Segment records come in groups ([`SegmentSlot`]), and the
 //! last record of a group carries the stop after it: the next segment re-planned by the planner
@@ -146,7 +125,7 @@ pub struct Pins {
 
 /// The geometry stream the motion runs on: its header, how far its curves are checked, and the
 /// channel's descriptors and arena. A curve's view is made when it is needed, in O(1): it was
-/// checked once, in path order, a slice of values per period ([`RtGeometry::follow`]).
+/// checked once, in path order, a slice of values per period (`RtGeometry::follow`).
 pub struct RtGeometry {
     /// Generation of the channel's stream (0: none).
     generation: u32,

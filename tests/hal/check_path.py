@@ -6,7 +6,9 @@
 - every position equals the offline one to --tol mm (u and feed too);
 - no fault, no underrun;
 - the motion ends at the end of the last curve, C(1), to --tol mm;
-- writes the recorded setpoints as a CSV in the offline format for `nurbs-plan verify`.
+- writes the recorded setpoints as a CSV in the offline format for `nurbs-plan verify`;
+- prints the least motion time that was queued ahead of the module, before the last records
+  went out (the margin the planner kept).
 """
 import json
 import sys
@@ -53,6 +55,13 @@ def main():
             errors.append(f"ends at {[last[c] for c in axes]}, C(1) = {end} (off by {dist:.3e} mm)")
 
     write_recorded_csv(a.recorded_csv, samples, axes, a.period)
+    queued = [s["buffered"] for s in samples if s["buffered"] is not None]
+    # Toward the end the queue drains: the margin is what was queued while at least 3 s of
+    # motion lay ahead.
+    ahead = len(queued) - int(3.0 / a.period)
+    if ahead > 0:
+        print(f"queued ahead of the module: at least {min(queued[:ahead]):.3f} s "
+              f"while 3 s or more of motion lay ahead")
 
     if errors:
         print("FAIL:\n  " + "\n  ".join(errors))

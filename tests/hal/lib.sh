@@ -32,7 +32,7 @@ hal_session() {
     hal_cleanup
     trap hal_cleanup EXIT
     local rc=0
-    timeout 120 halrun -f "$file" >"$log" 2>&1 || rc=$?
+    timeout "${HAL_TIMEOUT:-120}" halrun -f "$file" >"$log" 2>&1 || rc=$?
     hal_cleanup
     if [ $rc != 0 ]; then
         echo "halrun failed ($rc):"; cat "$log"; return 1

@@ -26,6 +26,12 @@ sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD --plan
     -e "s|@SAMPLES@|$SAMPLES|g" -e "s|@WORK@|$work|g" \
     "$here/path.hal.in" >"$work/path.hal"
 
+cat >"$work/rss.sh" <<'SH'
+#!/bin/sh
+# The running planner's peak resident memory.
+grep VmHWM "/proc/$(pidof nurbs-planner)/status" | sed 's/^/nurbs-planner peak /'
+SH
+chmod 755 "$work/rss.sh"
 hal_session "$work/path.hal" "$work/halrun.log"
 cat "$work/halrun.log"
 python3 "$here/check_path.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \

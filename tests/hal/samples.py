@@ -48,6 +48,8 @@ def read_samples(path):
                 "u": float(v[4]), "feed": float(v[5]), "curve": int(v[6]), "underruns": int(v[7]),
                 "fault_code": int(v[8]), "done": v[9] == "1", "fault": v[10] == "1",
                 "underrun": v[11] == "1",
+                # Where the session samples it: motion time queued ahead (s).
+                "buffered": float(v[12]) if len(v) > 12 else None,
             })
     return samples
 

@@ -1,5 +1,5 @@
 #!/bin/bash
-# A streamed plan that fails, in real LinuxCNC: nurbs-planner --stream on a curve the Erwinski
+# A streamed plan that fails, in real LinuxCNC: nurbs-planner (which streams) on a curve the Erwinski
 # planner refuses at u = 0 (tests/hal/refused_stream.json, case 1246 of the property test, the
 # only one of its 10,000 curves still refused: over its first 1e-8 mm the sampled positions step
 # back and forth, an axial jerk only a crawl at 0.2 % of the jerk limit avoids; the planner

@@ -1,0 +1,30 @@
+#!/bin/bash
+# Programs of growing length through `nurbs-plan plan --stream` (the plan the machine runs):
+# the dense CAM-like G1 program of scripts/dense-g1.py (the butterfly every 0.02 mm, passes
+# back and forth in Z) at F500 A1e4 J6e4, chord tolerance 0.001 mm, 0.25 ms, for each length in
+# LINES (default "1000 10000 100000"): motion time, planning time (the planner alone) and its
+# ratio to the motion, time per 1,000 lines, first record, groups and the longest, peak RSS of
+# the whole command (planning and writing the CSV), then `verify` of the written setpoints.
+# Usage: scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
+# shellcheck source=scripts/common.sh
+source "$(dirname "$0")/common.sh"
+limits="--feed 500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | peak RSS (MB) | verify |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|"
+for lines in ${LINES:-1000 10000 100000}; do
+  python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
+  # shellcheck disable=SC2086
+  /usr/bin/time -f "%M" -o "$dir/rss" $bin plan "$dir/dense.ngc" $limits --stream \
+    --out "$dir/dense.csv" --summary "$dir/dense.json" 2>/dev/null
+  # shellcheck disable=SC2086
+  if $bin verify "$dir/dense.csv" "$dir/dense.ngc" $limits >/dev/null; then ok=pass; else ok=FAIL; fi
+  python3 - "$lines" "$(cat "$dir/rss")" "$ok" "$dir/dense.json" <<'PY'
+import json, sys
+lines, rss, ok, path = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4]
+s = json.load(open(path))
+t, plan = s["motion_time_s"], s["plan_time_s"]
+elements = lines + s["rounding_corners"]
+print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "
+      f"| {s['first_segment_time_s'] * 1e3:.1f} | {s['groups']:,} | {s['longest_group_s']:.3f} | {rss / 1024:.0f} | {ok} |")
+PY
+done
