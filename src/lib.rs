@@ -10,5 +10,6 @@
 pub mod cli;
 pub mod geometry;
 pub mod kinematics;
+pub mod panics;
 pub mod planner;
 pub mod readers;

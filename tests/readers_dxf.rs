@@ -345,3 +345,19 @@ fn never_panics_on_garbage() {
     }
     let _ = dxf_reader::parse("g.dxf", &[0xff, 0x00, 0x13, 0x37]);
 }
+
+/// A header value the dxf library panics on (a date variable out of chrono's range, as odd CAD
+/// exporters write) is a clear read error, not a crash: found by mutating the bundled trident.
+#[test]
+fn a_header_the_dxf_library_panics_on_is_a_read_error() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/trident.dxf");
+    let text = std::fs::read_to_string(path).unwrap();
+    let bad = text.replacen(
+        "$TDUPDATE\r\n 40\r\n2461367.190451388713",
+        "$TDUPDATE\r\n 40\r\n2190451388713",
+        1,
+    );
+    assert!(bad != text, "the mutation applies");
+    let e = dxf_reader::parse("trident-bad-date.dxf", bad.as_bytes()).unwrap_err();
+    assert!(e.to_string().contains("invalid DXF"), "{e}");
+}

@@ -179,8 +179,17 @@ pub fn stream_plan(
         }
     }
     let report = planner.finish();
+    let stops = match report.stops_made.as_slice() {
+        [] => String::new(),
+        made => format!(
+            "; it stops at {} place(s) a whole-path plan would not (back-tracking reached records already sent), first at curve {} u = {}",
+            made.len(),
+            made[0].0,
+            made[0].1
+        ),
+    };
     emit(PlanEvent::Done(format!(
-        "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms",
+        "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms{stops}",
         report.records,
         report.motion_time,
         report.plan_time,
@@ -1183,7 +1192,14 @@ impl<'a> Streamer<'a> {
                 }
                 Ok(PlanEvent::Failed(e)) => return Err(e),
                 Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => return Err("the planner thread ended before the plan did".into()),
+                Err(TryRecvError::Disconnected) => {
+                    // A panic in the planning thread (its message kept by nurbs_motion::panics).
+                    let why = nurbs_motion::panics::take_last();
+                    return Err(format!(
+                        "the planner thread ended before the plan did{}",
+                        why.map_or(String::new(), |w| format!(": {w}"))
+                    ));
+                }
             }
         }
         Ok(())

@@ -1,3 +1,10 @@
 fn main() -> std::process::ExitCode {
-    nurbs_motion::cli::run()
+    nurbs_motion::panics::install();
+    match nurbs_motion::panics::catch(nurbs_motion::cli::run) {
+        Ok(code) => code,
+        Err(panic) => {
+            eprintln!("nurbs-plan: internal error (please report it with the input and the command): {panic}");
+            std::process::ExitCode::from(70)
+        }
+    }
 }

@@ -172,6 +172,9 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if let Some(line) = prepared.describe(out.deviation, report.limits.chord_tolerance) {
         eprintln!("{line}");
     }
+    for (curve, u) in &report.stops_made {
+        eprintln!("the streamed plan comes to rest at curve {curve} u = {u}: back-tracking reached records already handed out");
+    }
     if let Some(path) = args.summary {
         let summary = with_fields(
             summary_common(&args, "erwinski", &report.limits, &out.check, tip),
@@ -187,6 +190,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "setpoints": out.rows,
                 "groups": groups.count,
                 "longest_group_s": groups.longest,
+                "stops_made": report.stops_made.len(),
             }),
         );
         let summary = with_fields(summary, prepared.summary_fields(out.deviation));

@@ -85,6 +85,9 @@ pub struct PlanReport {
     pub first_record_time: f64,
     /// Records handed out.
     pub records: usize,
+    /// Where a streamed plan comes to rest because back-tracking reached records already
+    /// handed out, as (curve, u): stops a whole-path plan would not make.
+    pub stops_made: Vec<(usize, f64)>,
     /// Limits as used (one value per axis).
     pub limits: Limits,
 }
@@ -227,6 +230,8 @@ pub struct Planner<'a> {
     /// Time spent planning (in [`Planner::next_final`]), what the caller does between calls
     /// not counted (s).
     busy: f64,
+    /// Where the plan stops because a cascade reached records already handed out (curve, u).
+    stops_made: Vec<(usize, f64)>,
     first_record_time: Option<f64>,
     /// Nominal tangential acceleration and jerk.
     accel: f64,
@@ -317,6 +322,7 @@ impl<'a> Planner<'a> {
             failed: false,
             started,
             busy: 0.0,
+            stops_made: Vec::new(),
             first_record_time: None,
             accel: limits.min_accel(),
             jerk: limits.min_jerk(),
@@ -414,6 +420,7 @@ impl<'a> Planner<'a> {
             plan_time: self.busy,
             first_record_time: self.first_record_time.unwrap_or(0.0),
             records: self.emitted,
+            stops_made: self.stops_made,
             limits: self.limits,
         }
     }
@@ -541,6 +548,9 @@ impl<'a> Planner<'a> {
             self.states.push(state);
             self.start_feeds.push(record.profile().table().end().v.max(0.0));
         }
+        if let Some(last) = self.records.last() {
+            self.stops_made.push((last.curve(), last.u_end));
+        }
         self.k = self.records.len();
     }
 
@@ -591,6 +601,7 @@ impl<'a> Planner<'a> {
         }
         let ctx = self.context(k, budget);
         let mut outcome = solve_segment(&ctx, self.start_feeds[k], self.feeds[k + 1], &self.states[k]);
+        let mut made = None;
         if k > 0
             && k == self.settled
             && matches!(
@@ -602,7 +613,10 @@ impl<'a> Planner<'a> {
             // step-8 lowering of the end feed gives up before it reaches rest), or the stop
             // chain the settle rests on runs.
             match solve_segment(&ctx, self.start_feeds[k], 0.0, &self.states[k]) {
-                Ok(stop) => outcome = Ok(stop),
+                Ok(stop) => {
+                    made = Some((stop.0.curve(), stop.0.u_end));
+                    outcome = Ok(stop);
+                }
                 Err(_) if self.chain.as_ref().is_some_and(|(first, _)| *first == k) => {
                     self.adopt_chain(k);
                     return Ok(());
@@ -611,6 +625,7 @@ impl<'a> Planner<'a> {
             }
         }
         let last = ctx.last;
+        self.stops_made.extend(made);
         match outcome {
             Err(SegmentFailure::OutOfWork) => return Err(out_of_work(self.work.get())),
             Ok((record, state)) => {

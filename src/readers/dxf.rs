@@ -117,7 +117,10 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Toolpath, ReadError> {
     if bytes.iter().all(|b| b.is_ascii_whitespace()) {
         return Err(ReadError::new(file, "file is empty"));
     }
-    let drawing = dxf::Drawing::load(&mut std::io::Cursor::new(bytes))
+    // The dxf crate panics on some malformed values (a date variable of the header out of
+    // range, for one), even in parts of the file this reader does not use.
+    let drawing = crate::panics::catch(|| dxf::Drawing::load(&mut std::io::Cursor::new(bytes)))
+        .map_err(|panic| ReadError::new(file, format!("invalid DXF: the DXF library failed on it ({panic})")))?
         .map_err(|e| ReadError::new(file, format!("invalid DXF: {e}")))?;
     let s = scale_of(file, drawing.header.default_drawing_units)?;
     let mut raws: Vec<(String, Raw)> = Vec::new();

@@ -383,7 +383,16 @@ fn run(args: &Args) -> Result<(), String> {
 
 fn main() -> ExitCode {
     let args = Args::parse();
-    match run(&args) {
+    // A panic (ours or a dependency's, in this thread or the planning one) is an error: the
+    // component and the channel are released as it unwinds, and the module, getting no more
+    // records, stops on the path with the stop it already has.
+    nurbs_motion::panics::install();
+    let result = nurbs_motion::panics::catch(|| run(&args)).unwrap_or_else(|panic| {
+        Err(format!(
+            "internal error (please report it with the toolpath and the command): {panic}"
+        ))
+    });
+    match result {
         Ok(()) => {
             eprintln!("nurbs-planner: stopped by signal, exiting cleanly");
             ExitCode::SUCCESS
