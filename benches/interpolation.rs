@@ -1,4 +1,4 @@
-//! Table I of paper 000: per-step arc-length error and per-step cost of RK2-PC, SOT, TOT and
+//! Table I of Erwinski et al. 2022: per-step arc-length error and per-step cost of RK2-PC, SOT, TOT and
 //! FCP on the butterfly at lab set 1 (F 2500, A 1e4, J 6e4, eps 0.001, dt 0.25 ms), run in one
 //! process so the costs are comparable as ratios.
 // The small dense solve below indexes rows and columns like the textbook algorithm.

@@ -8,11 +8,11 @@ trap 'rm -rf "$dir"' EXIT
 lab1="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
 lab2="--feed 2500 --accel 1.5e4 --jerk 2e5 --chord-tol 0.001 --period 0.00025"
 vpop_limits="--feed 166.667 --vel 500,500 --accel 2500,3000 --jerk 5000,5000 --chord-tol 0.02 --period 0.006"
-# Paper 003, Table 1: joint limits of the XYZAC machine (x,y,z in mm, a,c in degrees).
+# VPOp, Table 1: joint limits of the XYZAC machine (x,y,z in mm, a,c in degrees).
 table1="--feed 83.333 --vel 500,500,500,90,120 --accel 2500,3000,2100,298.8,298.8 --jerk 5000,5000,50000,1800,36000 --chord-tol 0.02 --period 0.006"
 # The benchmark cases of figures.sh and compare-builds.sh ("curve|limits name|flags"; the curve
 # is examples/<curve>.json): every bundled curve at both lab sets, the three Table III sets of
-# paper 000 on the butterfly, the trident at the VPOp limits.
+# Erwinski et al. 2022 on the butterfly, the trident at the VPOp limits.
 bench_cases=(
   "butterfly|lab set 1|$lab1" "butterfly|lab set 2|$lab2"
   "trident|lab set 1|$lab1" "trident|lab set 2|$lab2"

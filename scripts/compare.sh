@@ -1,8 +1,8 @@
 #!/bin/bash
-# Side by side in one run: every bundled curve with both lab sets of paper 000 (and the trident
+# Side by side in one run: every bundled curve with both lab sets of Erwinski et al. 2022 (and the trident
 # with the VPOp limits), planned by `--planner erwinski` and `--planner vpop`, each output checked
 # by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run),
-# then the open pocket on the 5-axis machine with paper 003's Table 1 joint limits (VPOp only: the
+# then the open pocket on the 5-axis machine with VPOp's Table 1 joint limits (VPOp only: the
 # Erwinski planner has no joint kinematics).
 # Usage: scripts/compare.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh

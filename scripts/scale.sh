@@ -23,7 +23,7 @@ import json, sys
 lines, rss, ok, path = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4]
 s = json.load(open(path))
 t, plan = s["motion_time_s"], s["plan_time_s"]
-elements = lines + s["rounding_corners"]
+elements = s["elements"]
 print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "
       f"| {s['first_segment_time_s'] * 1e3:.1f} | {s['groups']:,} | {s['longest_group_s']:.3f} | {rss / 1024:.0f} | {ok} |")
 PY

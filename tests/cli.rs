@@ -118,7 +118,7 @@ fn plan_then_verify_and_verify_catches_a_jump() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// `plan --interp` (paper 000, Table I): `rk2pc` is the default output bit for bit; `sot`, `tot`
+/// `plan --interp` (Erwinski et al. 2022, Table I): `rk2pc` is the default output bit for bit; `sot`, `tot`
 /// and `fcp` give the same periods with positions computed their way, off the planned arc length
 /// (but near it); `--stream` plans a motion of the same length on the trident that passes
 /// `verify`; VPOp refuses both flags.
@@ -231,7 +231,7 @@ fn png_pixels(path: &Path) -> Vec<[u8; 3]> {
         .collect()
 }
 
-/// Limits of the plot tests: seed 003's for VPOp (coarse period, per-axis accelerations, a fast
+/// Limits of the plot tests: VPOp's for VPOp (coarse period, per-axis accelerations, a fast
 /// run), lab set 1 at a 1 ms period for the Erwinski planner.
 fn plot_limits(planner: &str) -> &'static [&'static str] {
     if planner == "vpop" {
@@ -489,7 +489,7 @@ fn g1_polylines_are_rounded_planned_and_verified() {
             }
         }
         if name == "fan_5axis tip" {
-            // The paper's limits (seed 003, tolerance 0.02 mm): VPOp flows through the rounded
+            // The paper's limits (VPOp, tolerance 0.02 mm): VPOp flows through the rounded
             // corners faster than it stops at the programmed ones.
             let lim = TIP_VPOP;
             let csv = dir.join("fan-paper.csv");

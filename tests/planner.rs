@@ -1,6 +1,6 @@
 //! Every planner output is sampled at the servo period and checked by finite differences
 //! (relative slack 1e-6), with feed, chord error, distance to the curve and end points: on every
-//! bundled curve with both lab sets of paper 000, the Table III sets on the butterfly, the
+//! bundled curve with both lab sets of Erwinski et al. 2022, the Table III sets on the butterfly, the
 //! trident with the VPOp limits, and random curves.
 
 mod common;

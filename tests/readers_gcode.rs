@@ -407,3 +407,24 @@ fn never_panics_on_garbage() {
         }
     }
 }
+
+/// Coordinates beyond any machine (a mutated file's 1e13 mm) are refused with the line that
+/// has them, before any planning: they would plan for minutes, and at the servo period the
+/// finite differences of such positions lose the precision the limit check needs.
+#[test]
+fn coordinates_beyond_any_machine_are_refused_up_front() {
+    let dir = std::env::temp_dir().join(format!("nurbs-gcode-sizes-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("far.ngc");
+    std::fs::write(&path, "G21 G90\nG0 X0 Y0\nF600\nG1 X10 Y0\nG1 X10000000000000 Y5\nM2\n").unwrap();
+    let e = read_toolpath(&path).expect_err("refused");
+    assert!(e.to_string().contains("beyond 1000000 mm"), "{e}");
+    // The G1 lines from line 4 on are one polyline element: it names where it starts.
+    assert!(
+        e.to_string().contains(":4: the path element that starts here"),
+        "names the element: {e}"
+    );
+    std::fs::write(&path, "G21 G90\nG0 X0 Y0\nF600\nG1 X10 Y0\nG1 X999999 Y5\nM2\n").unwrap();
+    assert!(read_toolpath(&path).is_ok(), "a long but possible line is read");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -1,4 +1,4 @@
-//! VPOp planner (seed 003): every plan is checked with the project's verifier (finite
+//! VPOp planner: every plan is checked with the project's verifier (finite
 //! differences at the servo period, relative slack 1e-6, at rest before the first and after the
 //! last row; feed; chord error; distance to the curve; end points).
 

@@ -862,6 +862,7 @@ pub fn block_stop_points(toolpath: &Toolpath, blocks: &[PathBlock], period: f64)
 /// could not bring within the limits joins the next block's group), and the arena data their
 /// stops need, which the streamer writes before the block goes out and whose offsets it
 /// fills in: per block its stored stop sequence ([`StopRun`]s), per curve its stop points.
+#[derive(Clone)]
 pub struct BlockPlan {
     pub blocks: Vec<PathBlock>,
     /// The stored stop sequence after each block, as arena values (a group's last block only).

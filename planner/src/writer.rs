@@ -53,6 +53,9 @@ pub struct GeometryWriter<'a> {
     /// Arena values and curve descriptors this stream uses at most ([`GeometryWriter::limit`]).
     arena_values: usize,
     curves_in_flight: u64,
+    /// Values written in all, and how often the writing wrapped to the arena's start.
+    written: u64,
+    wraps: u64,
 }
 
 impl<'a> GeometryWriter<'a> {
@@ -82,6 +85,8 @@ impl<'a> GeometryWriter<'a> {
             held: VecDeque::new(),
             arena_values: ARENA_VALUES,
             curves_in_flight: CURVE_SLOTS as u64,
+            written: 0,
+            wraps: 0,
         })
     }
 
@@ -163,6 +168,7 @@ impl<'a> GeometryWriter<'a> {
             .write_values(at, values)
             .map_err(|e| WriteError::Refused(format!("arena write refused: {e:?}")))?;
         let end = at + values.len();
+        self.count(at, values.len());
         self.held.push_back(Held {
             start: at,
             end,
@@ -217,6 +223,7 @@ impl<'a> GeometryWriter<'a> {
             PublishError::Invalid(f) => WriteError::Refused(format!("curve {index} refused: {f:?}")),
             PublishError::OutOfPlace => WriteError::Refused(format!("curve {index} out of order")),
         })?;
+        self.count(at, n);
         self.held.push_back(Held {
             start: at,
             end: at + n,
@@ -230,5 +237,19 @@ impl<'a> GeometryWriter<'a> {
     /// Arena values held for the module (what it may still read).
     pub fn held_values(&self) -> usize {
         self.held.iter().map(|h| h.end - h.start).sum()
+    }
+
+    /// Curves published, arena values written, and how often the arena was reused from its
+    /// start, in this stream.
+    pub fn usage(&self) -> (u32, u64, u64) {
+        (self.next_curve - self.first_curve, self.written, self.wraps)
+    }
+
+    /// Counts a write of `n` values at `at`.
+    fn count(&mut self, at: usize, n: usize) {
+        if at < self.write {
+            self.wraps += 1;
+        }
+        self.written += n as u64;
     }
 }

@@ -1,6 +1,6 @@
 //! Per-period interpolation: from a target arc length to the next curve parameter.
 //!
-//! [`rk2pc_step`] is the paper's RK2 predictor-corrector (paper 000, eq. 1-9): a Heun predictor
+//! [`rk2pc_step`] is the paper's RK2 predictor-corrector (Erwinski et al. 2022, eq. 1-9): a Heun predictor
 //! of the parameter increment, the predicted arc length measured by Simpson's rule, and a
 //! corrector on the remaining arc length. The printed eq. 9 has a slip (`sqrt(a^2 - 4ab)`); the
 //! correct root of eq. 5 is `(-b + sqrt(b^2 - 4ac)) / 2a`. With the chord replaced by the

@@ -1,4 +1,4 @@
-//! Seven-phase jerk-limited feed profile of one segment (paper 000, eq. 15-21 and 28-29).
+//! Seven-phase jerk-limited feed profile of one segment (Erwinski et al. 2022, eq. 15-21 and 28-29).
 //!
 //! The profile is stored as plain phase durations and constant phase jerks, starting at feed
 //! `feed_start` with zero tangential acceleration. The printed eq. 28 mislabels its last two

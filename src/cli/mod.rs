@@ -48,7 +48,7 @@ enum Command {
         #[arg(long)]
         summary: Option<PathBuf>,
         /// Feedrate planner: `erwinski` (segment records, streaming) or `vpop` (constraint
-        /// intersection at the servo period, seed 003).
+        /// intersection at the servo period, VPOp).
         #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
         planner: PlannerKind,
         /// Erwinski planner: plan as a stream, each segment final as soon as back-tracking can
@@ -59,13 +59,13 @@ enum Command {
         #[arg(long)]
         stream: bool,
         /// Erwinski planner: how the setpoints map each period's arc length to the curve
-        /// parameter (paper 000, Table I): `rk2pc` (RK2 predictor-corrector, what the realtime
+        /// parameter (Erwinski et al. 2022, Table I): `rk2pc` (RK2 predictor-corrector, what the realtime
         /// module runs and the plan is checked with), or for comparison `sot`, `tot` (second-,
         /// third-order Taylor) and `fcp` (feed correction polynomial, degree 7 per 2 mm), whose
         /// positions drift off the planned arc length and may exceed the limits (`verify` tells).
         #[arg(long, value_enum, default_value_t = Interp::Rk2pc)]
         interp: Interp,
-        /// Also draw the profile as a PNG (paper 000, Fig. 5): feedrate with the feedrate limit
+        /// Also draw the profile as a PNG (Erwinski et al. 2022, Fig. 5): feedrate with the feedrate limit
         /// function's components and the critical points, axial accelerations and axial jerks
         /// (the finite differences `verify` checks) with their limits, over the curve parameter.
         #[arg(long, value_name = "PNG")]

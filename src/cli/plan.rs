@@ -111,6 +111,9 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let mut state = SimState::start(tip, limits.period);
     let (mut records, mut critical_points, mut groups) = (Vec::new(), Vec::new(), Groups::default());
     let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
+    // A long plan says how far it has got, every PROGRESS_EVERY.
+    let began = std::time::Instant::now();
+    let mut next_report = PROGRESS_EVERY;
     while let Some(next) = planner.next_final() {
         let f = next.map_err(|e| match args.stream {
             // A streamed plan hands records out before it ends: on the machine they would be running.
@@ -123,6 +126,15 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         handed_out += 1;
         handed_out_time += f.record.profile().total_time();
         groups.push(&f);
+        if began.elapsed() >= next_report {
+            next_report += PROGRESS_EVERY;
+            eprintln!(
+                "planning: {handed_out_time:.1} s of motion in {handed_out} records after {:.0} s, at element {} of {}",
+                began.elapsed().as_secs_f64(),
+                f.record.curve + 1,
+                toolpath.elements.len()
+            );
+        }
         let found = planner.take_critical_points();
         if args.plot.is_some() {
             critical_points.extend(found);
@@ -186,6 +198,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "interpolation": format!("{:?}", args.interp).to_lowercase(),
                 "streamed": args.stream,
                 "segments": report.records,
+                "elements": toolpath.elements.len(),
                 "critical_points": groups.critical_points,
                 "setpoints": out.rows,
                 "groups": groups.count,
@@ -226,6 +239,9 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     Ok(())
 }
+
+/// How often a long plan reports its progress on stderr.
+const PROGRESS_EVERY: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Groups of final records (the records between two stops, [`FinalRecord`]): how many, and
 /// the longest in motion time (how long a hold may wait for a stop).

@@ -1,4 +1,4 @@
-//! `plan --plot`: the layout of paper 000's Fig. 5 as a PNG. Three panels over the curve
+//! `plan --plot`: the layout of Erwinski et al.'s Fig. 5 as a PNG. Three panels over the curve
 //! parameter: (a) the planned feedrate with the feedrate limit function's components dashed and
 //! the critical points marked; (b) axial accelerations and (c) axial jerks with their limits.
 //!

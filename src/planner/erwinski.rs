@@ -1,4 +1,4 @@
-//! The feedrate planner of paper 000 (Erwinski, Wawrzak, Paprocki 2022, section III, Fig. 3),
+//! The feedrate planner of Erwinski, Wawrzak, Paprocki 2022 (section III, Fig. 3),
 //! made strict: every segment is interpolated with the realtime interpolator itself and checked
 //! by finite differences; a segment that still violates after the golden-section searches of
 //! jerk and acceleration (steps 1-7) gets a lower end feed (step 8) and, failing that, a lower
@@ -36,7 +36,7 @@ pub struct PlanOptions {
     /// the plan ends. The price: a back-tracking cascade that would reach a record already
     /// handed out makes a segment stop instead (a stop checked before the records behind it
     /// were handed out), and settling costs an extra solve per segment. `false`: records are
-    /// handed out when the whole plan is done, with back-tracking unbounded (paper 000, step 9).
+    /// handed out when the whole plan is done, with back-tracking unbounded (Erwinski et al. 2022, step 9).
     pub stream: bool,
 }
 

@@ -1,4 +1,4 @@
-//! Feedrate limit function (paper 000, eq. 10-14) and its critical points (section III, steps
+//! Feedrate limit function (Erwinski et al. 2022, eq. 10-14) and its critical points (section III, steps
 //! 1-5).
 //!
 //! The paper writes the centripetal caps with the curvature and the smallest axis limit

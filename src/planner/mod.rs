@@ -1,4 +1,4 @@
-//! Feedrate planners. [`erwinski`] is the main, streaming-capable planner of paper 000; it
+//! Feedrate planners. [`erwinski`] is the main, streaming-capable planner of Erwinski et al. 2022; it
 //! turns toolpath geometry into `nurbs_rtcore` segment records whose sampled motion never
 //! exceeds an axis limit.
 

@@ -1,4 +1,4 @@
-//! Segment boundaries (nodes) of the Erwinski planner, paper 000 section III steps 1-4, produced
+//! Segment boundaries (nodes) of the Erwinski planner, Erwinski et al. 2022 section III steps 1-4, produced
 //! lazily from the front of the path so that planning can start before the path is scanned.
 //!
 //! Per path element: the FLF scan (step 1) and its critical points (steps 2-3), the knots where

@@ -1,4 +1,4 @@
-//! Fitting a seven-phase S-curve between two feeds over a given distance (paper 000, eq. 15-21).
+//! Fitting a seven-phase S-curve between two feeds over a given distance (Erwinski et al. 2022, eq. 15-21).
 
 use nurbs_rtcore::scurve::{SCurve, PHASES};
 

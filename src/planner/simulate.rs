@@ -68,7 +68,7 @@ pub fn setpoints(curves: &PathCurves, limits: &Limits, records: &[SegmentRecord]
     out
 }
 
-/// How the setpoints map each period's planned arc length to the curve parameter (paper 000,
+/// How the setpoints map each period's planned arc length to the curve parameter (Erwinski et al. 2022,
 /// section II and Table I).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Interpolation {
@@ -153,7 +153,7 @@ pub fn setpoints_with(
 }
 
 /// Least-squares polynomial u(x) of degree 7, x in [0, 1] over the arc lengths `s0..s1` of
-/// `curve` (normal equations on 65 Chebyshev points; the FCP of paper 000).
+/// `curve` (normal equations on 65 Chebyshev points; the FCP of Erwinski et al. 2022).
 pub fn fit_fcp(curve: &Nurbs, table: &ArcLengthTable, s0: f64, s1: f64) -> [f64; 8] {
     let n = 64;
     let mut ata = [[0.0f64; 8]; 8];

@@ -1,6 +1,6 @@
 //! Limit sets shared by the test suites and the benches, as `Limits` and as `nurbs-plan`
-//! arguments: the VPOp paper's (seed 003) trident limits, its Table 1 limits of the XYZAC
-//! machine, and lab set 1 of paper 000.
+//! arguments: the VPOp paper's trident limits, its Table 1 limits of the XYZAC
+//! machine, and lab set 1 of Erwinski et al. 2022.
 #![allow(dead_code)] // each crate that includes this file uses a different subset
 
 use nurbs_motion::planner::Limits;
@@ -108,7 +108,7 @@ pub const TIP_VPOP: [&str; 12] = [
     "0.006",
 ];
 
-/// Lab set 1 of paper 000 (F 2500 mm/s, A 1e4, J 6e4, chord 1 µm, dt 0.25 ms) on `dim` axes.
+/// Lab set 1 of Erwinski et al. 2022 (F 2500 mm/s, A 1e4, J 6e4, chord 1 µm, dt 0.25 ms) on `dim` axes.
 pub fn lab1(dim: usize) -> Limits {
     Limits::uniform(dim, 2500.0, 1e4, 6e4, 0.001, 0.00025)
 }

@@ -317,6 +317,7 @@ fn run(args: &Args) -> Result<(), String> {
             r.corners, limits.chord_tolerance, r.max_deviation
         );
     }
+    eprintln!("nurbs-planner: {} path elements", prepared.toolpath.elements.len());
     let toolpath = Arc::new(prepared.toolpath);
     // Before touching HAL: a clear refusal, not a half-started component.
     feed::check_fits(&toolpath)?;
@@ -362,8 +363,9 @@ fn run(args: &Args) -> Result<(), String> {
             let progressed = streamer.fill()?;
             show(&mut streamer);
             if streamer.done() && !reported {
+                let (curves, values, wraps) = streamer.writer().usage();
                 eprintln!(
-                    "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s)",
+                    "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s); {curves} curves and {values} arena values streamed, the arena reused from its start {wraps} times",
                     streamer.pushed, streamer.pushed_time, streamer.longest_group
                 );
                 reported = true;

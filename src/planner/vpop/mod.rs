@@ -1,4 +1,4 @@
-//! VPOp (Beudaert, Lavernhe, Tournier 2012, seed 003): time-discretised feedrate planning by
+//! VPOp (Beudaert, Lavernhe, Tournier 2012): time-discretised feedrate planning by
 //! constraint intersection at the servo period, with per-axis velocity, acceleration and jerk
 //! limits of any machine structure (2-/3-axis tool tip, XYZAC or XYZBC 5-axis), dichotomy back-tracking
 //! and look-ahead to the path end.
