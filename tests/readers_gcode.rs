@@ -217,7 +217,7 @@ fn arcs_are_exact_rational_quadratics() {
 }
 
 #[test]
-fn three_d_when_a_feed_move_has_z() {
+fn three_d_when_z_is_known_where_the_feed_motion_begins() {
     let t = ok("G0 X0 Y0 Z5\nG1 Z-1 F60\nG1 X10\nG2 X20 Y0 R5\nG5.2 X25 Y5 P1\nX30 Y0 P1\nG5.3\nG0 Z5\nM30\nG1 X99\n");
     assert_eq!(t.tip_dim(), 3);
     assert_eq!(t.elements.len(), 3);
@@ -227,10 +227,16 @@ fn three_d_when_a_feed_move_has_z() {
     );
     assert_eq!(t.elements[1].curve.control_point(0), &[10.0, 0.0, -1.0]);
     assert_eq!(t.elements[2].curve.control_point(2), &[30.0, 0.0, -1.0]);
-    // Z only on rapids: 2-D.
+    // Z known where the feed motion begins (positioned by rapids only): 3-D at that Z, decided
+    // at the first feed move so that a program streams.
     let t = ok("G0 X0 Y0 Z5\nG0 Z-1\nG1 X10 F60\nG0 Z5\n");
-    assert_eq!(t.tip_dim(), 2);
+    assert_eq!(t.tip_dim(), 3);
     assert_eq!(t.elements.len(), 1);
+    assert_eq!(t.elements[0].curve.points(), &[0.0, 0.0, -1.0, 10.0, 0.0, -1.0]);
+    // Z never programmed: 2-D.
+    let t = ok("G0 X0 Y0\nG1 X10 F60\nG2 X20 Y0 R5\n");
+    assert_eq!(t.tip_dim(), 2);
+    assert_eq!(t.elements.len(), 2);
 }
 
 #[test]
@@ -367,7 +373,17 @@ fn malformed_inputs_give_specific_errors() {
         "J word missing in absolute center arc",
     );
     // 3-D program whose Z is never positioned.
-    fails("G0 X0 Y0\nG1 X1 F60\nG1 Z-1\n", 2, "Z position is unknown");
+    // The path is 2-D when Z is unknown where its feed motion begins: a Z word later is refused.
+    fails(
+        "G0 X0 Y0\nG1 X1 F60\nG1 Z-1\n",
+        3,
+        "Z position was unknown where the feed motion began",
+    );
+    fails(
+        "G0 X0 Y0\nG1 Z-1 F60\n",
+        2,
+        "Z position was unknown where the feed motion began",
+    );
 }
 
 #[test]

@@ -27,7 +27,7 @@ fn rows(plan: &VpopPlan, tip: usize) -> Vec<Row> {
 }
 
 fn check(tp: &Toolpath, plan: &VpopPlan) -> Report {
-    let report = verify(&PathCurves::new(tp), &plan.limits, &rows(plan, tp.tip_dim()));
+    let report = verify(&mut PathCurves::new(tp), &plan.limits, &rows(plan, tp.tip_dim()));
     assert!(report.violations.is_empty(), "violations: {:?}", report.violations);
     report
 }
@@ -51,7 +51,7 @@ fn trident_vpop_limits() {
     // The plan uses the jerk limit: checked against 1 % less it must fail.
     let mut tighter = plan.limits.clone();
     tighter.jerk = tighter.jerk.iter().map(|j| 0.99 * j).collect();
-    let r = verify(&PathCurves::new(&tp), &tighter, &rows(&plan, 2));
+    let r = verify(&mut PathCurves::new(&tp), &tighter, &rows(&plan, 2));
     assert!(!r.violations.is_empty());
 }
 
@@ -194,7 +194,7 @@ fn open_pocket_five_axis_table_1() {
         jerk: vec![1e12; 3],
         ..limits.clone()
     };
-    let r = verify(&PathCurves::new(&tp), &tip_limits, &rows(&plan, 3));
+    let r = verify(&mut PathCurves::new(&tp), &tip_limits, &rows(&plan, 3));
     assert!(r.violations.is_empty(), "{:?}", r.violations);
     eprintln!(
         "open pocket 5-axis: {:.3} s, planned in {:.1} ms, joint peaks v {:?} a {:?} j {:?}",
@@ -305,7 +305,7 @@ fn random_curves_never_violate() {
         }
         match plan_tip(&tp, &limits, SearchOptions::default()) {
             Ok(plan) => {
-                let report = verify(&PathCurves::new(&tp), &plan.limits, &rows(&plan, tp.tip_dim()));
+                let report = verify(&mut PathCurves::new(&tp), &plan.limits, &rows(&plan, tp.tip_dim()));
                 assert!(
                     report.violations.is_empty(),
                     "case {case} (seed {seed}): violations {:?}\n{tp:?}\n{limits:?}",

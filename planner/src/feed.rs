@@ -447,7 +447,7 @@ pub fn choose_block_stops(
     // The module's evaluation of a block's points (see `Interpolator::point_at`).
     let mut spans = SpanCache::new();
     for b in blocks.iter_mut() {
-        let view = *curves.view(b.curve());
+        let view = curves.view(b.curve());
         let curve = &mut CachedCurve::new(view, &mut spans);
         for &u in &b.u[..b.len()] {
             fd.push(&curve.point(u)[..tip], limits);
@@ -757,7 +757,7 @@ fn stored_stop(
     f.reset_peaks();
     let mut spans = SpanCache::new();
     for p in &points {
-        let point = CachedCurve::new(*curves.view(p.element), &mut spans).point(p.u);
+        let point = CachedCurve::new(curves.view(p.element), &mut spans).point(p.u);
         f.push(&point[..tip], limits);
     }
     f.finish(limits);

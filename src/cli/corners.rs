@@ -1,115 +1,136 @@
 //! G1 corner rounding for `plan` and `verify` (one decision, shared): the path both commands
-//! use is read and rounded here, deterministically from the file, the mode and `--chord-tol`.
+//! use is read and rounded here, deterministically from the file, the mode and `--chord-tol`,
+//! as a stream ([`open`]) or whole ([`prepare`], the same stream collected).
 
-use super::machine::is_five_axis;
 use crate::geometry::Toolpath;
-use crate::planner::corner::{is_polyline, round_toolpath, ProgramPolyline};
-use crate::readers::read_toolpath;
-use std::path::Path;
+use crate::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
+use crate::readers::{open_toolpath, ElementStream};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 
-/// `--round-corners`: what to do with the corners of a straight-line (G1) tool path.
+/// `--round-corners`: what to do with the corners of straight-line (G1) moves.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum RoundCorners {
-    /// Round when every element is a straight line (G1, DXF LINE / LWPOLYLINE without bulges,
-    /// degree-1 JSON) of the tool tip, or of the tool tip and top point (5-axis G1), and the
-    /// elements join; plan other paths as programmed.
+    /// Round the corners of every run of joined straight lines (G1, DXF LINE / LWPOLYLINE
+    /// without bulges, degree-1 JSON) of the tool tip, or of the tool tip and top point (5-axis
+    /// G1), within the chord tolerance; arcs and NURBS, and where a run meets them, as
+    /// programmed.
     #[default]
     Auto,
-    /// Round, and fail if the path is not such a polyline.
+    /// Round, and fail if the path is not one continuous polyline.
     On,
-    /// Plan the programmed polyline as is (exact stop at every corner).
+    /// Plan the programmed path as is (exact stop at every corner).
     Off,
 }
 
 /// What rounding did to a polyline.
+#[derive(Clone, Copy, Debug)]
 pub struct Rounding {
     /// Corners replaced by a five-point cubic B-spline.
     pub corners: usize,
-    /// Largest distance of the rounded path to the programmed polyline (mm), sampled densely.
+    /// Largest distance of the rounded path to the programmed polyline (mm).
     pub max_deviation: f64,
     /// 5-axis: the same for the top curve (tool axis).
     pub max_top_deviation: Option<f64>,
 }
 
-/// The path to plan or verify: the programmed path, or the rounded one.
+/// The path to plan or verify as a stream: the programmed elements, rounded as they come.
+pub struct PreparedStream {
+    pub elements: ElementStream,
+    file: PathBuf,
+    stats: Option<Arc<Mutex<RoundingStats>>>,
+}
+
+impl PreparedStream {
+    /// The elements (the stream keeps what rounding did).
+    pub fn take_elements(&mut self) -> ElementStream {
+        std::mem::replace(&mut self.elements, Box::new(std::iter::empty()))
+    }
+
+    /// What rounding has done so far (all of it once the stream has ended); `None` with
+    /// `--round-corners off`.
+    pub fn rounding(&self) -> Option<Rounding> {
+        stream_rounding(&self.stats)
+    }
+
+    /// The programmed polyline, read from the file a second time as the setpoints measured
+    /// against it need ([`ProgramPolyline::streamed`]).
+    pub fn program(&self) -> Result<ProgramPolyline, Box<dyn std::error::Error>> {
+        Ok(ProgramPolyline::streamed(
+            open_toolpath(&self.file)?.map_while(Result::ok),
+        ))
+    }
+}
+
+/// Opens `file` as a stream of elements and applies `mode` with `tolerance` (`--chord-tol`).
+pub fn open(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<PreparedStream, Box<dyn std::error::Error>> {
+    let elements = open_toolpath(file)?;
+    let name = file.display().to_string();
+    let (elements, stats): (ElementStream, _) = match mode {
+        RoundCorners::Off => (elements, None),
+        RoundCorners::Auto | RoundCorners::On => {
+            let rounder = CornerRounder::new(&name, elements, tolerance, mode == RoundCorners::On)
+                .map_err(|e| format!("{name}: {e}"))?;
+            let stats = rounder.stats();
+            (Box::new(rounder), Some(stats))
+        }
+    };
+    Ok(PreparedStream {
+        elements,
+        file: file.to_owned(),
+        stats,
+    })
+}
+
+/// The path to plan or verify, whole: the programmed path, or the rounded one.
 pub struct Prepared {
     /// The path the planner follows (rounded when `rounding` is some).
     pub toolpath: Toolpath,
     pub rounding: Option<Rounding>,
-    /// The programmed polyline, when the program is one (rounded or not).
-    pub program: Option<ProgramPolyline>,
 }
 
-impl Prepared {
-    /// Largest distance of tool-tip points to the programmed polyline (mm); `None` when the
-    /// program is not a polyline.
-    pub fn deviation_from_program<'a>(&self, points: impl IntoIterator<Item = &'a [f64]>) -> Option<f64> {
-        self.program.as_ref().map(|p| p.max_distance(points))
-    }
-
-    /// Summary JSON fields.
-    pub fn summary_fields(&self, deviation: Option<f64>) -> serde_json::Value {
-        serde_json::json!({
-            "rounding_corners": self.rounding.as_ref().map_or(0, |r| r.corners),
-            "rounding_max_deviation_mm": self.rounding.as_ref().map(|r| r.max_deviation),
-            "rounding_max_top_deviation_mm": self.rounding.as_ref().and_then(|r| r.max_top_deviation),
-            "max_deviation_from_program_mm": deviation,
-        })
-    }
-
-    /// One line for the console, or nothing when the program is not a polyline.
-    pub fn describe(&self, deviation: Option<f64>, tolerance: f64) -> Option<String> {
-        let dev = deviation?;
-        Some(match &self.rounding {
-            Some(r) => format!(
-                "corners: {} rounded within --chord-tol {tolerance} mm (rounding deviation {:.6} mm{}); setpoints within {:.6} mm of the programmed polyline",
-                r.corners,
-                r.max_deviation,
-                r.max_top_deviation.map_or(String::new(), |t| format!(", top curve {t:.6} mm")),
-                dev
-            ),
-            None => format!("corners: not rounded; setpoints within {dev:.3e} mm of the programmed polyline"),
-        })
-    }
-}
-
-/// Reads `file` and applies `mode` with `tolerance` (`--chord-tol`).
+/// [`open`], read whole.
 pub fn prepare(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<Prepared, Box<dyn std::error::Error>> {
-    let toolpath = read_toolpath(file)?;
-    let polyline = is_polyline(&toolpath);
-    let program = if polyline {
-        Some(ProgramPolyline::new(&toolpath).map_err(|e| format!("{}: {e}", file.display()))?)
-    } else {
-        None
+    let PreparedStream { elements, stats, .. } = open(file, mode, tolerance)?;
+    let toolpath = Toolpath {
+        elements: elements.collect::<Result<Vec<_>, _>>()?,
     };
-    let round = match mode {
-        RoundCorners::Off => false,
-        RoundCorners::Auto => polyline,
-        RoundCorners::On if polyline => true,
-        RoundCorners::On => {
-            return Err(format!(
-                "{}: --round-corners on needs a polyline (one continuous run of straight G1 / LINE / degree-1 elements, with or without a top curve)",
-                file.display()
-            )
-            .into())
-        }
-    };
-    if !round {
-        return Ok(Prepared {
-            toolpath,
-            rounding: None,
-            program,
-        });
-    }
-    let rounded =
-        round_toolpath(&toolpath, tolerance).map_err(|e| format!("{}: corner rounding: {e}", file.display()))?;
     Ok(Prepared {
-        toolpath: rounded.toolpath,
-        rounding: Some(Rounding {
-            corners: rounded.corners,
-            max_deviation: rounded.max_deviation,
-            max_top_deviation: is_five_axis(&toolpath).then_some(rounded.max_top_deviation),
-        }),
-        program,
+        toolpath,
+        rounding: stream_rounding(&stats),
+    })
+}
+
+fn stream_rounding(stats: &Option<Arc<Mutex<RoundingStats>>>) -> Option<Rounding> {
+    let stats = *stats.as_ref()?.lock().ok()?;
+    Some(Rounding {
+        corners: stats.corners,
+        max_deviation: stats.max_deviation,
+        max_top_deviation: stats.top.then_some(stats.max_top_deviation),
+    })
+}
+
+/// Summary JSON fields of rounding and the setpoints' distance to the programmed polyline.
+pub fn summary_fields(rounding: Option<Rounding>, deviation: Option<f64>) -> serde_json::Value {
+    serde_json::json!({
+        "rounding_corners": rounding.map_or(0, |r| r.corners),
+        "rounding_max_deviation_mm": rounding.map(|r| r.max_deviation),
+        "rounding_max_top_deviation_mm": rounding.and_then(|r| r.max_top_deviation),
+        "max_deviation_from_program_mm": deviation,
+    })
+}
+
+/// One line for the console, or nothing when the program is not a polyline.
+pub fn describe(rounding: Option<Rounding>, deviation: Option<f64>, tolerance: f64) -> Option<String> {
+    let dev = deviation?;
+    Some(match rounding {
+        Some(r) => format!(
+            "corners: {} rounded within --chord-tol {tolerance} mm (rounding deviation {:.6} mm{}); setpoints within {:.6} mm of the programmed polyline",
+            r.corners,
+            r.max_deviation,
+            r.max_top_deviation.map_or(String::new(), |t| format!(", top curve {t:.6} mm")),
+            dev
+        ),
+        None => format!("corners: not rounded; setpoints within {dev:.3e} mm of the programmed polyline"),
     })
 }

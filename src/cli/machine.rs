@@ -58,7 +58,7 @@ pub struct MachineArgs {
 
 impl MachineArgs {
     /// The flags given on the command line, for messages (`None`: none given).
-    fn given(&self) -> Option<String> {
+    pub fn given(&self) -> Option<String> {
         let flags: Vec<&str> = [
             (self.machine.is_some(), "--machine"),
             (self.pivot.is_some(), "--pivot"),

@@ -1,4 +1,4 @@
-use super::corners::{prepare, RoundCorners};
+use super::corners::{describe, open, prepare, summary_fields, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
@@ -89,25 +89,37 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         }
         return run_vpop(args);
     }
-    let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
-    let toolpath = &prepared.toolpath;
-    args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
-    args.machine.refuse(
-        "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
-    )?;
-    let limits = args.limits.limits(toolpath.tip_dim())?;
+    if args.machine.given().is_some() {
+        // Refused either way; read whole to say why.
+        let whole = prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?;
+        args.machine.refuse_unless_five_axis(&whole.toolpath, args.toolpath)?;
+        args.machine.refuse(
+            "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
+        )?;
+    }
     let options = PlanOptions {
         stream: args.stream,
         ..PlanOptions::default()
     };
-    let tip = toolpath.tip_dim();
-    let names = ["x", "y", "z"];
-    let curves = PathCurves::new(toolpath);
-    // RK2-PC setpoints are written as each record comes (a program of any length in constant
-    // memory); the comparison methods and the plot need them all.
+    // RK2-PC setpoints are written as each record comes, from a path read as it is planned (a
+    // program of any length in memory that follows the look-ahead); the comparison methods and
+    // the plot need the whole path and every record.
     let keep = args.plot.is_some() || args.interp != Interpolation::Rk2pc;
-    let mut sink = SetpointSink::create(args.out, &names[..tip], &limits, prepared.program.as_ref(), !keep)?;
-    let mut planner = Planner::new(toolpath, &limits, &options)?;
+    let mut stream = open(args.toolpath, args.round_corners, args.limits.chord_tol)?;
+    let mut program = stream.program()?;
+    let whole = match keep {
+        true => Some(prepare(args.toolpath, args.round_corners, args.limits.chord_tol)?),
+        false => None,
+    };
+    let curves = match &whole {
+        Some(w) => PathCurves::new(&w.toolpath),
+        None => PathCurves::streamed(stream.take_elements())?,
+    };
+    let tip = curves.tip_dim();
+    let limits = args.limits.limits(tip)?;
+    let names = ["x", "y", "z"];
+    let mut sink = SetpointSink::create(args.out, &names[..tip], &limits, Some(&mut program), !keep)?;
+    let mut planner = Planner::with_curves(curves, &limits, &options)?;
     let mut state = SimState::start(tip, limits.period);
     let (mut records, mut critical_points, mut groups) = (Vec::new(), Vec::new(), Groups::default());
     let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
@@ -129,10 +141,10 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         if began.elapsed() >= next_report {
             next_report += PROGRESS_EVERY;
             eprintln!(
-                "planning: {handed_out_time:.1} s of motion in {handed_out} records after {:.0} s, at element {} of {}",
+                "planning: {handed_out_time:.1} s of motion in {handed_out} records after {:.0} s, at path element {} of {} read",
                 began.elapsed().as_secs_f64(),
                 f.record.curve + 1,
-                toolpath.elements.len()
+                planner.curves().len()
             );
         }
         let found = planner.take_critical_points();
@@ -146,7 +158,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         } else {
             let sink = &mut sink;
             let mut error = None;
-            run_segment(&curves, &limits, &mut state, f.record, &mut |s| {
+            run_segment(planner.curves(), &limits, &mut state, f.record, &mut |s| {
                 if let Err(e) = sink.push(s) {
                     error.get_or_insert(e);
                 }
@@ -155,9 +167,12 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     groups.critical_points += planner.take_critical_points().len() + critical_points.len();
+    let elements = planner.curves().len();
+    // A file that fails part way: the plan ends at rest before the element that failed.
+    let read_error = planner.curves().error().cloned();
     let report = planner.finish();
-    if keep {
-        for s in setpoints_with(toolpath, &report.limits, &records, args.interp) {
+    if let Some(w) = &whole {
+        for s in setpoints_with(&w.toolpath, &report.limits, &records, args.interp) {
             sink.push(&s)?;
         }
     }
@@ -181,11 +196,21 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             String::new()
         }
     );
-    if let Some(line) = prepared.describe(out.deviation, report.limits.chord_tolerance) {
+    let rounding = whole.as_ref().map_or_else(|| stream.rounding(), |w| w.rounding);
+    if let Some(line) = describe(rounding, out.deviation, report.limits.chord_tolerance) {
         eprintln!("{line}");
     }
     for (curve, u) in &report.stops_made {
         eprintln!("the streamed plan comes to rest at curve {curve} u = {u}: back-tracking reached records already handed out");
+    }
+    if let Some(e) = read_error {
+        return Err(format!(
+            "{e}\nthe plan ends at rest at the end of path element {} before it ({} setpoints written to {})",
+            elements.saturating_sub(1),
+            out.rows,
+            args.out.display()
+        )
+        .into());
     }
     if let Some(path) = args.summary {
         let summary = with_fields(
@@ -198,7 +223,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "interpolation": format!("{:?}", args.interp).to_lowercase(),
                 "streamed": args.stream,
                 "segments": report.records,
-                "elements": toolpath.elements.len(),
+                "elements": elements,
                 "critical_points": groups.critical_points,
                 "setpoints": out.rows,
                 "groups": groups.count,
@@ -206,10 +231,11 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "stops_made": report.stops_made.len(),
             }),
         );
-        let summary = with_fields(summary, prepared.summary_fields(out.deviation));
+        let summary = with_fields(summary, summary_fields(rounding, out.deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
-    if let Some(path) = args.plot {
+    if let (Some(path), Some(w)) = (args.plot, &whole) {
+        let toolpath = &w.toolpath;
         let points: Vec<PlotSample> = out
             .samples
             .iter()
@@ -271,7 +297,7 @@ struct SetpointSink<'a> {
     limits: &'a crate::planner::Limits,
     axes: usize,
     check: FiniteDifferences,
-    program: Option<(&'a ProgramPolyline, Deviation)>,
+    program: Option<(&'a mut ProgramPolyline, Deviation)>,
     rows: usize,
     samples: Option<Vec<Sample>>,
 }
@@ -289,7 +315,7 @@ impl<'a> SetpointSink<'a> {
         path: &Path,
         names: &[&str],
         limits: &'a crate::planner::Limits,
-        program: Option<&'a ProgramPolyline>,
+        program: Option<&'a mut ProgramPolyline>,
         streaming: bool,
     ) -> Result<Self, Box<dyn std::error::Error>> {
         let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
@@ -330,7 +356,7 @@ impl<'a> SetpointSink<'a> {
         Ok(Written {
             rows: self.rows,
             check: self.check,
-            deviation: self.program.map(|(_, d)| d.worst),
+            deviation: self.program.and_then(|(p, d)| d.finish(p)),
             samples: self.samples.unwrap_or_default(),
         })
     }
@@ -401,8 +427,9 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         plan.stats.dead_ends,
         plan.stats.brakes
     );
-    let deviation = prepared.deviation_from_program(plan.points.iter().map(|p| &p.tip[..tip]));
-    if let Some(line) = prepared.describe(deviation, plan.limits.chord_tolerance) {
+    let mut program = open(args.toolpath, args.round_corners, args.limits.chord_tol)?.program()?;
+    let deviation = program.max_distance(plan.points.iter().map(|p| &p.tip[..tip]));
+    if let Some(line) = describe(prepared.rounding, deviation, plan.limits.chord_tolerance) {
         eprintln!("{line}");
     }
     if let Some(path) = args.summary {
@@ -417,7 +444,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "axes": if five { args.machine.kinematics().joint_names().join(",") } else { "tool tip".into() },
             }),
         );
-        let mut summary = with_fields(summary, prepared.summary_fields(deviation));
+        let mut summary = with_fields(summary, summary_fields(prepared.rounding, deviation));
         if five {
             summary = with_fields(summary, args.machine.summary_fields());
         }

@@ -1,7 +1,8 @@
-use super::corners::{prepare, Prepared, RoundCorners};
+use super::corners::{describe, open, prepare, Prepared, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::LimitArgs;
 use crate::planner::corner::Deviation;
+use crate::planner::corner::ProgramPolyline;
 use crate::planner::verify::{verify, Row, Verifier};
 use crate::planner::PathCurves;
 use std::path::Path;
@@ -138,6 +139,7 @@ fn read_columns(path: &Path, names: &[&str]) -> Result<Vec<Vec<f64>>, String> {
 fn run_five_axis(
     setpoints: &Path,
     prepared: &Prepared,
+    mut program: ProgramPolyline,
     limits: &LimitArgs,
     machine: crate::kinematics::TableTilting,
 ) -> Result<bool, Box<dyn std::error::Error>> {
@@ -150,7 +152,7 @@ fn run_five_axis(
     let joints = read_columns(setpoints, &names)?;
     let tips = read_columns(setpoints, &["tip_x", "tip_y", "tip_z"])?;
     let base = read_rows(setpoints, 0)?;
-    let curves = PathCurves::new(toolpath);
+    let mut curves = PathCurves::new(toolpath);
     let mut fd = FiniteDifferences::new(5, joint_limits.period);
     let (mut fk_error, mut axis_error): (f64, f64) = (0.0, 0.0);
     for ((q, t), row) in joints.iter().zip(&tips).zip(&base) {
@@ -207,10 +209,10 @@ fn run_five_axis(
             ..r.clone()
         })
         .collect();
-    let report = verify(&curves, &tip_limits, &rows);
+    let report = verify(&mut curves, &tip_limits, &rows);
     violations.extend(report.violations);
     let deviation = check_program_deviation(
-        prepared,
+        &mut program,
         tips.iter().map(Vec::as_slice),
         joint_limits.chord_tolerance,
         &mut violations,
@@ -227,7 +229,7 @@ fn run_five_axis(
         report.max_chord_error,
         report.max_distance_to_curve,
     );
-    if let Some(line) = prepared.describe(deviation, joint_limits.chord_tolerance) {
+    if let Some(line) = describe(prepared.rounding, deviation, joint_limits.chord_tolerance) {
         println!("{line}");
     }
     print_programmed_feed(report.max_programmed_feed_ratio);
@@ -243,12 +245,12 @@ fn run_five_axis(
 /// Largest distance of the tool tips to the programmed polyline (`None` when the program is
 /// not one); a violation when it exceeds --chord-tol.
 fn check_program_deviation<'a>(
-    prepared: &Prepared,
+    program: &mut ProgramPolyline,
     tips: impl IntoIterator<Item = &'a [f64]>,
     tolerance: f64,
     violations: &mut Vec<String>,
 ) -> Option<f64> {
-    let deviation = prepared.deviation_from_program(tips);
+    let deviation = program.max_distance(tips);
     report_deviation(deviation, tolerance, violations);
     deviation
 }
@@ -269,6 +271,18 @@ fn print_programmed_feed(ratio: f64) {
     }
 }
 
+/// Whether the CSV's header has every column of `names`.
+fn has_columns(path: &Path, names: &[&str]) -> Result<bool, String> {
+    use std::io::BufRead;
+    let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut header = String::new();
+    std::io::BufReader::new(file)
+        .read_line(&mut header)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let columns: Vec<&str> = header.trim().split(',').map(str::trim).collect();
+    Ok(names.iter().all(|n| columns.contains(n)))
+}
+
 pub fn run(
     setpoints: &Path,
     toolpath: &Path,
@@ -277,11 +291,10 @@ pub fn run(
     machine: &MachineArgs,
 ) -> Result<bool, Box<dyn std::error::Error>> {
     let file = toolpath;
-    let prepared = prepare(toolpath, round_corners, limits.chord_tol)?;
-    let toolpath = &prepared.toolpath;
-    machine.refuse_unless_five_axis(toolpath, file)?;
-    if read_columns(setpoints, &["c", "tip_x"]).is_ok() {
-        if !is_five_axis(toolpath) {
+    if has_columns(setpoints, &["c", "tip_x"])? {
+        let prepared = prepare(toolpath, round_corners, limits.chord_tol)?;
+        machine.refuse_unless_five_axis(&prepared.toolpath, file)?;
+        if !is_five_axis(&prepared.toolpath) {
             return Err(format!(
                 "{}: joint setpoints (x,y,z,a|b,c) need a 5-axis toolpath, but {} has no top curve on every element",
                 setpoints.display(),
@@ -289,27 +302,34 @@ pub fn run(
             )
             .into());
         }
-        return run_five_axis(setpoints, &prepared, limits, machine.kinematics());
+        let program = open(toolpath, round_corners, limits.chord_tol)?.program()?;
+        return run_five_axis(setpoints, &prepared, program, limits, machine.kinematics());
     }
     machine.refuse(&format!(
         "{} holds tool-tip setpoints (no c, tip_x columns): no machine kinematics to check",
         setpoints.display()
     ))?;
-    let limits = limits.limits(toolpath.tip_dim())?;
-    let tip = toolpath.tip_dim();
-    let curves = PathCurves::new(toolpath);
-    // A row at a time: a setpoint file of any length in constant memory.
-    let mut verifier = Verifier::new(&curves, &limits);
-    let mut deviation = prepared.program.as_ref().map(|p| (p, Deviation::default()));
+    // A row at a time, the path read as the rows reach it: a setpoint file and a program of
+    // any length in constant memory.
+    let mut stream = open(toolpath, round_corners, limits.chord_tol)?;
+    let mut program = stream.program()?;
+    let mut curves = PathCurves::streamed(stream.take_elements())?;
+    let tip = curves.tip_dim();
+    let limits = limits.limits(tip)?;
+    let mut verifier = Verifier::new(&mut curves, &limits);
+    let mut deviation = Deviation::default();
     for row in RowReader::open(setpoints, tip)? {
         let row = row?;
         verifier.push(&row);
-        if let Some((p, d)) = &mut deviation {
-            d.push(p, &row.q[..tip]);
-        }
+        deviation.push(&mut program, &row.q[..tip]);
     }
     let mut report = verifier.finish();
-    let deviation = deviation.map(|(_, d)| d.worst);
+    if let Some(e) = curves.error() {
+        report
+            .violations
+            .push(format!("the toolpath could not be read to its end: {e}"));
+    }
+    let deviation = deviation.finish(&program);
     report_deviation(deviation, limits.chord_tolerance, &mut report.violations);
     println!(
         "{} setpoints ({:.6} s): max |v| {:?}, |a| {:?}, |jerk| {:?}; max feed {:.6}; chord error {:.3e} mm; off-curve {:.3e} mm",
@@ -322,7 +342,7 @@ pub fn run(
         report.max_chord_error,
         report.max_distance_to_curve,
     );
-    if let Some(line) = prepared.describe(deviation, limits.chord_tolerance) {
+    if let Some(line) = describe(stream.rounding(), deviation, limits.chord_tolerance) {
         println!("{line}");
     }
     print_programmed_feed(report.max_programmed_feed_ratio);

@@ -5,7 +5,11 @@
 //! is C2 in arc length. `d` uses as much of the contour tolerance as the segment lengths allow
 //! (each segment gives at most half its length to each of its two corners).
 
+use super::window::Window;
 use crate::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use crate::readers::ReadError;
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
 
 /// A rounded polyline and how far it strays from the programmed one.
 #[derive(Clone, Debug)]
@@ -116,112 +120,305 @@ pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, 
 }
 
 /// [`round_polyline`] with a programmed feed per segment (`feeds[i]` for `vertices[i]` to
-/// `vertices[i + 1]`): a straight piece keeps its segment's feed, a corner spline takes the
-/// lower feed of its two segments. Vertices longer than `tip` carry the top point (5-axis):
-/// the corner is where the tip turns or the tool axis changes its rate of turning per mm of
-/// tip travel (both make a joint stop), and both tip and top splines stay within `tolerance`
-/// of their polylines.
+/// `vertices[i + 1]`; see [`RunRounder`]).
 fn round_with_feeds(vertices: &[Vertex], tip: usize, feeds: &[Option<f64>], tolerance: f64) -> Result<Rounded, String> {
-    let five = vertices.first().is_some_and(|v| v.len() == 2 * tip);
-    let mut v: Vec<Vertex> = Vec::new();
-    // seg_feed[i]: feed of the kept segment v[i] to v[i + 1].
-    let mut seg_feed: Vec<Option<f64>> = Vec::new();
-    for (k, p) in vertices.iter().enumerate() {
-        let distinct = match v.last() {
-            Some(q) => norm(&sub(p, q)) > 1e-12,
-            None => true,
-        };
-        if distinct {
-            if k > 0 && !v.is_empty() {
-                seg_feed.push(feeds.get(k - 1).copied().flatten());
-            }
-            v.push(p.clone());
-        }
-    }
-    if v.len() < 2 {
-        return Err("a polyline needs two distinct points".into());
-    }
     if !(tolerance.is_finite() && tolerance > 0.0) {
         return Err(format!("contour tolerance {tolerance} must be > 0"));
     }
-    let n = v.len();
-    let lens: Vec<f64> = (0..n - 1).map(|i| norm(&sub(&v[i + 1][..tip], &v[i][..tip]))).collect();
-    let mut elements = Vec::new();
-    let mut start = v[0].clone();
-    let mut max_dev: f64 = 0.0;
-    let mut max_top_dev: f64 = 0.0;
-    let mut corners = 0;
-    // A straight piece runs from segment `start_seg` through collinear vertices: lowest feed.
-    let mut start_seg = 0;
-    let run_feed = |from: usize, to: usize| seg_feed[from..=to].iter().fold(None, |a, b| min_feed(a, *b));
-    for i in 1..n - 1 {
+    let mut stats = RoundingStats::default();
+    let mut elements = VecDeque::new();
+    let mut run = RunRounder::new(tip, tolerance);
+    for (k, p) in vertices.iter().enumerate() {
+        let feed = k.checked_sub(1).and_then(|j| feeds.get(j).copied().flatten());
+        run.push(p, feed, &mut elements, &mut stats);
+    }
+    run.finish(&mut elements)?;
+    Ok(Rounded {
+        toolpath: Toolpath {
+            elements: elements.into(),
+        },
+        max_deviation: stats.max_deviation,
+        max_top_deviation: stats.max_top_deviation,
+        corners: stats.corners,
+    })
+}
+
+/// What corner rounding did so far.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct RoundingStats {
+    /// Corners replaced by a five-point cubic B-spline.
+    pub corners: usize,
+    /// Largest distance of a corner spline to the programmed polyline (mm).
+    pub max_deviation: f64,
+    /// 5-axis: the same for the top curve (tool axis).
+    pub max_top_deviation: f64,
+    /// A rounded polyline had a top curve.
+    pub top: bool,
+}
+
+/// Rounds the corners of one polyline as its vertices come, handing out each straight piece
+/// and corner spline as soon as the next vertex settles it. A straight piece keeps the lowest
+/// programmed feed of its segments, a corner spline takes the lower feed of its two segments.
+/// Vertices longer than `tip` carry the top point (5-axis): the corner is where the tip turns
+/// or the tool axis changes its rate of turning per mm of tip travel (both make a joint stop),
+/// and both tip and top splines stay within the tolerance of their polylines. Consecutive
+/// vertices closer than 1e-12 mm count as one.
+struct RunRounder {
+    tip: usize,
+    tolerance: f64,
+    /// The last three distinct vertices (fewer at the run's start).
+    v: Vec<Vertex>,
+    /// Tip length and programmed feed of the segments between them.
+    lens: Vec<f64>,
+    seg_feed: Vec<Option<f64>>,
+    /// Distinct vertices taken.
+    count: usize,
+    /// Where the straight piece being built starts, and the lowest feed of its segments so far.
+    start: Vertex,
+    run_feed: Option<f64>,
+}
+
+impl RunRounder {
+    fn new(tip: usize, tolerance: f64) -> Self {
+        RunRounder {
+            tip,
+            tolerance,
+            v: Vec::with_capacity(3),
+            lens: Vec::with_capacity(2),
+            seg_feed: Vec::with_capacity(2),
+            count: 0,
+            start: Vec::new(),
+            run_feed: None,
+        }
+    }
+
+    /// The last vertex taken.
+    fn last(&self) -> Option<&Vertex> {
+        self.v.last()
+    }
+
+    /// Takes the next vertex `p`, reached at the programmed `feed` (of the segment into it).
+    fn push(&mut self, p: &[f64], feed: Option<f64>, out: &mut VecDeque<PathElement>, stats: &mut RoundingStats) {
+        let tip = self.tip;
+        match self.v.last() {
+            None => self.start = p.to_vec(),
+            Some(q) if norm(&sub(p, q)) <= 1e-12 => return,
+            Some(q) => {
+                self.lens.push(norm(&sub(&p[..tip], &q[..tip])));
+                self.seg_feed.push(feed);
+            }
+        }
+        self.v.push(p.to_vec());
+        self.count += 1;
+        if self.v.len() == 3 {
+            self.corner(out, stats);
+            self.v.remove(0);
+            self.lens.remove(0);
+            self.seg_feed.remove(0);
+        }
+    }
+
+    /// The middle one of the last three vertices.
+    fn corner(&mut self, out: &mut VecDeque<PathElement>, stats: &mut RoundingStats) {
+        let (tip, v, lens) = (self.tip, &self.v, &self.lens);
+        let five = v[0].len() == 2 * tip;
+        self.run_feed = min_feed(self.run_feed, self.seg_feed[0]);
         // Per mm of tip travel on either side: the tip's unit direction, and the top's rate.
         let rate = |k: usize| -> Vec<f64> { sub(&v[k + 1], &v[k]).iter().map(|x| x / lens[k]).collect() };
         // A turn of the tool axis with the tip standing still (5-axis) has no tip length to
         // round along: `None`, the vertex is kept like a reversal.
-        let turn = (lens[i - 1] > 1e-12 && lens[i] > 1e-12).then(|| {
-            let (r1, r2) = (rate(i - 1), rate(i));
+        let turn = (lens[0] > 1e-12 && lens[1] > 1e-12).then(|| {
+            let (r1, r2) = (rate(0), rate(1));
             let cos = r1[..tip].iter().zip(&r2[..tip]).map(|(a, b)| a * b).sum::<f64>();
             (cos, five && norm(&sub(&r1[tip..], &r2[tip..])) > 1e-12)
         });
         match turn {
-            Some((cos, axis_kink)) if cos > 1.0 - 1e-12 && !axis_kink => continue, // straight through
-            Some((cos, _)) if cos >= -1.0 + 1e-9 => {}                             // a corner
+            Some((cos, axis_kink)) if cos > 1.0 - 1e-12 && !axis_kink => return, // straight through
+            Some((cos, _)) if cos >= -1.0 + 1e-9 => {}                           // a corner
             _ => {
                 // A reversal has no rounding inside the tolerance (the spline would stop and
                 // turn back on itself): keep the programmed vertex, where the motion stops.
-                if norm(&sub(&v[i], &start)) > 1e-12 {
-                    elements.push(line(&start, &v[i], run_feed(start_seg, i - 1), tip));
+                if norm(&sub(&v[1], &self.start)) > 1e-12 {
+                    out.push_back(line(&self.start, &v[1], self.run_feed, tip));
                 }
-                start = v[i].clone();
-                start_seg = i;
-                continue;
+                self.start = v[1].clone();
+                self.run_feed = None;
+                return;
             }
         }
         // Deviation is proportional to d (the tip distance of the first control point from the
         // vertex), for the tip and the top alike: measure it at d = 1 and scale to the tolerance.
-        let spline = |d: f64| corner_curve(&v[i - 1], &v[i], &v[i + 1], d / lens[i - 1], d / lens[i], tip);
+        let spline = |d: f64| corner_curve(&v[0], &v[1], &v[2], d / lens[0], d / lens[1], tip);
         let unit = spline(1.0);
         let unit_dev = corner_deviation(&unit, 0..tip);
-        let mut d = (0.999 * tolerance / unit_dev).min(0.5 * lens[i - 1].min(lens[i]));
+        let mut d = (0.999 * self.tolerance / unit_dev).min(0.5 * lens[0].min(lens[1]));
         let unit_top_dev = if five {
             corner_deviation(&unit, tip..2 * tip)
         } else {
             0.0
         };
         if five {
-            d = d.min(0.999 * tolerance / unit_top_dev);
+            d = d.min(0.999 * self.tolerance / unit_top_dev);
         }
         let curve = spline(d);
         // The spline at d is the unit one scaled by d about the vertex: so is its deviation
         // (measured once, not again: 401 curve points a corner on a million-line program).
-        max_dev = max_dev.max(d * unit_dev);
+        stats.max_deviation = stats.max_deviation.max(d * unit_dev);
         if five {
-            max_top_dev = max_top_dev.max(d * unit_top_dev);
+            stats.max_top_deviation = stats.max_top_deviation.max(d * unit_top_dev);
         }
         let entry = curve.control_point(0).to_vec();
-        if norm(&sub(&entry, &start)) > 1e-12 {
-            elements.push(line(&start, &entry, run_feed(start_seg, i - 1), tip));
+        if norm(&sub(&entry, &self.start)) > 1e-12 {
+            out.push_back(line(&self.start, &entry, self.run_feed, tip));
         }
-        start = curve.control_point(4).to_vec();
-        elements.push(PathElement {
+        self.start = curve.control_point(4).to_vec();
+        out.push_back(PathElement {
             kind: ElementKind::Nurbs,
             curve,
-            feed: min_feed(seg_feed[i - 1], seg_feed[i]),
+            feed: min_feed(self.seg_feed[0], self.seg_feed[1]),
             source_line: None,
         });
-        start_seg = i;
-        corners += 1;
+        self.run_feed = None;
+        stats.corners += 1;
     }
-    if norm(&sub(&v[n - 1], &start)) > 1e-12 {
-        elements.push(line(&start, &v[n - 1], run_feed(start_seg, n - 2), tip));
+
+    /// The polyline ends: its last straight piece goes out.
+    fn finish(&mut self, out: &mut VecDeque<PathElement>) -> Result<(), String> {
+        if self.count < 2 {
+            return Err("a polyline needs two distinct points".into());
+        }
+        let last = self.v.last().expect("two vertices").clone();
+        self.run_feed = min_feed(self.run_feed, *self.seg_feed.last().expect("a segment"));
+        if norm(&sub(&last, &self.start)) > 1e-12 {
+            out.push_back(line(&self.start, &last, self.run_feed, self.tip));
+        }
+        Ok(())
     }
-    Ok(Rounded {
-        toolpath: Toolpath { elements },
-        max_deviation: max_dev,
-        max_top_deviation: max_top_dev,
-        corners,
-    })
+}
+
+/// Rounds, as they come, the corners of every run of joined straight-line elements (degree 1:
+/// G1 moves, DXF lines, degree-1 JSON curves; with or without a top curve) of a stream of path
+/// elements within `tolerance`; elements of other kinds pass unchanged, and where a run meets
+/// one (or a gap) its end vertex is kept as programmed. What it did so far is in the
+/// [`RoundingStats`] it shares ([`CornerRounder::stats`]).
+pub struct CornerRounder<I> {
+    source: I,
+    name: String,
+    tolerance: f64,
+    /// Refuse what is not one continuous polyline (`--round-corners on`).
+    polyline_only: bool,
+    /// The run being rounded: its rounder, tip dimension, whether it has a top curve.
+    run: Option<(RunRounder, bool)>,
+    out: VecDeque<PathElement>,
+    stats: Arc<Mutex<RoundingStats>>,
+    done: bool,
+}
+
+impl<I: Iterator<Item = Result<PathElement, ReadError>>> CornerRounder<I> {
+    /// Rounds `source` (of the file `name`, for errors) within `tolerance` (mm, > 0); with
+    /// `polyline_only`, an element that does not continue one polyline is an error.
+    pub fn new(name: &str, source: I, tolerance: f64, polyline_only: bool) -> Result<Self, String> {
+        if !(tolerance.is_finite() && tolerance > 0.0) {
+            return Err(format!("contour tolerance {tolerance} must be > 0"));
+        }
+        Ok(CornerRounder {
+            source,
+            name: name.to_owned(),
+            tolerance,
+            polyline_only,
+            run: None,
+            out: VecDeque::new(),
+            stats: Arc::default(),
+            done: false,
+        })
+    }
+
+    /// What rounding has done so far (complete once the stream has ended).
+    pub fn stats(&self) -> Arc<Mutex<RoundingStats>> {
+        Arc::clone(&self.stats)
+    }
+
+    /// Ends the run being rounded.
+    fn end_run(&mut self) -> Result<(), ReadError> {
+        if let Some((mut run, _)) = self.run.take() {
+            run.finish(&mut self.out).map_err(|e| ReadError::new(&self.name, e))?;
+        }
+        Ok(())
+    }
+
+    /// Takes the next element of the source.
+    fn take(&mut self, e: PathElement) -> Result<(), ReadError> {
+        let with_top = e.curve.dim() != e.curve.tip_dim();
+        let refuse = |what: &str| {
+            let at = e.source_line.map_or(String::new(), |l| format!(" (line {l})"));
+            Err(ReadError::new(
+                &self.name,
+                format!("--round-corners on needs a polyline (one continuous run of straight G1 / LINE / degree-1 elements, with or without a top curve), but {what}{at}"),
+            ))
+        };
+        if e.curve.degree() != 1 {
+            if self.polyline_only {
+                return refuse(&format!("an element is of degree {}", e.curve.degree()));
+            }
+            self.end_run()?;
+            self.out.push_back(e);
+            return Ok(());
+        }
+        let first = e.curve.control_point(0);
+        let joins = self.run.as_ref().is_some_and(|(run, top)| {
+            *top == with_top
+                && run.tip == e.curve.tip_dim()
+                && run.last().is_some_and(|q| norm(&sub(first, q)) <= JOIN_GAP)
+        });
+        if !joins {
+            if self.polyline_only && self.run.is_some() {
+                return refuse("an element does not continue the one before");
+            }
+            self.end_run()?;
+            self.run = Some((RunRounder::new(e.curve.tip_dim(), self.tolerance), with_top));
+        }
+        let Some((run, _)) = &mut self.run else {
+            unreachable!("a run was just begun")
+        };
+        let mut stats = self
+            .stats
+            .lock()
+            .map_err(|_| ReadError::new(&self.name, "rounding state lost"))?;
+        stats.top |= with_top;
+        for k in 0..e.curve.control_point_count() {
+            // Every vertex is reached at the element's feed (the join's zero-length segment too).
+            run.push(e.curve.control_point(k), e.feed, &mut self.out, &mut stats);
+        }
+        Ok(())
+    }
+}
+
+impl<I: Iterator<Item = Result<PathElement, ReadError>>> Iterator for CornerRounder<I> {
+    type Item = Result<PathElement, ReadError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(e) = self.out.pop_front() {
+                return Some(Ok(e));
+            }
+            if self.done {
+                return None;
+            }
+            let step = match self.source.next() {
+                Some(Ok(e)) => self.take(e),
+                Some(Err(e)) => Err(e),
+                None => {
+                    self.done = true;
+                    self.end_run()
+                }
+            };
+            if let Err(e) = step {
+                self.done = true;
+                self.out.clear();
+                return Some(Err(e));
+            }
+        }
+    }
 }
 
 type Vertices = Vec<Vertex>;
@@ -283,8 +480,17 @@ fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), Stri
 /// the same parameter (see [`round_with_feeds`]). Programmed feeds carry over: a straight
 /// piece keeps its element's feed, a corner spline the lower of its two segments'.
 pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, String> {
-    let (vertices, feeds) = polyline_of(toolpath)?;
-    round_with_feeds(&vertices, toolpath.tip_dim(), &feeds, tolerance)
+    polyline_of(toolpath)?;
+    let rounder = CornerRounder::new("", toolpath.elements.iter().cloned().map(Ok), tolerance, true)?;
+    let stats = rounder.stats();
+    let elements = rounder.collect::<Result<Vec<_>, _>>().map_err(|e| e.message)?;
+    let stats = *stats.lock().map_err(|_| "rounding state lost")?;
+    Ok(Rounded {
+        toolpath: Toolpath { elements },
+        max_deviation: stats.max_deviation,
+        max_top_deviation: stats.max_top_deviation,
+        corners: stats.corners,
+    })
 }
 
 /// True when every element is a straight-line polyline (degree 1) of the tool tip, or of the
@@ -296,40 +502,101 @@ pub fn is_polyline(toolpath: &Toolpath) -> bool {
         && polyline_of(toolpath).is_ok()
 }
 
-/// The programmed polyline of a toolpath made of degree-1 elements, for measuring how far
-/// setpoints stray from it.
-#[derive(Clone, Debug)]
+/// Segments of the programmed polyline kept behind the one nearest to the last point measured.
+const PROGRAM_SEGMENTS_BEHIND: usize = 4096;
+
+/// The programmed polyline of a toolpath of degree-1 elements, for measuring how far setpoints
+/// stray from it: read from its elements as far as the points measured need, and forgotten
+/// more than [`PROGRAM_SEGMENTS_BEHIND`] segments behind them, so that a program of any length
+/// is measured in constant memory. The measure is the distance to the nearest segment held:
+/// exact while the path does not come back near a part of itself forgotten already, and never
+/// below the true distance.
 pub struct ProgramPolyline {
-    vertices: Vec<Vec<f64>>,
+    /// The rest of the program's elements.
+    source: Option<Box<dyn Iterator<Item = PathElement> + Send>>,
+    vertices: Window<Vertex>,
+    /// Tool-tip dimension and whether vertices carry a top point, from the first element.
+    tip: usize,
+    five: bool,
+    /// The program turned out not to be one continuous polyline.
+    broken: bool,
 }
 
 impl ProgramPolyline {
+    /// The polyline of a whole toolpath; an error if it is not one.
     pub fn new(toolpath: &Toolpath) -> Result<Self, String> {
         let (vertices, _) = polyline_of(toolpath)?;
         if vertices.is_empty() {
             return Err("empty polyline".into());
         }
-        Ok(ProgramPolyline { vertices })
+        Ok(ProgramPolyline {
+            source: None,
+            vertices: Window::from_vec(vertices),
+            tip: toolpath.tip_dim(),
+            five: false,
+            broken: false,
+        })
+    }
+
+    /// The polyline of a program read as it is measured (the programmed elements, before any
+    /// rounding); if an element turns out not to continue it, [`Deviation::finish`] says so.
+    pub fn streamed(elements: impl Iterator<Item = PathElement> + Send + 'static) -> Self {
+        ProgramPolyline {
+            source: Some(Box::new(elements)),
+            vertices: Window::default(),
+            tip: 0,
+            five: false,
+            broken: false,
+        }
+    }
+
+    /// Whether vertex `i` is held, reading the program as far as it.
+    fn load(&mut self, i: usize) -> bool {
+        while self.vertices.len() <= i && !self.broken {
+            let Some(e) = self.source.as_mut().and_then(|s| s.next()) else {
+                self.source = None;
+                break;
+            };
+            let with_top = e.curve.dim() != e.curve.tip_dim();
+            if self.vertices.len() == 0 {
+                (self.tip, self.five) = (e.curve.tip_dim(), with_top);
+            }
+            if e.curve.degree() != 1 || with_top != self.five || e.curve.tip_dim() != self.tip {
+                self.broken = true;
+                break;
+            }
+            for k in 0..e.curve.control_point_count() {
+                let p = e.curve.control_point(k);
+                if k == 0 {
+                    if let Some(q) = self.vertices.last() {
+                        if norm(&sub(p, q)) > JOIN_GAP {
+                            self.broken = true;
+                            return false;
+                        }
+                    }
+                }
+                self.vertices.push(p.to_vec());
+            }
+        }
+        i < self.vertices.len()
     }
 
     fn segment(&self, i: usize, x: &[f64]) -> f64 {
         let n = self.vertices[i].len().min(x.len());
-        if self.vertices.len() == 1 {
-            return norm(&sub(&x[..n], &self.vertices[0][..n]));
+        match self.vertices.get(i + 1) {
+            Some(b) => segment_distance(&x[..n], &self.vertices[i][..n], &b[..n]),
+            None => norm(&sub(&x[..n], &self.vertices[i][..n])),
         }
-        segment_distance(&x[..n], &self.vertices[i][..n], &self.vertices[i + 1][..n])
     }
 
-    /// Largest distance of `points` (tool-tip coordinates) to the polyline: exact (the
-    /// distance of each point to the nearest segment of the whole polyline). A point is first
-    /// checked against the segments next to the previous point's nearest one and only scanned
-    /// against all segments when that cannot rule it out.
-    pub fn max_distance<'a>(&self, points: impl IntoIterator<Item = &'a [f64]>) -> f64 {
+    /// Largest distance of `points` (tool-tip coordinates) to the polyline ([`Deviation`]);
+    /// `None` if the program is not one polyline.
+    pub fn max_distance<'a>(&mut self, points: impl IntoIterator<Item = &'a [f64]>) -> Option<f64> {
         let mut d = Deviation::default();
         for x in points {
             d.push(self, x);
         }
-        d.worst
+        d.finish(self)
     }
 }
 
@@ -337,40 +604,49 @@ impl ProgramPolyline {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Deviation {
     /// The largest distance so far.
-    pub worst: f64,
+    worst: f64,
     hint: usize,
 }
 
 impl Deviation {
-    pub fn push(&mut self, polyline: &ProgramPolyline, x: &[f64]) {
-        let segs = polyline.vertices.len().saturating_sub(1).max(1);
+    pub fn push(&mut self, polyline: &mut ProgramPolyline, x: &[f64]) {
+        if !polyline.load(self.hint + 1) && !polyline.load(self.hint) {
+            return;
+        }
+        // The segment `i` runs from vertex i to i + 1 (a lone vertex is a segment of its own).
+        let last_segment = |p: &ProgramPolyline| p.vertices.len().saturating_sub(2);
         // Setpoints run along the polyline: follow them from the last nearest segment downhill
-        // (a setpoint may be many short segments on), and scan every segment only when that
-        // cannot rule the point out (the path may pass near an earlier part of itself).
-        let d = |i: usize| polyline.segment(i, x);
-        let (mut i, mut near) = (self.hint.min(segs - 1), d(self.hint.min(segs - 1)));
+        // (a setpoint may be many short segments on), and scan every segment held only when
+        // that cannot rule the point out (the path may pass near an earlier part of itself).
+        let (mut i, mut near) = (self.hint, polyline.segment(self.hint, x));
         for step in [1isize, -1] {
-            loop {
-                let j = i as isize + step;
-                if j < 0 || j as usize >= segs {
+            while let Some(j) = i.checked_add_signed(step) {
+                if j < polyline.vertices.first_index() || !polyline.load(j + 1) {
                     break;
                 }
-                let dj = d(j as usize);
+                let dj = polyline.segment(j, x);
                 if dj >= near {
                     break;
                 }
-                (i, near) = (j as usize, dj);
+                (i, near) = (j, dj);
             }
         }
         self.hint = i;
-        if near <= self.worst {
-            return;
+        if near > self.worst {
+            let (best, dmin) = (polyline.vertices.first_index()..=last_segment(polyline))
+                .map(|i| (i, polyline.segment(i, x)))
+                .fold((i, near), |a, b| if b.1 < a.1 { b } else { a });
+            self.hint = best;
+            self.worst = self.worst.max(dmin);
         }
-        let (best, dmin) = (0..segs)
-            .map(|i| (i, d(i)))
-            .fold((i, near), |a, b| if b.1 < a.1 { b } else { a });
-        self.hint = best;
-        self.worst = self.worst.max(dmin);
+        polyline
+            .vertices
+            .release_before(self.hint.saturating_sub(PROGRAM_SEGMENTS_BEHIND));
+    }
+
+    /// The largest distance, or `None` if the program is not one polyline.
+    pub fn finish(self, polyline: &ProgramPolyline) -> Option<f64> {
+        (!polyline.broken && polyline.vertices.len() > 0).then_some(self.worst)
     }
 }
 
@@ -554,7 +830,7 @@ mod tests {
         let tp = Toolpath {
             elements: vec![g1(&pts, 10.0)],
         };
-        let poly = ProgramPolyline::new(&tp).unwrap();
+        let mut poly = ProgramPolyline::new(&tp).unwrap();
         let probes: Vec<Vec<f64>> = (0..5000)
             .map(|k| {
                 let t = k as f64 * 0.002;
@@ -570,7 +846,7 @@ mod tests {
                     .fold(f64::INFINITY, f64::min)
             })
             .fold(0.0, f64::max);
-        let got = poly.max_distance(probes.iter().map(|x| x.as_slice()));
+        let got = poly.max_distance(probes.iter().map(|x| x.as_slice())).unwrap();
         assert!(brute > 0.1);
         assert_eq!(got, brute);
     }

@@ -182,15 +182,15 @@ impl From<LimitsError> for PlanError {
 /// The nodes come from [`NodeStream`], which scans the path only as far as needed to commit
 /// them. [`plan`] collects this stream: a batch plan and a streamed one run the same code and
 /// differ only in when records settle.
-pub struct Planner<'a> {
-    toolpath: &'a Toolpath,
-    curves: PathCurves<'a>,
+pub struct Planner {
+    /// The path, read as far as the scan has reached and forgotten behind the settled records.
+    curves: PathCurves,
     /// Limits as used, and the hair stricter ones of the check.
     limits: Limits,
     check_limits: Limits,
     /// Highest planned feed (the programmed feed with headroom).
     feed_cap: f64,
-    nodes: NodeStream<'a>,
+    nodes: NodeStream,
     /// Committed nodes, with the end feed each segment aims for and the peak feed cap of the
     /// segment starting at each.
     bounds: Window<Node>,
@@ -259,17 +259,23 @@ const FIRST_CHAIN_LOOK_BEHIND: usize = 16;
 /// Most segments of a stop chain.
 const CHAIN_MAX: usize = 256;
 
-impl<'a> Planner<'a> {
+impl Planner {
     /// Checks the inputs; no planning happens before the first [`Planner::next_record`].
-    pub fn new(toolpath: &'a Toolpath, limits: &Limits, options: &PlanOptions) -> Result<Self, PlanError> {
-        let started = Instant::now();
-        if toolpath.elements.is_empty() {
-            return Err(PlanError::EmptyPath);
-        }
+    pub fn new(toolpath: &Toolpath, limits: &Limits, options: &PlanOptions) -> Result<Self, PlanError> {
         let tip = toolpath.tip_dim();
         if toolpath.elements.iter().any(|e| e.curve.tip_dim() != tip) {
             return Err(PlanError::MixedDimensions);
         }
+        Self::with_curves(PathCurves::new(toolpath), limits, options)
+    }
+
+    /// A planner of `curves` (a whole toolpath, or a stream it reads as it plans).
+    pub fn with_curves(mut curves: PathCurves, limits: &Limits, options: &PlanOptions) -> Result<Self, PlanError> {
+        let started = Instant::now();
+        if !curves.load(0) {
+            return Err(PlanError::EmptyPath);
+        }
+        let tip = curves.tip_dim();
         let limits = limits.for_axes(tip)?;
         // Feed caps a hair below the programmed feed: the sampled path speed (chord / period)
         // then stays below it through rounding, with no retry of the segment.
@@ -277,13 +283,12 @@ impl<'a> Planner<'a> {
             feed: limits.feed * (1.0 - FEED_HEADROOM),
             ..limits.clone()
         };
-        let curves = PathCurves::new(toolpath);
         let start = options.start.unwrap_or(PlanStart {
             curve: 0,
             u: curves.view(0).u_min(),
             s: 0.0,
         });
-        let start_ok = start.curve < toolpath.elements.len() && {
+        let start_ok = curves.load(start.curve) && {
             let view = curves.view(start.curve);
             start.u >= view.u_min() && start.u < view.u_max() && start.s.is_finite() && start.s >= 0.0
         };
@@ -295,11 +300,10 @@ impl<'a> Planner<'a> {
             });
         }
         Ok(Planner {
-            toolpath,
             curves,
             check_limits: strict(&limits),
             feed_cap: planning.feed,
-            nodes: NodeStream::new(toolpath, planning, options, start),
+            nodes: NodeStream::new(tip, planning, options, start),
             bounds: Window::default(),
             feeds: Window::default(),
             lengths: Window::default(),
@@ -357,7 +361,7 @@ impl<'a> Planner<'a> {
                     Vec::new()
                 };
                 if self.stream {
-                    self.release_settled();
+                    self.release_settled(record.curve as usize);
                 }
                 return Some(Ok(FinalRecord { record, stop }));
             }
@@ -381,8 +385,9 @@ impl<'a> Planner<'a> {
 
     /// Forgets what back-tracking can no longer reach: the state before the settled records
     /// (segment `settled` starts from `states[settled]`) and the scans of the elements before
-    /// the one it starts on.
-    fn release_settled(&mut self) {
+    /// the one it starts on; the path before those elements too, except the curve of the
+    /// record just handed out (`handed_out_curve`), which the caller runs before the next call.
+    fn release_settled(&mut self, handed_out_curve: usize) {
         let k = self.settled.min(self.emitted);
         self.records.release_before(k);
         for w in [
@@ -397,7 +402,14 @@ impl<'a> Planner<'a> {
         self.states.release_before(k);
         if let Some(node) = self.bounds.get(k) {
             self.nodes.release_elements_before(node.start_curve);
+            self.curves.release_before(node.start_curve.min(handed_out_curve));
         }
+    }
+
+    /// The path as far as it is read: the curves of the records handed out (the last one's
+    /// until the next call) and of the stops after them.
+    pub fn curves(&self) -> &PathCurves {
+        &self.curves
     }
 
     /// Elements scanned to their end (their critical points final).
@@ -429,13 +441,13 @@ impl<'a> Planner<'a> {
     /// when every segment is planned.
     fn commit_nodes(&mut self) -> bool {
         while !self.end_known && self.bounds.len() < self.k + 2 {
-            let Some(b) = self.nodes.next(&self.curves) else {
+            let Some(b) = self.nodes.next(&mut self.curves) else {
                 break;
             };
             if let Some(prev) = self.bounds.last() {
                 self.lengths.push((b.node.end_s - prev.start_s).max(0.0));
             }
-            let programmed = self.toolpath.elements[b.node.start_curve].feed.unwrap_or(f64::INFINITY);
+            let programmed = self.curves.element(b.node.start_curve).feed.unwrap_or(f64::INFINITY);
             self.peak_caps
                 .push(self.feed_cap.min(programmed * (1.0 - FEED_HEADROOM)));
             self.bounds.push(b.node);
@@ -686,7 +698,7 @@ impl<'a> Planner<'a> {
                 if self.chain.as_ref().is_some_and(|(first, c)| k < first + c.len()) {
                     self.chain = None; // its segments are not the plan's any more
                 }
-                let s = element.table.length_to(&self.toolpath.elements[c].curve, u);
+                let s = element.table.length_to(&self.curves.element(c).curve, u);
                 let end_s = self.bounds[k + 1].end_s;
                 self.bounds.insert(k + 1, Node::within(c, u, s, cap));
                 self.lengths[k] = s - self.bounds[k].start_s;
@@ -743,7 +755,7 @@ impl<'a> Planner<'a> {
     }
 }
 
-impl Iterator for Planner<'_> {
+impl Iterator for Planner {
     type Item = Result<SegmentRecord, PlanError>;
     fn next(&mut self) -> Option<Self::Item> {
         self.next_record()
@@ -833,7 +845,7 @@ fn strict(limits: &Limits) -> Limits {
 
 #[derive(Clone, Copy)]
 struct SegmentContext<'a> {
-    curves: &'a PathCurves<'a>,
+    curves: &'a PathCurves,
     limits: &'a Limits,
     node_start: Node,
     node_end: Node,

@@ -27,7 +27,7 @@ use super::quick_check::ArcGrid;
 use super::scurve_fit::reachable_feed;
 use super::window::Window;
 use super::{Limits, PathCurves};
-use crate::geometry::{ArcLengthTable, Toolpath};
+use crate::geometry::ArcLengthTable;
 use nurbs_rtcore::executor::Derivs;
 use nurbs_rtcore::math::{dot, norm, sub};
 use nurbs_rtcore::CurveView;
@@ -92,8 +92,7 @@ pub(super) struct ElementScan {
 }
 
 /// The lazily produced, committed nodes of a path.
-pub(super) struct NodeStream<'a> {
-    toolpath: &'a Toolpath,
+pub(super) struct NodeStream {
     planning: Limits,
     options: PlanOptions,
     start: PlanStart,
@@ -118,6 +117,8 @@ pub(super) struct NodeStream<'a> {
     ready: VecDeque<Boundary>,
     /// Critical points and breaks per element, in path order (for the plan's report).
     pub criticals: Vec<(usize, CriticalPoint)>,
+    /// Every node of the path has been produced.
+    exhausted: bool,
 }
 
 /// A node is kept when the look-ahead reaches at least this fraction of its cap.
@@ -126,12 +127,11 @@ const MERGE_TOLERANCE: f64 = 0.999;
 /// Successor feeds sampled by [`NodeStream::backward_lowest`].
 const SUCCESSOR_FEEDS: usize = 16;
 
-impl<'a> NodeStream<'a> {
-    pub fn new(toolpath: &'a Toolpath, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
+impl NodeStream {
+    pub fn new(tip: usize, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
         let (accel, jerk) = (planning.min_accel(), planning.min_jerk());
         NodeStream {
-            toolpath,
-            tip: toolpath.tip_dim(),
+            tip,
             accel,
             jerk,
             elements: Window::starting_at(start.curve),
@@ -144,6 +144,7 @@ impl<'a> NodeStream<'a> {
             commit_at: 0,
             ready: VecDeque::new(),
             criticals: Vec::new(),
+            exhausted: false,
         }
     }
 
@@ -165,11 +166,12 @@ impl<'a> NodeStream<'a> {
 
     /// Whether every node of the path has been produced (the whole path scanned).
     pub fn is_exhausted(&self) -> bool {
-        self.current == self.toolpath.elements.len()
+        self.exhausted
     }
 
-    /// The next committed node, scanning as far as that needs; `None` after the path end.
-    pub fn next(&mut self, curves: &PathCurves) -> Option<Boundary> {
+    /// The next committed node, scanning (and reading the path) as far as that needs; `None`
+    /// after the path end.
+    pub fn next(&mut self, curves: &mut PathCurves) -> Option<Boundary> {
         while self.ready.is_empty() && !self.is_exhausted() {
             self.advance(curves);
             if self.window.len() >= self.commit_at || self.is_exhausted() {
@@ -180,12 +182,20 @@ impl<'a> NodeStream<'a> {
     }
 
     /// Scans one control point's worth of samples further and produces the nodes that settles.
-    fn advance(&mut self, curves: &PathCurves) {
+    fn advance(&mut self, curves: &mut PathCurves) {
         let c = self.current;
-        let view = curves.view(c);
-        let curve = &self.toolpath.elements[c].curve;
+        if !curves.load(c) {
+            // Only where a streamed path ends early (its file failed): there is nothing to scan.
+            self.exhausted = true;
+            return;
+        }
+        // The join after this element needs the next one.
+        let last = !curves.load(c + 1);
+        let curves = &*curves;
+        let view = &curves.view(c);
+        let curve = &curves.element(c).curve;
         if self.elements.len() == c {
-            self.begin_element(c, view);
+            self.begin_element(c, curves);
         }
         let tip = self.tip;
         let e = &mut self.elements[c];
@@ -233,17 +243,20 @@ impl<'a> NodeStream<'a> {
                 v.speed_cap().min(self.options.flf_margin * v.accel.min(v.jerk))
             });
             self.criticals.push((c, p));
-            self.push_node(Node {
-                hard: fixed_cap.is_some(),
-                ..Node::within(c, p.u, s, cap)
-            });
+            self.push_node(
+                Node {
+                    hard: fixed_cap.is_some(),
+                    ..Node::within(c, p.u, s, cap)
+                },
+                curves,
+            );
         }
         let e = &mut self.elements[c];
         if e.scan.is_complete() {
             e.table.extend_past(curve, f64::INFINITY);
             let s1 = e.table.total();
             let next = c + 1;
-            let node = if next == self.toolpath.elements.len() {
+            let node = if last {
                 Node::within(c, u1, s1, 0.0)
             } else {
                 // The join: the next element starts here.
@@ -257,15 +270,17 @@ impl<'a> NodeStream<'a> {
                     hard: true,
                 }
             };
-            self.push_node(node);
+            self.push_node(node, curves);
             self.current = next;
+            self.exhausted = last;
         }
     }
 
     /// Sets up the scan of element `c`; on the start element, the start node.
-    fn begin_element(&mut self, c: usize, view: &CurveView) {
+    fn begin_element(&mut self, c: usize, curves: &PathCurves) {
+        let view = &curves.view(c);
         let mut limits = self.planning.clone();
-        if let Some(f) = self.toolpath.elements[c].feed {
+        if let Some(f) = curves.element(c).feed {
             limits.feed = limits.feed.min(f * (1.0 - FEED_HEADROOM));
         }
         let (u0, u1) = (view.u_min(), view.u_max());
@@ -278,7 +293,7 @@ impl<'a> NodeStream<'a> {
         self.elements.push(ElementScan {
             scan: FlfScan::lazy(view, self.options.samples_per_control_point),
             grid: ArcGrid::empty(self.tip),
-            table: ArcLengthTable::lazy(&self.toolpath.elements[c].curve),
+            table: ArcLengthTable::lazy(&curves.element(c).curve),
             search: CriticalPointSearch::default(),
             found: VecDeque::new(),
             breaks,
@@ -301,7 +316,7 @@ impl<'a> NodeStream<'a> {
     /// Appends a produced node; a speed-cap dip below both ends of the segment before it
     /// becomes a node too (any other dip is left to the exact check of the segment, which
     /// splits it there if the profile passes it too fast).
-    fn push_node(&mut self, node: Node) {
+    fn push_node(&mut self, node: Node, curves: &PathCurves) {
         self.window.push(node);
         let mut k = self.window.len() - 2;
         while k + 1 < self.window.len() {
@@ -310,7 +325,7 @@ impl<'a> NodeStream<'a> {
             let e = &self.elements[c];
             match e.scan.min_speed_cap_between(a.start_u, b.end_u) {
                 Some((m, u)) if m < a.cap.min(b.cap) && u > a.start_u && u < b.end_u => {
-                    let s = e.table.length_to(&self.toolpath.elements[c].curve, u);
+                    let s = e.table.length_to(&curves.element(c).curve, u);
                     self.window.insert(k + 1, Node::within(c, u, s, m));
                 }
                 _ => k += 1,

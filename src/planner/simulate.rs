@@ -108,7 +108,7 @@ pub fn setpoints_with(
     let mut spans = SpanCache::new();
     for sample in &mut samples {
         let c = sample.curve;
-        let view = *curves.view(c);
+        let view = curves.view(c);
         let curve = &mut CachedCurve::new(view, &mut spans);
         let u = match method {
             Interpolation::Rk2pc => sample.u,

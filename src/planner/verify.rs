@@ -33,7 +33,7 @@ pub struct Report {
 /// Relative slack allowed over a limit, for rounding only.
 pub const SLACK: f64 = 1e-6;
 
-pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
+pub fn verify(curves: &mut PathCurves, limits: &Limits, rows: &[Row]) -> Report {
     let mut v = Verifier::new(curves, limits);
     for r in rows {
         v.push(r);
@@ -41,9 +41,10 @@ pub fn verify(curves: &PathCurves, limits: &Limits, rows: &[Row]) -> Report {
     v.finish()
 }
 
-/// [`verify`] a row at a time, in constant memory (a setpoint file of any length).
+/// [`verify`] a row at a time, in constant memory (a setpoint file of any length, a path read
+/// as the rows reach it and forgotten behind them).
 pub struct Verifier<'a> {
-    curves: &'a PathCurves<'a>,
+    curves: &'a mut PathCurves,
     limits: &'a Limits,
     tip: usize,
     fd: FiniteDifferences,
@@ -55,10 +56,12 @@ pub struct Verifier<'a> {
     /// ends the row checks.
     row_violations: Vec<String>,
     missing: Option<String>,
+    /// The first row is not the start of the path.
+    bad_start: bool,
 }
 
 impl<'a> Verifier<'a> {
-    pub fn new(curves: &'a PathCurves<'a>, limits: &'a Limits) -> Self {
+    pub fn new(curves: &'a mut PathCurves, limits: &'a Limits) -> Self {
         let tip = limits.velocity.len();
         Verifier {
             curves,
@@ -70,6 +73,7 @@ impl<'a> Verifier<'a> {
             prev: None,
             row_violations: Vec::new(),
             missing: None,
+            bad_start: false,
         }
     }
 
@@ -78,13 +82,20 @@ impl<'a> Verifier<'a> {
         let (limits, tip) = (self.limits, self.tip);
         self.report.rows += 1;
         self.fd.push(&r.q, limits);
-        if self.first.is_none() {
-            self.first = Some(r.clone());
-        }
         if self.missing.is_some() {
             self.prev = Some(r.clone());
             return;
         }
+        if self.first.is_none() {
+            self.first = Some(r.clone());
+            self.curves.load(0);
+            let start = self.curves.curve(0).map(|c| c.point(c.u_min()));
+            self.bad_start = end_gap(r, start, tip) > 1e-9;
+        }
+        // The path as far as this row, and nothing before the previous row's element.
+        let behind = self.prev.as_ref().map_or(0, |a| a.curve.min(r.curve));
+        self.curves.release_before(behind);
+        self.curves.load(r.curve.max(behind));
         let Some(p) = self.curves.curve(r.curve).map(|c| c.point(r.u)) else {
             self.missing = Some(format!("t={}: element {} does not exist", r.t, r.curve));
             self.prev = Some(r.clone());
@@ -126,7 +137,7 @@ impl<'a> Verifier<'a> {
         use nurbs_rtcore::executor::CurveSet;
         let (limits, tip) = (self.limits, self.tip);
         let mut report = std::mem::take(&mut self.report);
-        let (Some(first_row), Some(last_row)) = (self.first.take(), self.prev.take()) else {
+        let (Some(_), Some(last_row)) = (self.first.take(), self.prev.take()) else {
             report.violations.push("no setpoints".into());
             return report;
         };
@@ -169,25 +180,27 @@ impl<'a> Verifier<'a> {
             ));
         }
         let curves = self.curves;
-        let first = curves.curve(0).map(|c| c.point(c.u_min()));
-        let last = curves.curve(curves.len() - 1).map(|c| c.point(c.u_max()));
-        let end_gap = |row: &Row, p: Option<nurbs_rtcore::Vector>| -> f64 {
-            let mut q = [0.0; nurbs_rtcore::MAX_DIM];
-            q[..tip].copy_from_slice(&row.q[..tip]);
-            p.map_or(f64::INFINITY, |p| norm(&sub(&p, &q), tip))
-        };
-        if end_gap(&first_row, first) > 1e-9 {
+        curves.load_to_end();
+        let last = curves.curve(curves.len().saturating_sub(1)).map(|c| c.point(c.u_max()));
+        if self.bad_start {
             report
                 .violations
                 .push("the first setpoint is not the start of the path".into());
         }
-        if end_gap(&last_row, last) > 1e-9 {
+        if end_gap(&last_row, last, tip) > 1e-9 {
             report
                 .violations
                 .push("the last setpoint is not the end of the path".into());
         }
         report
     }
+}
+
+/// Distance of a row to a path point (infinite when there is none).
+fn end_gap(row: &Row, p: Option<nurbs_rtcore::Vector>, tip: usize) -> f64 {
+    let mut q = [0.0; nurbs_rtcore::MAX_DIM];
+    q[..tip].copy_from_slice(&row.q[..tip]);
+    p.map_or(f64::INFINITY, |p| norm(&sub(&p, &q), tip))
 }
 
 /// The feed a step from element `from` to element `to` may not exceed: the highest programmed

@@ -57,6 +57,11 @@ impl<T> Window<T> {
         self.items.truncate(len.saturating_sub(self.base));
     }
 
+    /// Absolute index of the first item held.
+    pub fn first_index(&self) -> usize {
+        self.base
+    }
+
     pub fn last(&self) -> Option<&T> {
         self.items.back()
     }

@@ -23,7 +23,8 @@
 //!   moves the tool *between* two feed moves is an error, because a [`Toolpath`] is one continuous
 //!   feed motion.
 //! * **`G1`**: consecutive `G1` moves at the same feed become one [`ElementKind::Polyline`]
-//!   element, parameterised by cumulative chord length (mm). Zero-length moves are skipped.
+//!   element (of at most 1,024 points), parameterised by cumulative chord length (mm).
+//!   Zero-length moves are skipped.
 //! * **`G2`/`G3`** in the XY plane with `I J` (incremental, or absolute after `G90.1`) or `R`
 //!   (negative `R` for more than a half turn) and optional `P` turns become one exact
 //!   [`ElementKind::Arc`] element: a rational quadratic NURBS split into equal pieces of at most
@@ -52,9 +53,15 @@
 //!   (LinuxCNC ignores them), axis words on the `G5.3` line (ignored by LinuxCNC), any other G- or
 //!   M-code inside a block (LinuxCNC would discard the open block), and end of file inside a
 //!   block are errors.
-//! * **Dimension.** The toolpath is 3-D (X Y Z) if any feed move (`G1`/`G2`/`G3`) has a `Z`
-//!   word; every element then carries Z (arcs and NURBS at the Z where they start). Otherwise
-//!   all elements are 2-D (X Y) and `Z` on rapids only positions the tool.
+//! * **Dimension**, decided where the feed motion begins (so that a program streams: elements
+//!   go out before the rest of the file is read). The toolpath is 3-D (X Y Z) if the Z position
+//!   is known at the start of the first feed move that moves (positioned by `G0` or `G1`
+//!   before it); every element then carries Z (arcs and NURBS at the Z where they start).
+//!   Otherwise it is 2-D (X Y), and a later feed move with a `Z` word is an error.
+//! * **Streaming.** [`GcodeStream`] reads one line at a time and hands out each element once
+//!   no later line can change it; a run of `G1` moves is cut into polyline elements of at most
+//!   1,024 points. [`parse`] collects it. An error ends the stream after the elements before
+//!   its line.
 //! * **Accepted modal codes that do not change the tool-tip path:** `G17`, `G40`, `G43 H…`,
 //!   `G49`, `G54`–`G59.3` (only before the first move: a change afterwards would move the path),
 //!   `G61`, `G61.1`, `G64` (with `P`/`Q`), `G80`, `G90`/`G91`, `G90.1`/`G91.1`, `G94`, `G96`,
@@ -66,7 +73,9 @@
 
 use super::ReadError;
 use crate::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use std::collections::VecDeque;
 use std::f64::consts::{FRAC_PI_2, SQRT_2, TAU};
+use std::sync::Arc;
 
 const MM_PER_INCH: f64 = 25.4;
 /// `CENTER_ARC_RADIUS_TOLERANCE_MM` (interp_internal.hh), in mm.
@@ -154,8 +163,8 @@ struct NurbsBlock {
     weights: Vec<f64>,
 }
 
-struct Interp<'a> {
-    file: &'a str,
+struct Interp {
+    file: Arc<str>,
     /// mm per program unit.
     scale: f64,
     absolute: bool,
@@ -369,9 +378,10 @@ fn unsupported_g(code: i32) -> Option<&'static str> {
     })
 }
 
-impl<'a> Interp<'a> {
+impl Interp {
     fn parse_block(&self, lineno: usize, words: &[Word]) -> Result<Block, ReadError> {
-        let file = self.file;
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
         let mut b = Block::default();
         let mut groups: Vec<(u8, i32)> = Vec::new();
         for w in words {
@@ -466,7 +476,7 @@ impl<'a> Interp<'a> {
     fn need(&self, lineno: usize, col: usize, axis: usize) -> Result<f64, ReadError> {
         self.pos[axis].ok_or_else(|| {
             err(
-                self.file,
+                &self.file,
                 lineno,
                 col,
                 format!(
@@ -494,7 +504,8 @@ impl<'a> Interp<'a> {
     }
 
     fn line(&mut self, lineno: usize, words: &[Word]) -> Result<bool, ReadError> {
-        let file = self.file;
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
         let b = self.parse_block(lineno, words)?;
         let in_nurbs = self.nurbs.is_some();
 
@@ -768,7 +779,8 @@ impl<'a> Interp<'a> {
 
     /// One line of a G5.2 block (`Interp::convert_nurbs`).
     fn nurbs_point(&mut self, lineno: usize, col: usize, b: &Block) -> Result<(), ReadError> {
-        let file = self.file;
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
         let (x, y) = (b.get('X'), b.get('Y'));
         if x.is_some() != y.is_some() {
             let c = x.or(y).map_or(col, |w| w.1);
@@ -875,7 +887,8 @@ impl<'a> Interp<'a> {
 
     /// G2/G3 in the XY plane (`convert_arc`, `arc_data_ijk`, `arc_data_r`).
     fn arc(&mut self, lineno: usize, col: usize, cw: bool, b: &Block) -> Result<(), ReadError> {
-        let file = self.file;
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
         let name = if cw { "G2" } else { "G3" };
         let ijk = b.has('I') || b.has('J');
         let r = b.get('R');
@@ -1152,170 +1165,296 @@ pub fn linuxcnc_knot_vector(control_points: usize, order: usize) -> Vec<f64> {
         .collect()
 }
 
-/// Parses a LinuxCNC G-code program into a toolpath (see the module documentation for the exact
-/// semantics and every decision).
+/// Most points of one polyline element: a longer run of G1 moves is cut into elements of this
+/// many points (joined end to start), so that a program streams in bounded memory however
+/// long its G1 runs are. Corner rounding joins them again.
+const POLYLINE_POINTS: usize = 1024;
+
+/// Parses a whole LinuxCNC G-code program into a toolpath (collects [`GcodeStream`]; see the
+/// module documentation for the exact semantics and every decision).
 pub fn parse(file: &str, text: &str) -> Result<Toolpath, ReadError> {
-    if text.trim().is_empty() {
-        return Err(ReadError::new(file, "file is empty"));
+    let elements = GcodeStream::new(file, text.lines().map(|l| Ok(l.to_owned()))).collect::<Result<Vec<_>, _>>()?;
+    Ok(Toolpath { elements })
+}
+
+/// A G-code program read one line at a time, as a stream of path elements: each element is
+/// handed out as soon as the lines after it cannot change it, so a program of any length is
+/// read in constant memory and planning can begin at its first line. An error ends the
+/// stream (after the elements before it).
+pub struct GcodeStream<L> {
+    lines: L,
+    lineno: usize,
+    /// `Some(open)` once the first non-blank line is seen: whether the program is wrapped in `%`.
+    percent: Option<bool>,
+    /// No more lines are read (`M2`/`M30`, the closing `%`, or the end of the file).
+    ended: bool,
+    failed: bool,
+    interp: Interp,
+    builder: Builder,
+    out: VecDeque<PathElement>,
+}
+
+impl<L: Iterator<Item = std::io::Result<String>>> GcodeStream<L> {
+    /// The program whose lines `lines` gives; `file` names it in errors.
+    pub fn new(file: &str, lines: L) -> Self {
+        let file: Arc<str> = Arc::from(file);
+        GcodeStream {
+            lines,
+            lineno: 0,
+            percent: None,
+            ended: false,
+            failed: false,
+            interp: Interp {
+                file: Arc::clone(&file),
+                scale: 1.0,
+                absolute: true,
+                ij_absolute: false,
+                motion: None,
+                feed: 0.0,
+                pos: [None; 3],
+                coord_system: 540,
+                nurbs: None,
+                moves: Vec::new(),
+            },
+            builder: Builder {
+                file,
+                three_d: None,
+                poly: None,
+                pending_rapid: None,
+                any: false,
+            },
+            out: VecDeque::new(),
+        }
     }
-    let mut it = Interp {
-        file,
-        scale: 1.0,
-        absolute: true,
-        ij_absolute: false,
-        motion: None,
-        feed: 0.0,
-        pos: [None; 3],
-        coord_system: 540,
-        nurbs: None,
-        moves: Vec::new(),
-    };
-    let mut percent: Option<bool> = None; // Some(open) once the first non-blank line is seen
-    let mut last_line = 0;
-    let mut ended = false;
-    for (idx, raw) in text.lines().enumerate() {
-        let lineno = idx + 1;
-        last_line = lineno;
+
+    /// Reads and interprets the next line (or ends the program).
+    fn step(&mut self) -> Result<(), ReadError> {
+        let file = Arc::clone(&self.interp.file);
+        let Some(raw) = self.lines.next() else {
+            return self.end_of_file();
+        };
+        let raw = raw.map_err(|e| ReadError::new(&file, e.to_string()))?;
+        self.lineno += 1;
+        let lineno = self.lineno;
         let trimmed = raw.trim();
         if trimmed.starts_with('%') {
-            match percent {
+            match self.percent {
                 None => {
-                    percent = Some(true);
-                    continue;
+                    self.percent = Some(true);
+                    return Ok(());
                 }
                 Some(true) => {
-                    percent = Some(false);
-                    ended = true;
-                    break;
+                    self.percent = Some(false);
+                    return self.end_of_program();
                 }
                 Some(false) => {}
             }
         }
-        if percent.is_none() && !trimmed.is_empty() {
-            percent = Some(false);
+        if self.percent.is_none() && !trimmed.is_empty() {
+            self.percent = Some(false);
         }
-        let words = tokenize(file, lineno, raw)?;
-        if it.line(lineno, &words)? {
-            if let Some(block) = &it.nurbs {
+        let words = tokenize(&file, lineno, &raw)?;
+        let stop = self.interp.line(lineno, &words)?;
+        for m in self.interp.moves.drain(..) {
+            self.builder.push(m, &mut self.out)?;
+        }
+        if stop {
+            if let Some(block) = &self.interp.nurbs {
                 return Err(ReadError::at(
-                    file,
+                    &file,
                     lineno,
                     None,
                     format!("program ends inside the G5.2 NURBS block opened at line {}", block.line),
                 ));
             }
-            ended = true;
-            break;
+            return self.end_of_program();
         }
+        Ok(())
     }
-    if percent == Some(true) && !ended {
-        return Err(ReadError::at(
-            file,
-            last_line,
-            None,
-            "file ended with no closing percent sign",
-        ));
+
+    fn end_of_file(&mut self) -> Result<(), ReadError> {
+        let file = Arc::clone(&self.interp.file);
+        match self.percent {
+            None => return Err(ReadError::new(&file, "file is empty")),
+            Some(true) => {
+                return Err(ReadError::at(
+                    &file,
+                    self.lineno,
+                    None,
+                    "file ended with no closing percent sign",
+                ))
+            }
+            Some(false) => {}
+        }
+        if let Some(block) = &self.interp.nurbs {
+            return Err(ReadError::at(
+                &file,
+                self.lineno,
+                None,
+                format!(
+                    "file ends inside the G5.2 NURBS block opened at line {} (missing G5.3)",
+                    block.line
+                ),
+            ));
+        }
+        self.end_of_program()
     }
-    if let Some(block) = &it.nurbs {
-        return Err(ReadError::at(
-            file,
-            last_line,
-            None,
-            format!(
-                "file ends inside the G5.2 NURBS block opened at line {} (missing G5.3)",
-                block.line
-            ),
-        ));
+
+    fn end_of_program(&mut self) -> Result<(), ReadError> {
+        self.ended = true;
+        self.builder.finish(&mut self.out)
     }
-    build(file, it.moves)
 }
 
-/// Turns interpreted moves into path elements.
-fn build(file: &str, moves: Vec<Move>) -> Result<Toolpath, ReadError> {
-    let three_d = moves.iter().any(|m| match m {
-        Move::Line { z_word, .. } | Move::Arc { z_word, .. } => *z_word,
-        _ => false,
-    });
-    let geometry = |line: usize| {
-        move |e: nurbs_rtcore::GeometryError| ReadError::at(file, line, None, format!("invalid curve: {e}"))
-    };
-    let need_z = |line: usize, z: Option<f64>| {
+impl<L: Iterator<Item = std::io::Result<String>>> Iterator for GcodeStream<L> {
+    type Item = Result<PathElement, ReadError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(e) = self.out.pop_front() {
+                return Some(Ok(e));
+            }
+            if self.ended || self.failed {
+                return None;
+            }
+            if let Err(e) = self.step() {
+                self.failed = true;
+                return Some(Err(e));
+            }
+        }
+    }
+}
+
+/// Turns interpreted moves into path elements as they come.
+struct Builder {
+    file: Arc<str>,
+    /// Whether the path is 3-D: decided by the first feed move that moves, by whether the Z
+    /// position is known where it starts.
+    three_d: Option<bool>,
+    /// The polyline under construction: (first line, feed, points).
+    poly: Option<(usize, f64, Vec<Vec<f64>>)>,
+    /// A rapid that moved the tool after a feed move (an error if another feed move follows).
+    pending_rapid: Option<(usize, usize)>,
+    /// A feed move has been taken.
+    any: bool,
+}
+
+impl Builder {
+    fn geometry(&self, line: usize) -> impl Fn(nurbs_rtcore::GeometryError) -> ReadError + '_ {
+        move |e| ReadError::at(&self.file, line, None, format!("invalid curve: {e}"))
+    }
+
+    /// The Z of a 3-D path's move, which is known there (the path's Z was known where the
+    /// feed motion began, and stays known).
+    fn z_of(&self, line: usize, z: Option<f64>) -> Result<f64, ReadError> {
         z.ok_or_else(|| {
             ReadError::at(
-                file,
+                &self.file,
                 line,
                 None,
                 "the Z position is unknown at the start of this move, but the program moves in Z: position Z with G0 first",
             )
         })
-    };
-    let mut elements: Vec<PathElement> = Vec::new();
-    // Current polyline under construction: (first line, feed, points).
-    let mut poly: Option<(usize, f64, Vec<Vec<f64>>)> = None;
-    let mut pending_rapid: Option<(usize, usize)> = None;
-    let flush = |poly: &mut Option<(usize, f64, Vec<Vec<f64>>)>, elements: &mut Vec<PathElement>| {
-        if let Some((line, feed, pts)) = poly.take() {
-            let curve = polyline_nurbs(&pts).map_err(geometry(line))?;
-            elements.push(PathElement {
+    }
+
+    /// Decides the dimension at the first feed move (where Z starts `z`), and refuses a Z word
+    /// on a feed move of a 2-D path.
+    fn dimension(&mut self, line: usize, z: Option<f64>, z_word: bool) -> Result<bool, ReadError> {
+        let three_d = *self.three_d.get_or_insert(z.is_some());
+        if !three_d && z_word {
+            return Err(ReadError::at(
+                &self.file,
+                line,
+                None,
+                "this move programs Z, but the Z position was unknown where the feed motion began (a 2-D path): position Z with G0 before the first feed move",
+            ));
+        }
+        Ok(three_d)
+    }
+
+    fn flush(&mut self, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
+        if let Some((line, feed, pts)) = self.poly.take() {
+            let curve = polyline_nurbs(&pts).map_err(self.geometry(line))?;
+            out.push_back(PathElement {
                 kind: ElementKind::Polyline,
                 curve,
                 feed: Some(feed),
                 source_line: Some(line),
             });
         }
-        Ok::<(), ReadError>(())
-    };
-    for m in moves {
-        let feed_move_line = match &m {
-            Move::Rapid { line, col, from, to } => {
-                if from != to && (!elements.is_empty() || poly.is_some()) && pending_rapid.is_none() {
-                    pending_rapid = Some((*line, *col));
-                }
-                None
-            }
-            Move::Line { line, from, to, .. } => {
-                let moves_xy = from[0] != to[0] || from[1] != to[1];
-                let moves_z = three_d && from[2] != to[2];
-                (moves_xy || moves_z).then_some(*line)
-            }
-            Move::Arc { line, .. } | Move::Nurbs { line, .. } => Some(*line),
-        };
-        let Some(_) = feed_move_line else { continue };
-        if let Some((rl, rc)) = pending_rapid.take() {
+        Ok(())
+    }
+
+    /// A feed move is taken: a rapid that moved the tool since the last one is an error.
+    fn feed_move(&mut self) -> Result<(), ReadError> {
+        if let Some((rl, rc)) = self.pending_rapid.take() {
             return Err(ReadError::at(
-                file,
+                &self.file,
                 rl,
                 Some(rc),
                 "G0 rapid between feed moves is not supported: a toolpath is one continuous feed motion (split the program)",
             ));
         }
+        self.any = true;
+        Ok(())
+    }
+
+    fn push(&mut self, m: Move, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
         match m {
-            Move::Rapid { .. } => unreachable!("rapids are skipped above"),
+            Move::Rapid { line, col, from, to } => {
+                if from != to && self.any && self.pending_rapid.is_none() {
+                    self.pending_rapid = Some((line, col));
+                }
+            }
             Move::Line {
-                line, from, to, feed, ..
+                line,
+                from,
+                to,
+                feed,
+                z_word,
             } => {
+                let moves_xy = from[0] != to[0] || from[1] != to[1];
+                let moves_z = from[2] != to[2];
+                if self.three_d.is_none() && !(moves_xy || moves_z) {
+                    return Ok(());
+                }
+                let three_d = self.dimension(line, from[2], z_word)?;
+                if !(moves_xy || three_d && moves_z) {
+                    return Ok(());
+                }
+                self.feed_move()?;
                 let point = |p: &Pos| -> Result<Vec<f64>, ReadError> {
                     let (x, y) = (p[0].expect("checked"), p[1].expect("checked"));
                     Ok(if three_d {
-                        vec![x, y, need_z(line, p[2])?]
+                        vec![x, y, self.z_of(line, p[2])?]
                     } else {
                         vec![x, y]
                     })
                 };
                 let (a, b) = (point(&from)?, point(&to)?);
-                match &mut poly {
-                    Some((_, f, pts)) if *f == feed && pts.last() == Some(&a) => pts.push(b),
+                match &mut self.poly {
+                    Some((_, f, pts)) if *f == feed && pts.last() == Some(&a) && pts.len() < POLYLINE_POINTS => {
+                        pts.push(b)
+                    }
                     _ => {
-                        flush(&mut poly, &mut elements)?;
-                        poly = Some((line, feed, vec![a, b]));
+                        self.flush(out)?;
+                        self.poly = Some((line, feed, vec![a, b]));
                     }
                 }
             }
-            Move::Arc { line, arc, z, feed, .. } => {
-                flush(&mut poly, &mut elements)?;
-                let z = if three_d { Some(need_z(line, z)?) } else { None };
-                let curve = arc_nurbs(&arc, z).map_err(geometry(line))?;
-                elements.push(PathElement {
+            Move::Arc {
+                line,
+                arc,
+                z,
+                feed,
+                z_word,
+            } => {
+                let three_d = self.dimension(line, z, z_word)?;
+                self.feed_move()?;
+                self.flush(out)?;
+                let z = if three_d { Some(self.z_of(line, z)?) } else { None };
+                let curve = arc_nurbs(&arc, z).map_err(self.geometry(line))?;
+                out.push_back(PathElement {
                     kind: ElementKind::Arc,
                     curve,
                     feed: Some(feed),
@@ -1330,8 +1469,10 @@ fn build(file: &str, moves: Vec<Move>) -> Result<Toolpath, ReadError> {
                 z,
                 feed,
             } => {
-                flush(&mut poly, &mut elements)?;
-                let z = if three_d { Some(need_z(line, z)?) } else { None };
+                let three_d = self.dimension(line, z, false)?;
+                self.feed_move()?;
+                self.flush(out)?;
+                let z = if three_d { Some(self.z_of(line, z)?) } else { None };
                 let pts: Vec<Vec<f64>> = points
                     .iter()
                     .map(|p| match z {
@@ -1340,8 +1481,8 @@ fn build(file: &str, moves: Vec<Move>) -> Result<Toolpath, ReadError> {
                     })
                     .collect();
                 let knots = linuxcnc_knot_vector(pts.len(), order);
-                let curve = Nurbs::new(order - 1, knots, &pts, Some(weights)).map_err(geometry(line))?;
-                elements.push(PathElement {
+                let curve = Nurbs::new(order - 1, knots, &pts, Some(weights)).map_err(self.geometry(line))?;
+                out.push_back(PathElement {
                     kind: ElementKind::Nurbs,
                     curve,
                     feed: Some(feed),
@@ -1349,13 +1490,18 @@ fn build(file: &str, moves: Vec<Move>) -> Result<Toolpath, ReadError> {
                 });
             }
         }
+        Ok(())
     }
-    flush(&mut poly, &mut elements)?;
-    if elements.is_empty() {
-        return Err(ReadError::new(
-            file,
-            "the program contains no feed moves (G1, G2, G3 or G5.2/G5.3)",
-        ));
+
+    /// The program has ended: the last polyline goes out.
+    fn finish(&mut self, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
+        self.flush(out)?;
+        if !self.any {
+            return Err(ReadError::new(
+                &self.file,
+                "the program contains no feed moves (G1, G2, G3 or G5.2/G5.3)",
+            ));
+        }
+        Ok(())
     }
-    Ok(Toolpath { elements })
 }

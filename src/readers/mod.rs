@@ -7,7 +7,7 @@ pub mod dxf;
 pub mod gcode;
 pub mod json;
 
-use crate::geometry::Toolpath;
+use crate::geometry::{PathElement, Toolpath};
 use std::fmt;
 use std::path::Path;
 
@@ -82,68 +82,75 @@ impl Format {
 pub const MAX_COORDINATE: f64 = 1e6;
 /// Most control points of one path element: more than the channel's arena carries.
 pub const MAX_CONTROL_POINTS: usize = 1_000_000;
-/// Most path elements of one toolpath (it is held in memory whole: some 300 bytes each).
-pub const MAX_ELEMENTS: usize = 20_000_000;
 
-/// Refuses a toolpath that no machine or the planner's precision can take: coordinates beyond
-/// [`MAX_COORDINATE`], an element of more than [`MAX_CONTROL_POINTS`], more than
-/// [`MAX_ELEMENTS`] elements. Each with the element (and source line) it found first.
-pub fn check_sizes(name: &str, toolpath: &Toolpath) -> Result<(), ReadError> {
-    if toolpath.elements.len() > MAX_ELEMENTS {
-        return Err(ReadError::new(
-            name,
-            format!(
-                "{} path elements: more than {MAX_ELEMENTS} in one toolpath",
-                toolpath.elements.len()
-            ),
-        ));
+/// A toolpath's elements in path order, as a reader hands them out: G-code as it reads its
+/// lines ([`gcode::GcodeStream`]), JSON and DXF once the whole file is read. An error ends it.
+pub type ElementStream = Box<dyn Iterator<Item = Result<PathElement, ReadError>> + Send>;
+
+/// Refuses an element that no machine or the planner's precision can take: coordinates beyond
+/// [`MAX_COORDINATE`], more than [`MAX_CONTROL_POINTS`]; the error names the element's source
+/// line, or its index `i` where the format has no lines.
+pub fn check_element(name: &str, i: usize, e: &PathElement) -> Result<(), ReadError> {
+    let at = |what: String| match e.source_line {
+        Some(line) => ReadError::at(name, line, None, format!("the path element that starts here: {what}")),
+        None => ReadError::new(name, format!("path element {i}: {what}")),
+    };
+    let c = &e.curve;
+    let points = c.points().len() / c.dim().max(1);
+    if points > MAX_CONTROL_POINTS {
+        return Err(at(format!(
+            "{points} control points: more than {MAX_CONTROL_POINTS} in one element"
+        )));
     }
-    for (i, e) in toolpath.elements.iter().enumerate() {
-        let at = |what: String| match e.source_line {
-            Some(line) => ReadError::at(name, line, None, format!("the path element that starts here: {what}")),
-            None => ReadError::new(name, format!("path element {i}: {what}")),
-        };
-        let c = &e.curve;
-        let points = c.points().len() / c.dim().max(1);
-        if points > MAX_CONTROL_POINTS {
-            return Err(at(format!(
-                "{points} control points: more than {MAX_CONTROL_POINTS} in one element"
-            )));
-        }
-        if let Some(x) = c.points().iter().find(|x| x.abs() > MAX_COORDINATE) {
-            return Err(at(format!(
-                "coordinate {x} mm is beyond {MAX_COORDINATE} mm: no machine's travel, and the servo-period check would lose its precision"
-            )));
-        }
+    if let Some(x) = c.points().iter().find(|x| x.abs() > MAX_COORDINATE) {
+        return Err(at(format!(
+            "coordinate {x} mm is beyond {MAX_COORDINATE} mm: no machine's travel, and the servo-period check would lose its precision"
+        )));
     }
     Ok(())
 }
 
-/// Reads a toolpath, choosing the reader by file extension, and checks its sizes
-/// ([`check_sizes`]).
-pub fn read_toolpath(path: &Path) -> Result<Toolpath, ReadError> {
-    let name = path.display().to_string();
-    let toolpath = read_as_format(&name, path)?;
-    check_sizes(&name, &toolpath)?;
-    Ok(toolpath)
+/// [`check_element`] on every element of a whole toolpath.
+pub fn check_sizes(name: &str, toolpath: &Toolpath) -> Result<(), ReadError> {
+    toolpath
+        .elements
+        .iter()
+        .enumerate()
+        .try_for_each(|(i, e)| check_element(name, i, e))
 }
 
-fn read_as_format(name: &str, path: &Path) -> Result<Toolpath, ReadError> {
-    let name = name.to_owned();
+/// Opens a toolpath as a stream of elements, choosing the reader by file extension; each
+/// element is checked ([`check_element`]) as it comes.
+pub fn open_toolpath(path: &Path) -> Result<ElementStream, ReadError> {
+    let name = path.display().to_string();
     let format = Format::from_path(path)
         .ok_or_else(|| ReadError::new(&name, "unknown file type: expected .json, .ngc/.nc/.gcode/.tap or .dxf"))?;
-    match format {
+    let elements: ElementStream = match format {
+        Format::Gcode => {
+            use std::io::BufRead;
+            let file = std::fs::File::open(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
+            Box::new(gcode::GcodeStream::new(&name, std::io::BufReader::new(file).lines()))
+        }
         Format::Json => {
             let text = std::fs::read_to_string(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
-            json::parse(&name, &text)
-        }
-        Format::Gcode => {
-            let text = std::fs::read_to_string(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
-            gcode::parse(&name, &text)
+            Box::new(json::parse(&name, &text)?.elements.into_iter().map(Ok))
         }
         Format::Dxf => {
             let bytes = std::fs::read(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
-            dxf::parse(&name, &bytes)
+            Box::new(dxf::parse(&name, &bytes)?.elements.into_iter().map(Ok))
         }
-    }
+    };
+    let mut index = 0;
+    Ok(Box::new(elements.map(move |e| {
+        let e = e?;
+        check_element(&name, index, &e)?;
+        index += 1;
+        Ok(e)
+    })))
+}
+
+/// Reads a whole toolpath ([`open_toolpath`], collected).
+pub fn read_toolpath(path: &Path) -> Result<Toolpath, ReadError> {
+    let elements = open_toolpath(path)?.collect::<Result<Vec<_>, _>>()?;
+    Ok(Toolpath { elements })
 }

@@ -118,7 +118,7 @@ pub fn try_plan_and_verify(toolpath: &Toolpath, limits: &Limits) -> Result<f64, 
 /// [`try_plan_and_verify`] with planner options (e.g. streaming).
 pub fn try_plan_and_verify_with(toolpath: &Toolpath, limits: &Limits, options: &PlanOptions) -> Result<f64, Failure> {
     let plan = plan(toolpath, limits, options, &mut |_| {}).map_err(Failure::Refused)?;
-    let curves = PathCurves::new(toolpath);
+    let mut curves = PathCurves::new(toolpath);
     let samples = setpoints(&curves, &plan.limits, &plan.records);
     let tip = toolpath.tip_dim();
     let rows: Vec<Row> = samples
@@ -131,7 +131,7 @@ pub fn try_plan_and_verify_with(toolpath: &Toolpath, limits: &Limits, options: &
             q: s.point[..tip].to_vec(),
         })
         .collect();
-    let report = verify(&curves, &plan.limits, &rows);
+    let report = verify(&mut curves, &plan.limits, &rows);
     if !report.violations.is_empty() {
         return Err(Failure::Violation(format!("{:?}", report.violations)));
     }

@@ -265,7 +265,7 @@ pub fn violations(job: &Job, run: &[Out], to_end: bool) -> Vec<String> {
             q: o.q[..tip].to_vec(),
         })
         .collect();
-    let report = verify(&PathCurves::new(&job.toolpath), &job.limits, &rows);
+    let report = verify(&mut PathCurves::new(&job.toolpath), &job.limits, &rows);
     report
         .violations
         .into_iter()
