@@ -6,7 +6,7 @@
 //! whole plan of the 200-line program in the same process.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nurbs_motion::planner::Limits;
+use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent};
 
 #[path = "../tests/common/test_paths.rs"]
@@ -22,7 +22,7 @@ fn bench_start(c: &mut Criterion) {
         g.bench_function(format!("first group ({lines} lines)"), |b| {
             b.iter(|| {
                 let mut first = None;
-                stream_plan(&toolpath, &limits, None, &mut |e| {
+                stream_plan(PathCurves::new(&toolpath), &limits, None, &mut |e| {
                     if let PlanEvent::Group(group) = e {
                         first = Some(group.slots.len());
                     }

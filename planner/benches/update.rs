@@ -57,7 +57,7 @@ fn bench_update(c: &mut Criterion) {
         mock::set_pin("nurbs_interp.enable", Value::Bit(true));
         let update = mock::funct("nurbs_interp.update").unwrap();
         let start = |toolpath: &'static Toolpath| {
-            Streamer::new(channel, toolpath, source(), 0, f64::INFINITY, Instant::now()).unwrap()
+            Streamer::new(channel, toolpath.tip_dim(), source(), 0, f64::INFINITY, Instant::now()).unwrap()
         };
         let toolpath: &'static Toolpath = Box::leak(Box::new(toolpath.clone()));
         let mut streamer = start(toolpath);

@@ -14,13 +14,12 @@
 use std::cell::{OnceCell, RefCell};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
-use std::sync::Arc;
 use std::time::Instant;
 
-use crate::writer::{GeometryWriter, Release, WriteError, MAX_CURVE_INDEX};
-use nurbs_hal::channel::{Channel, Slot, StopPoint, ARENA_VALUES, SEGMENT_SLOTS};
+use crate::writer::{GeometryWriter, Release, WriteError};
+use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
 use nurbs_hal::record::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
-use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
+use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
 use nurbs_motion::planner::verify::SLACK;
@@ -40,24 +39,22 @@ pub enum PlannerKind {
 /// Where a plan from the module's stop point starts: there, or where the machine stands at
 /// the end of an element (not the last), at the start of the next one (the module accepts
 /// either).
-pub fn plan_start(toolpath: &Toolpath, stop: &StopPoint) -> PlanStart {
+pub fn plan_start(curves: &mut PathCurves, stop: &StopPoint) -> PlanStart {
     let curve = stop.curve as usize;
     let next = curve + 1;
-    let at_end = toolpath
-        .elements
-        .get(curve)
-        .is_some_and(|e| stop.u >= e.curve.view().u_max());
-    match toolpath.elements.get(next) {
-        Some(e) if at_end => PlanStart {
+    let at_end = curves.load(curve) && stop.u >= curves.view(curve).u_max();
+    if at_end && curves.load(next) {
+        PlanStart {
             curve: next,
-            u: e.curve.view().u_min(),
+            u: curves.view(next).u_min(),
             s: 0.0,
-        },
-        _ => PlanStart {
+        }
+    } else {
+        PlanStart {
             curve,
             u: stop.u,
             s: stop.s,
-        },
+        }
     }
 }
 
@@ -71,6 +68,10 @@ pub struct SegmentGroup {
     pub chain: Vec<f64>,
     /// Motion time of the records (s).
     pub time: f64,
+    /// The curves this group is the first to need (it and its stop), in path order from
+    /// `first_curve`: they go into the geometry stream before the group into the ring.
+    pub curves: Vec<Nurbs>,
+    pub first_curve: u32,
 }
 
 impl SegmentGroup {
@@ -118,8 +119,19 @@ impl Grouper {
             };
         }
         let time = run.iter().map(|r| r.record.profile().total_time()).sum();
-        Some(SegmentGroup { slots, chain, time })
+        Some(SegmentGroup {
+            slots,
+            chain,
+            time,
+            curves: Vec::new(),
+            first_curve: 0,
+        })
     }
+}
+
+/// Highest curve a final record and its stop run on.
+fn curve_needed(r: &FinalRecord) -> u32 {
+    r.stop.iter().map(|s| s.curve).fold(r.record.curve, u32::max)
 }
 
 /// What [`stream_plan`] hands out, in order.
@@ -127,27 +139,35 @@ impl Grouper {
 pub enum PlanEvent {
     /// The next group of final records.
     Group(SegmentGroup),
-    /// The plan is complete (a line for the log).
-    Done(String),
+    /// The plan is complete (a line for the log); `error`: the file could not be read to its
+    /// end, and the plan ends at rest before the element that failed.
+    Done {
+        line: String,
+        error: Option<String>,
+    },
     Failed(String),
 }
 
-/// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `toolpath`, from its
-/// start or from rest at the module's stop point `from`, and hands each group of final records
-/// to `emit` as soon as it is complete; stops early when `emit` returns false (nobody listens
-/// any more).
+/// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `curves` (read as it
+/// plans), from its start or from rest at the module's stop point `from`, and hands each group
+/// of final records, with the curves it is the first to need, to `emit` as soon as it is
+/// complete; stops early when `emit` returns false (nobody listens any more).
 pub fn stream_plan(
-    toolpath: &Toolpath,
+    mut curves: PathCurves,
     limits: &Limits,
     from: Option<&StopPoint>,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) {
+    let start = from.map(|p| plan_start(&mut curves, p));
+    // A re-plan from a stop point never needs the path before it.
+    let mut next_curve = start.map_or(0, |s| s.curve);
+    curves.release_before(next_curve);
     let options = PlanOptions {
         stream: true,
-        start: from.map(|p| plan_start(toolpath, p)),
+        start,
         ..PlanOptions::default()
     };
-    let mut planner = match Planner::new(toolpath, limits, &options) {
+    let mut planner = match Planner::with_curves(curves, limits, &options) {
         Ok(p) => p,
         Err(e) => {
             emit(PlanEvent::Failed(e.to_string()));
@@ -156,14 +176,26 @@ pub fn stream_plan(
     };
     let mut grouper = Grouper::default();
     let (mut groups, mut longest) = (0usize, 0.0f64);
+    // The curves of the group being collected, from `first_curve` on.
+    let (mut first_curve, mut new_curves) = (next_curve as u32, Vec::new());
     while let Some(next) = planner.next_final() {
         match next {
             Ok(record) => {
                 // The critical points are not sent: drop them as they come.
                 drop(planner.take_critical_points());
-                if let Some(group) = grouper.push(record) {
+                // The record's curves are still held (its own until the next call, its stop's
+                // ahead of the planning front), and every curve before them has been sent.
+                let needed = curve_needed(&record) as usize;
+                while next_curve <= needed {
+                    new_curves.push(planner.curves().element(next_curve).curve.clone());
+                    next_curve += 1;
+                }
+                if let Some(mut group) = grouper.push(record) {
                     groups += 1;
                     longest = longest.max(group.time);
+                    group.first_curve = first_curve;
+                    first_curve = next_curve as u32;
+                    group.curves = std::mem::take(&mut new_curves);
                     if !emit(PlanEvent::Group(group)) {
                         return;
                     }
@@ -178,6 +210,12 @@ pub fn stream_plan(
             }
         }
     }
+    let error = planner.curves().error().map(|e| {
+        format!(
+            "{e}: the plan ends at rest at the end of path element {} before it",
+            planner.curves().len().saturating_sub(1)
+        )
+    });
     let report = planner.finish();
     let stops = match report.stops_made.as_slice() {
         [] => String::new(),
@@ -188,13 +226,16 @@ pub fn stream_plan(
             made[0].1
         ),
     };
-    emit(PlanEvent::Done(format!(
-        "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms{stops}",
-        report.records,
-        report.motion_time,
-        report.plan_time,
-        report.first_record_time * 1e3
-    )));
+    emit(PlanEvent::Done {
+        line: format!(
+            "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms{stops}",
+            report.records,
+            report.motion_time,
+            report.plan_time,
+            report.first_record_time * 1e3
+        ),
+        error,
+    });
 }
 
 /// The stop chosen after one record.
@@ -233,30 +274,6 @@ impl StopChoice {
 /// largest first: 1, 0.85, 0.85^2, ... (30 steps, down to 0.009).
 pub fn fractions(max_fraction: f64) -> Vec<f64> {
     (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
-}
-
-/// Refuses, before any planning, a toolpath the channel cannot carry: a path element whose
-/// curve has more values than the channel's arena, or more elements than a stream's curve
-/// indices. Everything else streams, however long the program.
-pub fn check_fits(toolpath: &Toolpath) -> Result<(), String> {
-    if toolpath.elements.len() > MAX_CURVE_INDEX as usize + 1 {
-        return Err(format!(
-            "{} path elements: the channel carries at most {} in one motion",
-            toolpath.elements.len(),
-            MAX_CURVE_INDEX as usize + 1
-        ));
-    }
-    for (i, e) in toolpath.elements.iter().enumerate() {
-        let c = &e.curve;
-        let values = c.knots().len() + c.points().len() + c.weights().len();
-        if values > ARENA_VALUES {
-            let line = e.source_line.map_or(String::new(), |l| format!(" (line {l})"));
-            return Err(format!(
-                "path element {i}{line} has {values} knots, coordinates and weights: more than the channel's arena of {ARENA_VALUES} values holds"
-            ));
-        }
-    }
-    Ok(())
 }
 
 /// Refuses toolpaths the module cannot run as VPOp plans: it drives the tool tip only, so a
@@ -873,6 +890,8 @@ pub struct BlockPlan {
     pub choices: Vec<StopChoice>,
     /// Motion time of one block sample (s).
     pub period: f64,
+    /// The path's curves, for the geometry stream.
+    pub curves: Vec<Nurbs>,
 }
 
 impl BlockPlan {
@@ -912,7 +931,7 @@ pub fn block_plan(
     }
     let mut arcs = ArcLengths::new(toolpath);
     if let Some(a) = anchor {
-        let start = plan_start(toolpath, a);
+        let start = plan_start(&mut PathCurves::new(toolpath), a);
         arcs.set_anchor(start.curve, start.u, start.s);
     }
     let mut blocks = pack_blocks(&arcs, &plan.points);
@@ -955,6 +974,7 @@ pub fn block_plan(
         points,
         choices,
         period: plan.limits.period,
+        curves: toolpath.elements.iter().map(|e| e.curve.clone()).collect(),
     })
 }
 
@@ -963,7 +983,7 @@ pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>)
     check_tip_path(toolpath)?;
     let options = SearchOptions {
         start: from.map(|p| {
-            let start = plan_start(toolpath, p);
+            let start = plan_start(&mut PathCurves::new(toolpath), p);
             (start.curve, start.u)
         }),
         ..SearchOptions::default()
@@ -1001,8 +1021,12 @@ pub enum Source {
     Segments {
         events: Option<Receiver<PlanEvent>>,
         queue: VecDeque<SegmentGroup>,
+        /// Motion time of the groups in `queue` (s).
+        queued: f64,
         /// The plan has ended; its motion time.
         total: Option<f64>,
+        /// The plan ended before the file did (it could not be read further).
+        error: Option<String>,
     },
     /// A VPOp plan with its checked stops, sent block group by block group.
     Blocks {
@@ -1027,15 +1051,18 @@ pub struct Group {
 }
 
 impl Source {
-    /// The Erwinski plan of `toolpath` (from its start, or from rest at the stop point `from`)
-    /// as a stream, planned in a thread of its own.
-    pub fn streamed(toolpath: Arc<Toolpath>, limits: Limits, from: Option<StopPoint>) -> Source {
-        let (sender, receiver) = mpsc::channel();
-        std::thread::spawn(move || stream_plan(&toolpath, &limits, from.as_ref(), &mut |e| sender.send(e).is_ok()));
+    /// The Erwinski plan of `curves` (from its start, or from rest at the stop point `from`)
+    /// as a stream, planned in a thread of its own that reads the path as it plans and waits
+    /// while [`QUEUED_AHEAD`] seconds of motion wait to be sent.
+    pub fn streamed(curves: PathCurves, limits: Limits, from: Option<StopPoint>) -> Source {
+        let (sender, receiver) = mpsc::sync_channel(EVENTS_AHEAD);
+        std::thread::spawn(move || stream_plan(curves, &limits, from.as_ref(), &mut |e| sender.send(e).is_ok()));
         Source::Segments {
             events: Some(receiver),
             queue: VecDeque::new(),
+            queued: 0.0,
             total: None,
+            error: None,
         }
     }
 
@@ -1045,7 +1072,9 @@ impl Source {
         Source::Segments {
             events: None,
             queue: groups.into(),
+            queued: total,
             total: Some(total),
+            error: None,
         }
     }
 
@@ -1068,6 +1097,18 @@ impl Source {
     }
 }
 
+/// Motion time (s) planned before the motion starts, where the planner's pace lets the queue
+/// grow from there to the margin as the motion runs (the start rule asks for twice the
+/// motion's pace): the machine moves within milliseconds of the start, whatever the program's
+/// length.
+pub const START_AHEAD: f64 = 0.25;
+
+/// Motion time (s) of the groups a streamed plan hands out ahead of the ring: the planner
+/// thread waits beyond it, so that memory follows the look-ahead, not the program's length.
+pub const QUEUED_AHEAD: f64 = 20.0;
+/// Events the planner thread may hand out before the streamer takes them.
+const EVENTS_AHEAD: usize = 4;
+
 /// The whole streamed plan of `toolpath` as groups, planned here (tests, benches).
 pub fn plan_groups(
     toolpath: &Toolpath,
@@ -1076,10 +1117,10 @@ pub fn plan_groups(
 ) -> Result<Vec<SegmentGroup>, String> {
     let mut groups = Vec::new();
     let mut failed = None;
-    stream_plan(toolpath, limits, from, &mut |e| {
+    stream_plan(PathCurves::new(toolpath), limits, from, &mut |e| {
         match e {
             PlanEvent::Group(g) => groups.push(g),
-            PlanEvent::Done(_) => {}
+            PlanEvent::Done { error, .. } => failed = error,
             PlanEvent::Failed(e) => failed = Some(e),
         }
         true
@@ -1091,8 +1132,11 @@ pub fn plan_groups(
 /// slots into the ring within the time margin.
 pub struct Streamer<'a> {
     channel: &'a Channel,
-    toolpath: &'a Toolpath,
     writer: GeometryWriter<'a>,
+    /// Curves the groups taken so far need that wait for the geometry stream, from the
+    /// writer's next curve on; the index the next curve queued will have.
+    curves: VecDeque<Nurbs>,
+    next_queued: u32,
     source: Source,
     /// The next group to go out (its curves published as far as there was room).
     current: Option<Group>,
@@ -1113,24 +1157,25 @@ pub struct Streamer<'a> {
 }
 
 impl<'a> Streamer<'a> {
-    /// Begins the geometry stream of a motion of `toolpath` whose first curve is
+    /// Begins the geometry stream of a motion of a `tip`-axis path whose first curve is
     /// `first_curve` (the module must run no motion), to be filled from `source` keeping
     /// `margin` seconds queued. `began`: when its planning began (the start rule's pace).
     pub fn new(
         channel: &'a Channel,
-        toolpath: &'a Toolpath,
+        tip: usize,
         source: Source,
         first_curve: usize,
         margin: f64,
         began: Instant,
     ) -> Result<Self, String> {
         let first = u32::try_from(first_curve).map_err(|_| "path element index beyond 32 bits".to_string())?;
-        let writer = GeometryWriter::begin(channel, first, toolpath.tip_dim())?;
+        let writer = GeometryWriter::begin(channel, first, tip)?;
         channel.set_planned_time(0.0);
         Ok(Streamer {
             channel,
-            toolpath,
             writer,
+            curves: VecDeque::new(),
+            next_queued: first,
             planned: source.planned(),
             source,
             current: None,
@@ -1170,26 +1215,53 @@ impl<'a> Streamer<'a> {
     pub fn done(&self) -> bool {
         self.current.is_none()
             && match &self.source {
-                Source::Segments { events, queue, total } => events.is_none() && queue.is_empty() && total.is_some(),
+                Source::Segments {
+                    events, queue, total, ..
+                } => events.is_none() && queue.is_empty() && total.is_some(),
                 Source::Blocks { plan, next, .. } => *next >= plan.blocks.len(),
             }
     }
 
-    /// Takes what the planner thread has handed out so far.
+    /// Why the plan ended before the toolpath file did, once it has ended.
+    pub fn plan_error(&self) -> Option<&str> {
+        match &self.source {
+            Source::Segments { error, .. } => error.as_deref(),
+            Source::Blocks { .. } => None,
+        }
+    }
+
+    /// Whether [`QUEUED_AHEAD`] seconds of motion wait to be sent (the planner waits for them).
+    fn queue_full(&self) -> bool {
+        matches!(&self.source, Source::Segments { queued, events: Some(_), .. } if *queued >= QUEUED_AHEAD)
+    }
+
+    /// Takes what the planner thread has handed out so far, up to [`QUEUED_AHEAD`].
     fn receive(&mut self) -> Result<(), String> {
-        let Source::Segments { events, queue, total } = &mut self.source else {
+        let Source::Segments {
+            events,
+            queue,
+            queued,
+            total,
+            error,
+        } = &mut self.source
+        else {
             return Ok(());
         };
         while let Some(rx) = events {
+            if *queued >= QUEUED_AHEAD {
+                break;
+            }
             match rx.try_recv() {
                 Ok(PlanEvent::Group(g)) => {
                     self.planned += g.time;
+                    *queued += g.time;
                     queue.push_back(g);
                 }
-                Ok(PlanEvent::Done(line)) => {
+                Ok(PlanEvent::Done { line, error: failed }) => {
                     eprintln!("nurbs-planner: {line}");
                     *total = Some(self.planned);
                     *events = None;
+                    *error = failed;
                 }
                 Ok(PlanEvent::Failed(e)) => return Err(e),
                 Err(TryRecvError::Empty) => break,
@@ -1206,17 +1278,33 @@ impl<'a> Streamer<'a> {
         Ok(())
     }
 
-    /// The next group from the source, if one is ready.
+    /// The next group from the source, if one is ready; the curves it is the first to need
+    /// join the queue of curves to publish.
     fn next_group(&mut self) -> Result<Option<Group>, String> {
         match &mut self.source {
-            Source::Segments { queue, .. } => Ok(queue.pop_front().map(|g| Group {
-                curve_needed: g.curve_needed(),
-                times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
-                slots: g.slots.iter().map(Slot::segment).collect(),
-                blocks: Vec::new(),
-                written: 0,
-                chain: (!g.chain.is_empty()).then_some(g.chain),
-            })),
+            Source::Segments { queue, queued, .. } => {
+                let Some(g) = queue.pop_front() else {
+                    return Ok(None);
+                };
+                *queued -= g.time;
+                let curve_needed = g.curve_needed();
+                if !g.curves.is_empty() && g.first_curve != self.next_queued {
+                    return Err(format!(
+                        "a group brings curves from {}, but curve {} comes next",
+                        g.first_curve, self.next_queued
+                    ));
+                }
+                self.next_queued += g.curves.len() as u32;
+                self.curves.extend(g.curves);
+                Ok(Some(Group {
+                    curve_needed,
+                    times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
+                    slots: g.slots.iter().map(Slot::segment).collect(),
+                    blocks: Vec::new(),
+                    written: 0,
+                    chain: (!g.chain.is_empty()).then_some(g.chain),
+                }))
+            }
             Source::Blocks { plan, next, .. } => {
                 let first = *next;
                 if first >= plan.blocks.len() {
@@ -1225,8 +1313,17 @@ impl<'a> Streamer<'a> {
                 let n = (plan.blocks[first].group_left as usize).max(1);
                 let range = first..(first + n).min(plan.blocks.len());
                 *next = range.end;
+                let needed = plan.blocks[first].curve_needed;
+                while self.next_queued <= needed {
+                    let c = plan
+                        .curves
+                        .get(self.next_queued as usize)
+                        .ok_or_else(|| format!("a block needs curve {}, beyond the path", self.next_queued))?;
+                    self.curves.push_back(c.clone());
+                    self.next_queued += 1;
+                }
                 Ok(Some(Group {
-                    curve_needed: plan.blocks[first].curve_needed,
+                    curve_needed: needed,
                     times: range.clone().map(|k| plan.time(k)).collect(),
                     slots: range.clone().map(|k| Slot::block(&plan.blocks[k])).collect(),
                     blocks: range.collect(),
@@ -1240,13 +1337,11 @@ impl<'a> Streamer<'a> {
     /// Publishes the curves up to `needed`; false if there is no room for them yet.
     fn publish_curves(&mut self, needed: u32) -> Result<bool, String> {
         while self.writer.next_curve() <= needed {
-            let c = self.writer.next_curve() as usize;
-            let e = self
-                .toolpath
-                .elements
-                .get(c)
+            let c = self.writer.next_curve();
+            let curve = self
+                .curves
+                .front()
                 .ok_or_else(|| format!("a record needs curve {c}, beyond the path"))?;
-            let curve = &e.curve;
             match self.writer.publish_curve(
                 curve.degree(),
                 curve.dim(),
@@ -1254,7 +1349,9 @@ impl<'a> Streamer<'a> {
                 curve.points(),
                 curve.weights(),
             ) {
-                Ok(()) => {}
+                Ok(()) => {
+                    self.curves.pop_front();
+                }
                 Err(WriteError::Full) => return Ok(false),
                 Err(WriteError::Refused(e)) => return Err(e),
             }
@@ -1395,7 +1492,8 @@ impl<'a> Streamer<'a> {
             Source::Blocks { .. } => self.planned,
         };
         let rate = self.planned / self.began.elapsed().as_secs_f64().max(1e-9);
-        self.started = far_enough_ahead(self.planned, total, rate, self.margin);
+        // With the queue full the planner waits for the motion: it cannot get further ahead.
+        self.started = far_enough_ahead(self.planned, total, rate, START_AHEAD.min(self.margin)) || self.queue_full();
         self.started
     }
 }

@@ -12,6 +12,7 @@ use nurbs_hal::channel::{PathBlock, Slot, StopPoint};
 use nurbs_hal::module::FaultCode;
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::vpop::VpopPlan;
+use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{block_plan, plan_start, vpop_plan, BlockPlan, Source, Streamer};
 
 struct BlockJob {
@@ -49,7 +50,7 @@ fn blocks_of(toolpath: &Toolpath, plan: &VpopPlan, from: Option<&StopPoint>) -> 
 fn block_streamer<'a>(l: &'a Loaded, bj: &'a BlockJob, blocks: BlockPlan, first: usize) -> Streamer<'a> {
     Streamer::new(
         l.channel,
-        &bj.job.toolpath,
+        bj.job.toolpath.tip_dim(),
         Source::blocks(blocks),
         first,
         f64::INFINITY,
@@ -113,7 +114,7 @@ fn underrun_and_resume(bj: &BlockJob, cut: usize) {
     }
     let plan = vpop_plan(&bj.job.toolpath, &bj.job.limits, Some(&stop)).unwrap();
     let rest = blocks_of(&bj.job.toolpath, &plan, Some(&stop));
-    let first = plan_start(&bj.job.toolpath, &stop).curve;
+    let first = plan_start(&mut PathCurves::new(&bj.job.toolpath), &stop).curve;
     drop(s);
     let mut s = block_streamer(&l, bj, rest, first);
     set_bit("nurbs_interp.resume", true);
@@ -173,7 +174,7 @@ fn hold_stops_at_the_group_end_and_resumes() {
         period();
     }
     let plan = vpop_plan(&bj.job.toolpath, &bj.job.limits, Some(&stop)).unwrap();
-    let first = plan_start(&bj.job.toolpath, &stop).curve;
+    let first = plan_start(&mut PathCurves::new(&bj.job.toolpath), &stop).curve;
     drop(s);
     let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &plan, Some(&stop)), first);
     run(&mut s, 100, &mut |_| {}, &mut |_| false);

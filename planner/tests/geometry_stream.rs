@@ -149,7 +149,7 @@ fn a_program_longer_than_the_channel_reuses_it() {
     let l = load();
     let mut s = Streamer::new(
         l.channel,
-        &job.toolpath,
+        job.toolpath.tip_dim(),
         Source::groups(job.groups.clone()),
         0,
         0.2,
@@ -166,5 +166,20 @@ fn a_program_longer_than_the_channel_reuses_it() {
         "{} elements through 64 descriptor slots and 3,000 arena values ({} of {CURVE_SLOTS} slots and the whole arena on the machine)",
         job.toolpath.elements.len(),
         64
+    );
+}
+
+/// Every path element the readers accept fits the channel's arena with its knots and weights,
+/// at the most coordinates a curve has (tool tip and top) and the highest degree: a stream
+/// never meets an element it cannot carry.
+#[test]
+fn every_element_a_reader_accepts_fits_the_arena() {
+    let points = nurbs_motion::readers::MAX_CONTROL_POINTS;
+    let knots = points + nurbs_rtcore::MAX_DEGREE + 1;
+    let values = knots + points * nurbs_rtcore::MAX_DIM + points;
+    assert!(
+        values <= nurbs_hal::channel::ARENA_VALUES,
+        "{values} values against an arena of {}",
+        nurbs_hal::channel::ARENA_VALUES
     );
 }

@@ -13,6 +13,7 @@ use nurbs_hal::mock;
 use nurbs_hal::module::FaultCode;
 use nurbs_hal::record::{SegmentSlot, KIND_BLOCK};
 use nurbs_hal::sys;
+use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{plan_groups, Source, Streamer};
 use nurbs_planner::writer::GeometryWriter;
 
@@ -249,11 +250,11 @@ fn an_underrun_resumes_from_the_stop_point_on_command() {
         for _ in 0..5 {
             period(); // the module empties the ring of the stopped motion
         }
-        let from = nurbs_planner::feed::plan_start(&job.toolpath, &stop);
+        let from = nurbs_planner::feed::plan_start(&mut PathCurves::new(&job.toolpath), &stop);
         let rest = plan_groups(&job.toolpath, &job.limits, Some(&stop)).unwrap();
         let mut s = Streamer::new(
             l.channel,
-            &job.toolpath,
+            job.toolpath.tip_dim(),
             Source::groups(rest),
             from.curve,
             f64::INFINITY,
@@ -350,12 +351,12 @@ fn hold_and_abort_stop_at_the_group_end_within_the_limits() {
             for _ in 0..5 {
                 period();
             }
-            let from = nurbs_planner::feed::plan_start(&job.toolpath, &stop);
+            let from = nurbs_planner::feed::plan_start(&mut PathCurves::new(&job.toolpath), &stop);
             let rest = plan_groups(&job.toolpath, &job.limits, Some(&stop)).unwrap();
             drop(s);
             let mut s = Streamer::new(
                 l.channel,
-                &job.toolpath,
+                job.toolpath.tip_dim(),
                 Source::groups(rest),
                 from.curve,
                 f64::INFINITY,
@@ -532,10 +533,9 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
     let _guard = lock_module();
     let job = job_of(g1_zigzag(60));
     let l = load();
-    let path = std::sync::Arc::new(job.toolpath.clone());
-    let source = Source::streamed(path, job.limits.clone(), None);
+    let source = Source::streamed(PathCurves::new(&job.toolpath), job.limits.clone(), None);
     let began = Instant::now();
-    let mut s = Streamer::new(l.channel, &job.toolpath, source, 0, 0.5, began).unwrap();
+    let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.5, began).unwrap();
     // The module at 8 times the real pace (the planner is far faster than that here).
     let mut pace = |k: usize| {
         while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 8.0 {

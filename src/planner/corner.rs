@@ -94,6 +94,21 @@ fn corner_deviation(curve: &Nurbs, range: std::ops::Range<usize>) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// Largest distance of the tip's corner spline at d = 1 to the two segments it replaces, for
+/// unit directions `r1` into the vertex and `r2` out of it: sin(turn) / 8, reached at the
+/// spline's middle (u = 1/2, the point P + (u_a + u_b) / 8 with u_a, u_b the unit vectors from
+/// the vertex along the segments; the distance to either segment grows monotonically up to
+/// there, as the control points' do). The sine comes from the cross product, exact for the
+/// small turns of dense G1 programs (`corner_deviation` samples the same curve, in the tests).
+fn tip_unit_deviation(r1: &[f64], r2: &[f64]) -> f64 {
+    let cross2 = match (r1, r2) {
+        ([a, b], [c, d]) => (a * d - b * c).powi(2),
+        ([a, b, c], [d, e, f]) => (b * f - c * e).powi(2) + (c * d - a * f).powi(2) + (a * e - b * d).powi(2),
+        _ => unreachable!("tool-tip vectors have 2 or 3 coordinates"),
+    };
+    cross2.sqrt() / 8.0
+}
+
 fn line(a: &[f64], b: &[f64], feed: Option<f64>, tip: usize) -> PathElement {
     PathElement {
         kind: ElementKind::Polyline,
@@ -249,11 +264,10 @@ impl RunRounder {
         // Deviation is proportional to d (the tip distance of the first control point from the
         // vertex), for the tip and the top alike: measure it at d = 1 and scale to the tolerance.
         let spline = |d: f64| corner_curve(&v[0], &v[1], &v[2], d / lens[0], d / lens[1], tip);
-        let unit = spline(1.0);
-        let unit_dev = corner_deviation(&unit, 0..tip);
+        let unit_dev = tip_unit_deviation(&rate(0)[..tip], &rate(1)[..tip]);
         let mut d = (0.999 * self.tolerance / unit_dev).min(0.5 * lens[0].min(lens[1]));
         let unit_top_dev = if five {
-            corner_deviation(&unit, tip..2 * tip)
+            corner_deviation(&spline(1.0), tip..2 * tip)
         } else {
             0.0
         };
@@ -309,6 +323,9 @@ pub struct CornerRounder<I> {
     polyline_only: bool,
     /// The run being rounded: its rounder, tip dimension, whether it has a top curve.
     run: Option<(RunRounder, bool)>,
+    /// The degree-1 element being taken, and its next vertex to take: a vertex at a time, so
+    /// that the first rounded element goes out without the rest of a long element.
+    taking: Option<(PathElement, usize)>,
     out: VecDeque<PathElement>,
     stats: Arc<Mutex<RoundingStats>>,
     done: bool,
@@ -327,6 +344,7 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> CornerRounder<I> {
             tolerance,
             polyline_only,
             run: None,
+            taking: None,
             out: VecDeque::new(),
             stats: Arc::default(),
             done: false,
@@ -377,19 +395,31 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> CornerRounder<I> {
             self.end_run()?;
             self.run = Some((RunRounder::new(e.curve.tip_dim(), self.tolerance), with_top));
         }
-        let Some((run, _)) = &mut self.run else {
-            unreachable!("a run was just begun")
+        self.stats
+            .lock()
+            .map_err(|_| ReadError::new(&self.name, "rounding state lost"))?
+            .top |= with_top;
+        self.taking = Some((e, 0));
+        Ok(())
+    }
+
+    /// Takes the next vertex of the element being taken, if it has one left.
+    fn take_vertex(&mut self) -> Result<bool, ReadError> {
+        let (Some((e, k)), Some((run, _))) = (&mut self.taking, &mut self.run) else {
+            return Ok(false);
         };
+        if *k == e.curve.control_point_count() {
+            self.taking = None;
+            return Ok(false);
+        }
         let mut stats = self
             .stats
             .lock()
             .map_err(|_| ReadError::new(&self.name, "rounding state lost"))?;
-        stats.top |= with_top;
-        for k in 0..e.curve.control_point_count() {
-            // Every vertex is reached at the element's feed (the join's zero-length segment too).
-            run.push(e.curve.control_point(k), e.feed, &mut self.out, &mut stats);
-        }
-        Ok(())
+        // Every vertex is reached at the element's feed (the join's zero-length segment too).
+        run.push(e.curve.control_point(*k), e.feed, &mut self.out, &mut stats);
+        *k += 1;
+        Ok(true)
     }
 }
 
@@ -403,6 +433,14 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> Iterator for CornerRoun
             }
             if self.done {
                 return None;
+            }
+            match self.take_vertex() {
+                Ok(true) => continue,
+                Ok(false) => {}
+                Err(e) => {
+                    self.done = true;
+                    return Some(Err(e));
+                }
             }
             let step = match self.source.next() {
                 Some(Ok(e)) => self.take(e),
@@ -687,6 +725,35 @@ mod tests {
         let feeds: Vec<Option<f64>> = r.toolpath.elements.iter().map(|e| e.feed).collect();
         assert_eq!(feeds, vec![Some(50.0), Some(50.0), Some(50.0), Some(20.0), Some(20.0)]);
         assert!(r.max_deviation <= 0.01 && r.max_deviation > 0.009);
+    }
+
+    /// The tip spline's deviation in closed form equals the densely sampled one, for turns from
+    /// 0.01 to 179 degrees in 2-D and 3-D and uneven segment lengths.
+    #[test]
+    fn the_closed_form_deviation_is_the_sampled_one() {
+        for turn_deg in [0.01, 1.0, 10.0, 45.0, 90.0, 135.0, 170.0, 179.0] {
+            let turn = turn_deg * std::f64::consts::PI / 180.0;
+            for (tilt, lens) in [(0.0f64, [1.0, 1.0]), (0.3, [1.0, 7.0]), (1.2, [3.0, 2.0])] {
+                let a = [-lens[0], 0.0, 0.0];
+                let p = [0.0, 0.0, 0.0];
+                let dir = [turn.cos(), turn.sin() * tilt.cos(), turn.sin() * tilt.sin()];
+                let b: Vec<f64> = dir.iter().map(|x| x * lens[1]).collect();
+                for tip in [2, 3] {
+                    if tip == 2 && tilt != 0.0 {
+                        continue;
+                    }
+                    let unit = corner_curve(&a[..tip], &p[..tip], &b[..tip], 1.0 / lens[0], 1.0 / lens[1], tip);
+                    let sampled = corner_deviation(&unit, 0..tip);
+                    let r1: Vec<f64> = (0..tip).map(|i| (p[i] - a[i]) / lens[0]).collect();
+                    let r2: Vec<f64> = (0..tip).map(|i| (b[i] - p[i]) / lens[1]).collect();
+                    let closed = tip_unit_deviation(&r1, &r2);
+                    assert!(
+                        (closed - sampled).abs() <= 1e-12 * sampled,
+                        "turn {turn_deg} deg, tip {tip}: {closed} against {sampled}"
+                    );
+                }
+            }
+        }
     }
 
     /// A reversal keeps its vertex (exact stop); the other corners are rounded.

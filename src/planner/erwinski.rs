@@ -283,7 +283,7 @@ impl Planner {
             feed: limits.feed * (1.0 - FEED_HEADROOM),
             ..limits.clone()
         };
-        let start = options.start.unwrap_or(PlanStart {
+        let start = options.start.unwrap_or_else(|| PlanStart {
             curve: 0,
             u: curves.view(0).u_min(),
             s: 0.0,

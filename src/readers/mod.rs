@@ -80,8 +80,10 @@ impl Format {
 /// finite differences of positions at a servo period of 0.25 ms would lose the precision the
 /// limit check needs (a third difference of positions near 1e9 mm rounds to some 1e4 mm/s^3).
 pub const MAX_COORDINATE: f64 = 1e6;
-/// Most control points of one path element: more than the channel's arena carries.
-pub const MAX_CONTROL_POINTS: usize = 1_000_000;
+/// Most control points of one path element: with its knots and weights, a curve of up to six
+/// coordinates (tool tip and top) then fits the realtime channel's arena of 4,194,304 values
+/// (checked by the planner crate's tests), so that any element read can stream to the machine.
+pub const MAX_CONTROL_POINTS: usize = 500_000;
 
 /// A toolpath's elements in path order, as a reader hands them out: G-code as it reads its
 /// lines ([`gcode::GcodeStream`]), JSON and DXF once the whole file is read. An error ends it.

@@ -32,8 +32,16 @@ cat >"$work/rss.sh" <<'SH'
 grep VmHWM "/proc/$(pidof nurbs-planner)/status" | sed 's/^/nurbs-planner peak /'
 SH
 chmod 755 "$work/rss.sh"
+cat >"$work/stamp.sh" <<SH
+#!/bin/sh
+# The wall-clock time, into the file named by the argument.
+date +%s.%N >"$work/\$1"
+SH
+chmod 755 "$work/stamp.sh"
 hal_session "$work/path.hal" "$work/halrun.log"
 cat "$work/halrun.log"
+python3 -c "import sys; print(f'motion started {1e3 * (float(sys.argv[2]) - float(sys.argv[1])):.1f} ms after the planner was loaded')" \
+    "$(cat "$work/t-loadusr")" "$(cat "$work/t-start")"
 python3 "$here/check_path.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
     --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv"
 nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD

@@ -14,7 +14,7 @@ trap 'rm -rf "$work"' EXIT
 python3 "$here/../../scripts/dense-g1.py" --lines "$lines" >"$work/dense.ngc"
 # The motion takes about 4.6 s per 1,000 lines.
 HAL_TIMEOUT=$((lines * 6 / 1000 + 120)) bash "$here/path_test.sh" "$work/dense.ngc" | tee "$work/run.log"
-elements=$(sed -n 's/.*nurbs-planner: \([0-9]*\) path elements.*/\1/p' "$work/run.log" | head -1)
+elements=$(sed -n 's/.*nurbs-planner: all .* records sent .*; \([0-9]*\) path elements and .*/\1/p' "$work/run.log" | head -1)
 elements=${elements:-0}
 echo "$lines lines, $elements path elements"
 [ "$elements" -gt 65536 ] || { echo "only $elements path elements: not longer than the old channel"; exit 1; }

@@ -43,9 +43,9 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
-use nurbs_motion::cli::corners::{prepare, RoundCorners};
+use nurbs_motion::cli::corners::{open, prepare, PreparedStream, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::Limits;
+use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, PlannerKind, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 
@@ -196,11 +196,28 @@ fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
     .map_err(|e| e.to_string())
 }
 
-/// Plans the whole path, or the rest of it from the module's stop point `from`, begins its
+/// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
+/// the same tolerance (and `verify` checks), its first element read; and the stream's record
+/// of the rounding.
+fn open_path(args: &Args) -> Result<(PathCurves, PreparedStream), String> {
+    let mut stream = open(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
+    let curves = PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())?;
+    Ok((curves, stream))
+}
+
+/// What a motion runs on: the file read as a stream for each motion (the Erwinski planner), or
+/// the whole path, read once (VPOp plans it whole).
+enum PathSource {
+    Stream,
+    Whole(Arc<Toolpath>),
+}
+
+/// Plans the path, or the rest of it from the module's stop point `from` (the Erwinski
+/// planner as a stream over `curves`, VPOp over the whole path, read here), begins its
 /// geometry stream once the module runs no motion, and queues the first records.
 fn start_motion<'a>(
     args: &Args,
-    shared: &'a Arc<Toolpath>,
+    path: &PathSource,
     limits: &Limits,
     channel: &'a Channel,
     from: Option<&StopPoint>,
@@ -218,16 +235,23 @@ fn start_motion<'a>(
             p.seq
         );
     }
-    let toolpath: &'a Toolpath = shared;
     let began = Instant::now();
-    let source = match PlannerKind::from(args.planner) {
-        // The planner runs in a thread of its own; its groups wait until the stream has begun.
-        PlannerKind::Erwinski => Source::streamed(Arc::clone(shared), limits.clone(), from.copied()),
-        PlannerKind::Vpop => {
+    let (source, first_curve, tip) = match path {
+        // The planner runs in a thread of its own, reading the file as it plans; its groups
+        // wait until the stream has begun.
+        PathSource::Stream => {
+            let (mut curves, _) = open_path(args)?;
+            let first = from.map_or(0, |p| feed::plan_start(&mut curves, p).curve);
+            let tip = curves.tip_dim();
+            (Source::streamed(curves, limits.clone(), from.copied()), first, tip)
+        }
+        PathSource::Whole(path) => {
+            let first = from.map_or(0, |p| feed::plan_start(&mut PathCurves::new(path), p).curve);
+            let tip = path.tip_dim();
+            let path = Arc::clone(path);
             // The whole VPOp plan and its stop checks come before the motion: in a thread, so
             // that a signal still ends the planner at once.
-            let (path, plan_limits, start, fraction) =
-                (Arc::clone(shared), limits.clone(), from.copied(), args.stop_fraction);
+            let (plan_limits, start, fraction) = (limits.clone(), from.copied(), args.stop_fraction);
             let (sender, receiver) = std::sync::mpsc::channel();
             std::thread::spawn(move || {
                 let planned = feed::vpop_plan(&path, &plan_limits, start.as_ref()).and_then(|plan| {
@@ -254,7 +278,7 @@ fn start_motion<'a>(
                 plan.plan_time,
                 began.elapsed().as_secs_f64() - plan.plan_time
             );
-            Source::blocks(blocks)
+            (Source::blocks(blocks), first, tip)
         }
     };
     // A motion of an earlier planner may still be queued or running: the module empties the
@@ -276,11 +300,10 @@ fn start_motion<'a>(
             return Err("the stop point was withdrawn (abort) while planning from it".into());
         }
     }
-    let first_curve = from.map_or(0, |p| feed::plan_start(toolpath, p).curve);
-    let mut streamer = Streamer::new(channel, toolpath, source, first_curve, args.margin, began)?;
-    // Queue what the start rule and the margin allow before hal_ready: `loadusr -W` returns
-    // with the motion under way.
-    while !streamer.done() && !(streamer.started() && streamer.buffered() >= args.margin) {
+    let mut streamer = Streamer::new(channel, tip, source, first_curve, args.margin, began)?;
+    // Queue what the start rule asks for before hal_ready: `loadusr -W` returns with the
+    // motion ready to go; the queue grows to the margin as it runs.
+    while !streamer.done() && !streamer.started() {
         if stopped() {
             return Err("stopped by signal before the motion started".into());
         }
@@ -309,21 +332,20 @@ impl From<Planner> for PlannerKind {
 fn run(args: &Args) -> Result<(), String> {
     // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
     // prepares it with the same tolerance (and `verify` checks it).
-    let prepared = prepare(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
-    let limits = limits(args, prepared.toolpath.tip_dim())?;
-    if let Some(r) = &prepared.rounding {
-        eprintln!(
-            "nurbs-planner: {} G1 corners rounded within {} mm (deviation {:.6} mm)",
-            r.corners, limits.chord_tolerance, r.max_deviation
-        );
-    }
-    eprintln!("nurbs-planner: {} path elements", prepared.toolpath.elements.len());
-    let toolpath = Arc::new(prepared.toolpath);
-    // Before touching HAL: a clear refusal, not a half-started component.
-    feed::check_fits(&toolpath)?;
-    if args.planner == Planner::Vpop {
-        feed::check_tip_path(&toolpath)?;
-    }
+    // The Erwinski planner reads the file as it plans (here only its first element, for the
+    // dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
+    // half-started component.
+    let (path, tip) = match args.planner {
+        Planner::Erwinski => (PathSource::Stream, open_path(args)?.0.tip_dim()),
+        Planner::Vpop => {
+            let prepared =
+                prepare(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
+            feed::check_tip_path(&prepared.toolpath)?;
+            let tip = prepared.toolpath.tip_dim();
+            (PathSource::Whole(Arc::new(prepared.toolpath)), tip)
+        }
+    };
+    let limits = limits(args, tip)?;
     // Until here a signal ends the process at once (nothing to clean up); from here on it is
     // a request the loops below honour, so that the component and the channel are released.
     install_signal_handlers();
@@ -338,7 +360,7 @@ fn run(args: &Args) -> Result<(), String> {
         let channel = comp.attach_channel(Duration::from_secs(5))?;
         // The module may be standing where an underrun stopped it: then plan from there.
         let mut from = channel.stop.read();
-        let mut streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
+        let mut streamer = start_motion(args, &path, &limits, channel, from.as_ref())?;
         let show = |s: &mut Streamer| {
             sent_pin.set(s.pushed as u32);
             running.set(!s.done());
@@ -356,7 +378,7 @@ fn run(args: &Args) -> Result<(), String> {
                 if from.is_none_or(|f| f.epoch != p.epoch) {
                     from = Some(p);
                     drop(streamer);
-                    streamer = start_motion(args, &toolpath, &limits, channel, from.as_ref())?;
+                    streamer = start_motion(args, &path, &limits, channel, from.as_ref())?;
                     reported = false;
                 }
             }
@@ -365,9 +387,14 @@ fn run(args: &Args) -> Result<(), String> {
             if streamer.done() && !reported {
                 let (curves, values, wraps) = streamer.writer().usage();
                 eprintln!(
-                    "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s); {curves} curves and {values} arena values streamed, the arena reused from its start {wraps} times",
+                    "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s); {curves} path elements and {values} arena values streamed, the arena reused from its start {wraps} times",
                     streamer.pushed, streamer.pushed_time, streamer.longest_group
                 );
+                if let Some(e) = streamer.plan_error() {
+                    // The motion ends at rest where the file could not be read further.
+                    eprintln!("nurbs-planner: {e}");
+                    error.set(true);
+                }
                 reported = true;
             }
             if !progressed {

@@ -196,7 +196,7 @@ pub fn job_of(toolpath: Toolpath) -> Job {
 pub fn streamer<'a>(l: &'a Loaded, toolpath: &'a Toolpath, groups: Vec<SegmentGroup>, first: usize) -> Streamer<'a> {
     Streamer::new(
         l.channel,
-        toolpath,
+        toolpath.tip_dim(),
         Source::groups(groups),
         first,
         f64::INFINITY,
