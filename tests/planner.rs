@@ -222,6 +222,8 @@ fn bad_limits_are_refused() {
 /// the README records a 10,000-case run. `PROPTEST_FIRST_CASE` draws the cases before it
 /// without planning them (to reproduce one case of a long run quickly), and
 /// `PROPTEST_VERBOSE=1` names each case before planning it (to find one that takes long);
+/// `PROPTEST_MAX_PERIODS` (default 200,000; `inf` for none) skips cases whose motion at full
+/// feed would take more periods;
 /// `PROPTEST_DUMP=dir` writes each case to a file ([`dump_case`]).
 #[test]
 fn random_curves_never_violate() {
@@ -355,15 +357,20 @@ struct RandomRun {
 /// Plans (with `options`) and verifies cases `cases` of the random curves of `seed` (the ones
 /// before are drawn and passed over); panics at the first violation.
 fn random_run(seed: u64, cases: std::ops::Range<u64>, verbose: bool, options: &PlanOptions) -> RandomRun {
+    let max_periods = std::env::var("PROPTEST_MAX_PERIODS")
+        .ok()
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or(2e5);
     let mut run = RandomRun {
         planned: 0,
         refused: Vec::new(),
         skipped: 0,
     };
     for (case, tp, limits) in random_cases(seed, cases) {
-        // Bound the work: motions over 200,000 periods at full feed take long, test nothing new.
+        // Bound the work of the runs in the test suite: motions over `max_periods` at full
+        // feed take long (the documented long run plans them too).
         let len = ArcLengthTable::new(&tp.elements[0].curve).total();
-        if len / limits.feed / limits.period >= 2e5 {
+        if len / limits.feed / limits.period >= max_periods {
             run.skipped += 1;
             continue;
         }

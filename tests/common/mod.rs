@@ -3,9 +3,9 @@
 #![allow(dead_code)] // each test crate uses a different subset
 
 use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
-use nurbs_motion::planner::simulate::setpoints;
-use nurbs_motion::planner::verify::{verify, Row};
-use nurbs_motion::planner::{plan, Limits, PathCurves, PlanError, PlanOptions};
+use nurbs_motion::planner::simulate::{run_segment, SimState};
+use nurbs_motion::planner::verify::{Row, Verifier};
+use nurbs_motion::planner::{Limits, PathCurves, PlanError, PlanOptions, Planner};
 use nurbs_motion::readers::read_toolpath;
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
@@ -115,28 +115,42 @@ pub fn try_plan_and_verify(toolpath: &Toolpath, limits: &Limits) -> Result<f64, 
     try_plan_and_verify_with(toolpath, limits, &PlanOptions::default())
 }
 
-/// [`try_plan_and_verify`] with planner options (e.g. streaming).
+/// [`try_plan_and_verify`] with planner options (e.g. streaming). Each record's setpoints go
+/// to the verifier as it is handed out, so a motion of any length is checked in constant
+/// memory.
 pub fn try_plan_and_verify_with(toolpath: &Toolpath, limits: &Limits, options: &PlanOptions) -> Result<f64, Failure> {
-    let plan = plan(toolpath, limits, options, &mut |_| {}).map_err(Failure::Refused)?;
-    let mut curves = PathCurves::new(toolpath);
-    let samples = setpoints(&curves, &plan.limits, &plan.records);
+    let mut planner = Planner::new(toolpath, limits, options).map_err(Failure::Refused)?;
     let tip = toolpath.tip_dim();
-    let rows: Vec<Row> = samples
-        .iter()
-        .enumerate()
-        .map(|(j, s)| Row {
-            t: j as f64 * limits.period,
-            curve: s.curve,
-            u: s.u,
-            q: s.point[..tip].to_vec(),
-        })
-        .collect();
-    let report = verify(&mut curves, &plan.limits, &rows);
+    let check_limits = limits.for_axes(tip).map_err(|e| Failure::Refused(PlanError::from(e)))?;
+    let mut curves = PathCurves::new(toolpath);
+    let mut verifier = Verifier::new(&mut curves, &check_limits);
+    let mut state = SimState::start(tip, limits.period);
+    let mut rows = 0usize;
+    while let Some(next) = planner.next_final() {
+        let record = next.map_err(Failure::Refused)?.record;
+        let ok = run_segment(planner.curves(), &check_limits, &mut state, record, &mut |s| {
+            verifier.push(&Row {
+                t: rows as f64 * limits.period,
+                curve: s.curve,
+                u: s.u,
+                q: s.point[..tip].to_vec(),
+            });
+            rows += 1;
+        });
+        if !ok {
+            return Err(Failure::Violation(format!(
+                "the interpolator refused record {}",
+                record.seq
+            )));
+        }
+    }
+    let report = verifier.finish();
+    let plan = planner.finish();
     if !report.violations.is_empty() {
         return Err(Failure::Violation(format!("{:?}", report.violations)));
     }
     // The plan's own profile time and the sampled motion agree to one period.
-    let motion = (samples.len() - 1) as f64 * limits.period;
+    let motion = rows.saturating_sub(1) as f64 * limits.period;
     if (motion - plan.motion_time).abs() > limits.period + 1e-9 {
         return Err(Failure::Violation(format!(
             "sampled {motion} s vs planned {} s",
