@@ -127,37 +127,6 @@ fn min_feed(a: Option<f64>, b: Option<f64>) -> Option<f64> {
     }
 }
 
-/// Rounds the corners of a polyline given by its vertices (2-D or 3-D) within `tolerance`.
-pub fn round_polyline(vertices: &[Vec<f64>], tolerance: f64) -> Result<Rounded, String> {
-    let feeds = vec![None; vertices.len().saturating_sub(1)];
-    let tip = vertices.first().map_or(2, Vec::len);
-    round_with_feeds(vertices, tip, &feeds, tolerance)
-}
-
-/// [`round_polyline`] with a programmed feed per segment (`feeds[i]` for `vertices[i]` to
-/// `vertices[i + 1]`; see [`RunRounder`]).
-fn round_with_feeds(vertices: &[Vertex], tip: usize, feeds: &[Option<f64>], tolerance: f64) -> Result<Rounded, String> {
-    if !(tolerance.is_finite() && tolerance > 0.0) {
-        return Err(format!("contour tolerance {tolerance} must be > 0"));
-    }
-    let mut stats = RoundingStats::default();
-    let mut elements = VecDeque::new();
-    let mut run = RunRounder::new(tip, tolerance);
-    for (k, p) in vertices.iter().enumerate() {
-        let feed = k.checked_sub(1).and_then(|j| feeds.get(j).copied().flatten());
-        run.push(p, feed, &mut elements, &mut stats);
-    }
-    run.finish(&mut elements)?;
-    Ok(Rounded {
-        toolpath: Toolpath {
-            elements: elements.into(),
-        },
-        max_deviation: stats.max_deviation,
-        max_top_deviation: stats.max_top_deviation,
-        corners: stats.corners,
-    })
-}
-
 /// What corner rounding did so far.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RoundingStats {
@@ -464,13 +433,11 @@ type Vertices = Vec<Vertex>;
 /// Largest gap between consecutive elements of one continuous polyline (mm).
 const JOIN_GAP: f64 = 1e-9;
 
-/// The programmed polyline of a toolpath made of degree-1 elements: its vertices (tool tip,
-/// padded to the toolpath's tip dimension, then the top point when every element has a top
-/// curve) and the programmed feed of each segment (the element's; the zero-length joins
-/// between elements get the later element's).
-fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), String> {
+/// The vertices of a toolpath made of degree-1 elements that join (tool tip, padded to the
+/// toolpath's tip dimension, then the top point when every element has a top curve); an error
+/// naming the element where it is not one continuous polyline.
+fn polyline_of(toolpath: &Toolpath) -> Result<Vertices, String> {
     let mut vertices: Vec<Vertex> = Vec::new();
-    let mut feeds = Vec::new();
     let tip = toolpath.tip_dim();
     let with_top = |e: &PathElement| e.curve.dim() != e.curve.tip_dim();
     let five = toolpath.elements.first().is_some_and(with_top);
@@ -504,19 +471,17 @@ fn polyline_of(toolpath: &Toolpath) -> Result<(Vertices, Vec<Option<f64>>), Stri
                     }
                 }
             }
-            if !vertices.is_empty() {
-                feeds.push(e.feed);
-            }
             vertices.push(p);
         }
     }
-    Ok((vertices, feeds))
+    Ok(vertices)
 }
 
-/// Rounds a toolpath made of degree-1 elements (G1 blocks, polylines, degree-1 splines) as one
-/// polyline through their control points: the tool tip, and on 5-axis paths the top curve with
-/// the same parameter (see [`round_with_feeds`]). Programmed feeds carry over: a straight
-/// piece keeps its element's feed, a corner spline the lower of its two segments'.
+/// Rounds a whole toolpath made of degree-1 elements (G1 blocks, polylines, degree-1 splines)
+/// that is one polyline through their control points ([`CornerRounder`], collected): the tool
+/// tip, and on 5-axis paths the top curve with the same parameter. Programmed feeds carry
+/// over: a straight piece keeps its element's feed, a corner spline the lower of its two
+/// segments'.
 pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, String> {
     polyline_of(toolpath)?;
     let rounder = CornerRounder::new("", toolpath.elements.iter().cloned().map(Ok), tolerance, true)?;
@@ -529,15 +494,6 @@ pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, St
         max_top_deviation: stats.max_top_deviation,
         corners: stats.corners,
     })
-}
-
-/// True when every element is a straight-line polyline (degree 1) of the tool tip, or of the
-/// tool tip and top point (5-axis G1 with tool-axis vectors), and each element starts where the
-/// previous one ends: G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON curves.
-pub fn is_polyline(toolpath: &Toolpath) -> bool {
-    !toolpath.elements.is_empty()
-        && toolpath.elements.iter().all(|e| e.curve.degree() == 1)
-        && polyline_of(toolpath).is_ok()
 }
 
 /// Segments of the programmed polyline kept behind the one nearest to the last point measured.
@@ -563,7 +519,7 @@ pub struct ProgramPolyline {
 impl ProgramPolyline {
     /// The polyline of a whole toolpath; an error if it is not one.
     pub fn new(toolpath: &Toolpath) -> Result<Self, String> {
-        let (vertices, _) = polyline_of(toolpath)?;
+        let vertices = polyline_of(toolpath)?;
         if vertices.is_empty() {
             return Err("empty polyline".into());
         }
@@ -780,7 +736,7 @@ mod tests {
                 g1(&[[10.0, 1.0], [20.0, 1.0]], 50.0),
             ],
         };
-        assert!(!is_polyline(&tp));
+        assert!(polyline_of(&tp).is_err());
         let err = round_toolpath(&tp, 0.01).unwrap_err();
         assert!(err.contains("not one continuous polyline"), "{err}");
     }
@@ -827,7 +783,7 @@ mod tests {
                 source_line: None,
             }],
         };
-        assert!(is_polyline(&tp));
+        assert!(polyline_of(&tp).is_ok());
         let tol = 0.01;
         let r = round_toolpath(&tp, tol).unwrap();
         // Vertex 1: the tip goes straight on, the axis starts turning; 2 and 3: tip corners.

@@ -75,14 +75,14 @@ impl PathCurves {
             match source.next() {
                 Some(Ok(e)) if e.curve.tip_dim() == self.tip => self.elements.push(e),
                 Some(Ok(e)) => {
+                    // The readers refuse such a file; a source of another kind ends the path here.
                     self.error = Some(ReadError::new(
-                        "",
+                        "toolpath",
                         format!(
-                            "path element {} is {}-D in a {}-D path{}",
+                            "path element {} is {}-D in a {}-D path",
                             self.elements.len(),
                             e.curve.tip_dim(),
-                            self.tip,
-                            e.source_line.map_or(String::new(), |l| format!(" (line {l})"))
+                            self.tip
                         ),
                     ));
                     self.source = None;

@@ -133,13 +133,29 @@ pub fn open_toolpath(path: &Path) -> Result<ElementStream, ReadError> {
             let file = std::fs::File::open(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
             Box::new(gcode::GcodeStream::new(&name, std::io::BufReader::new(file).lines()))
         }
-        Format::Json => {
-            let text = std::fs::read_to_string(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
-            Box::new(json::parse(&name, &text)?.elements.into_iter().map(Ok))
-        }
-        Format::Dxf => {
-            let bytes = std::fs::read(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
-            Box::new(dxf::parse(&name, &bytes)?.elements.into_iter().map(Ok))
+        Format::Json | Format::Dxf => {
+            let toolpath = match format {
+                Format::Json => {
+                    let text = std::fs::read_to_string(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
+                    json::parse(&name, &text)?
+                }
+                _ => {
+                    let bytes = std::fs::read(path).map_err(|e| ReadError::new(&name, e.to_string()))?;
+                    dxf::parse(&name, &bytes)?
+                }
+            };
+            // A G-code path decides its dimension once; a file read whole says it here.
+            let tip = toolpath.tip_dim();
+            if let Some(i) = toolpath.elements.iter().position(|e| e.curve.tip_dim() != tip) {
+                return Err(ReadError::new(
+                    &name,
+                    format!(
+                        "path element {i} is {}-D in a {tip}-D path",
+                        toolpath.elements[i].curve.tip_dim()
+                    ),
+                ));
+            }
+            Box::new(toolpath.elements.into_iter().map(Ok))
         }
     };
     let mut index = 0;

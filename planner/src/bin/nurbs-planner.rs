@@ -43,7 +43,7 @@ use std::time::{Duration, Instant};
 use clap::Parser;
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
-use nurbs_motion::cli::corners::{open, prepare, PreparedStream, RoundCorners};
+use nurbs_motion::cli::corners::{open, prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, PlannerKind, Source, Streamer};
@@ -197,12 +197,10 @@ fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
 }
 
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
-/// the same tolerance (and `verify` checks), its first element read; and the stream's record
-/// of the rounding.
-fn open_path(args: &Args) -> Result<(PathCurves, PreparedStream), String> {
+/// the same tolerance (and `verify` checks), its first element read.
+fn open_path(args: &Args) -> Result<PathCurves, String> {
     let mut stream = open(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
-    let curves = PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())?;
-    Ok((curves, stream))
+    PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())
 }
 
 /// What a motion runs on: the file read as a stream for each motion (the Erwinski planner), or
@@ -240,7 +238,7 @@ fn start_motion<'a>(
         // The planner runs in a thread of its own, reading the file as it plans; its groups
         // wait until the stream has begun.
         PathSource::Stream => {
-            let (mut curves, _) = open_path(args)?;
+            let mut curves = open_path(args)?;
             let first = from.map_or(0, |p| feed::plan_start(&mut curves, p).curve);
             let tip = curves.tip_dim();
             (Source::streamed(curves, limits.clone(), from.copied()), first, tip)
@@ -336,7 +334,7 @@ fn run(args: &Args) -> Result<(), String> {
     // dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
     // half-started component.
     let (path, tip) = match args.planner {
-        Planner::Erwinski => (PathSource::Stream, open_path(args)?.0.tip_dim()),
+        Planner::Erwinski => (PathSource::Stream, open_path(args)?.tip_dim()),
         Planner::Vpop => {
             let prepared =
                 prepare(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
