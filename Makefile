@@ -5,6 +5,8 @@
 #   make install       module into $(MODULE_DIR), planner, recorder and nurbs-plan into $(BINDIR)
 #   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
 #   make bench         criterion: per-period cost of nurbs_interp.update (mock HAL)
+#   make man           the pin table of docs/integration.md and docs/man/nurbs_interp.9 from the
+#                      module's pin declarations (committed; the tests check them)
 #   make headers       cbindgen -> include/nurbs_rt.h   (committed)
 #   make bindings      bindgen  -> hal/src/bindings.rs (committed; a normal build needs no libclang)
 #   make check-generated   fail if the committed header or bindings are stale
@@ -30,6 +32,7 @@ LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
 MODULE_DIR  ?= /usr/lib/linuxcnc/modules
 PREFIX      ?= /usr/local
 BINDIR      ?= $(PREFIX)/bin
+MANDIR      ?= $(PREFIX)/share/man
 # Generator versions: their output is committed, so every machine must produce the same bytes.
 # bindgen from Debian bookworm (with its libclang); cbindgen from crates.io (Debian's 0.24 cannot
 # parse C-string literals or let-else).
@@ -51,7 +54,7 @@ BINDGEN_FLAGS := --use-core --ctypes-prefix core::ffi --no-layout-tests --no-doc
 	--allowlist-var 'HAL_NAME_LEN|HAL_STREAM_MAX_PINS|RTAPI_NAME_LEN'
 
 .PHONY: all module planner install uninstall test test-cargo test-hal bench headers bindings \
-	check-generated tools clean FORCE
+	check-generated tools clean man FORCE
 
 all: module planner
 
@@ -71,12 +74,13 @@ $(MODULE): $(STATICLIB) hal/module.ver
 		-Wl,-Bsymbolic -Wl,--version-script=hal/module.ver -Wl,--gc-sections $(NATIVE_LIBS)
 
 install: all
-	install -d $(DESTDIR)$(MODULE_DIR) $(DESTDIR)$(BINDIR)
+	install -d $(DESTDIR)$(MODULE_DIR) $(DESTDIR)$(BINDIR) $(DESTDIR)$(MANDIR)/man9
 	install -m 0644 $(MODULE) $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so
+	install -m 0644 docs/man/nurbs_interp.9 $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
 	for b in $(BINS); do install -m 0755 $(OUT)/$$b $(DESTDIR)$(BINDIR)/$$b; done
 
 uninstall:
-	rm -f $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so
+	rm -f $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
 	for b in $(BINS); do rm -f $(DESTDIR)$(BINDIR)/$$b; done
 
 test: test-cargo test-hal
@@ -90,6 +94,9 @@ bench:
 # Needs root (or the RTAPI_UID setup in tests/hal/lib.sh) and an installed module.
 test-hal: install
 	bash tests/hal/run.sh
+
+man:
+	UPDATE_DOCS=1 $(CARGO) test -p nurbs-planner --test pins_doc
 
 headers: include/nurbs_rt.h
 

@@ -48,20 +48,21 @@ runs=0
 declare -A first_hwm last_hwm
 while [ "$(date +%s)" -lt "$end" ]; do
     for k in 0 1; do
-        halcmd loadusr -W nurbs-planner "${programs[$k]}" $limits >"$work/planner.log" 2>&1 &
-        planner_shell=$!
-        # Wait for the motion to finish.
-        for _ in $(seq 1 6000); do
-            [ "$(halcmd getp nurbs_interp.done 2>/dev/null)" = TRUE ] && break
-            sleep 0.05
+        halcmd loadusr -W nurbs-planner "${programs[$k]}" $limits
+        # The motion of this program begins (`done` of the last one clears), then ends.
+        for want in FALSE TRUE; do
+            for _ in $(seq 1 12000); do
+                [ "$(halcmd getp nurbs_interp.done 2>/dev/null)" = "$want" ] && break
+                sleep 0.025
+            done
         done
-        hwm=$(grep VmHWM "/proc/$(pidof nurbs-planner)/status" | awk '{print $2}')
+        pid=$(pidof nurbs-planner) || { echo "nurbs-planner is not running after run $runs"; exit 1; }
+        hwm=$(grep VmHWM "/proc/$pid/status" | awk '{print $2}')
         [ -n "${first_hwm[$k]:-}" ] || first_hwm[$k]=$hwm
         last_hwm[$k]=$hwm
         [ "$(halcmd getp nurbs_interp.fault)" = FALSE ] || { echo "fault $(halcmd getp nurbs_interp.fault-code)"; exit 1; }
         echo "$(halcmd getp nurbs_interp.pos-cmd-x) $(halcmd getp nurbs_interp.pos-cmd-y)" >>"$work/ends"
         halcmd unload nurbs-planner
-        wait "$planner_shell" || true
         runs=$((runs + 1))
     done
 done

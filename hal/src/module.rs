@@ -11,7 +11,7 @@
 //! (no indexing that can fail); failures are pins (fault, fault-code, underrun), not errors.
 //!
 //! Its pins, fault codes and the stop and resume protocol, for integrators:
-//! `docs/integration.md` (the pins are created in `create`).
+//! `docs/integration.md` and `man nurbs_interp`, both rendered from [`PINS`].
 //!
 //! Every stop is a planned stop. Segment records come in groups ([`SegmentSlot`]), and the
 //! last record of a group carries the stop after it: the next segment re-planned by the planner
@@ -97,30 +97,35 @@ pub enum FaultCode {
     BlockPath = 9,
 }
 
-/// The component's pins, in HAL shared memory.
-#[repr(C)]
-pub struct Pins {
-    pub enable: Pin<bool>,
-    pub hold: Pin<bool>,
-    pub abort: Pin<bool>,
-    pub resume: Pin<bool>,
-    pub pos_cmd_x: Pin<f64>,
-    pub pos_cmd_y: Pin<f64>,
-    pub pos_cmd_z: Pin<f64>,
-    pub feed: Pin<f64>,
-    pub u: Pin<f64>,
-    pub curve: Pin<u32>,
-    pub active: Pin<bool>,
-    pub done: Pin<bool>,
-    pub fault: Pin<bool>,
-    pub fault_code: Pin<u32>,
-    pub underrun: Pin<bool>,
-    pub underruns: Pin<u32>,
-    pub records: Pin<u32>,
-    pub seq: Pin<u32>,
-    pub buffered: Pin<f64>,
-    pub resume_ready: Pin<bool>,
-    pub held: Pin<bool>,
+crate::declare_pins! { "nurbs_interp", Pins, PINS,
+    enable: bool, In, "enable", "",
+        "run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine)";
+    hold: bool, In, "hold", "",
+        "feed hold: at the end of the current group of records, the planner's stop to rest on the path; released, the plan from the stop point runs";
+    abort: bool, In, "abort", "",
+        "stop as for hold, then discard the queue; the motion is over until a planner begins a new stream";
+    resume: bool, In, "resume", "",
+        "after an underrun stop: a rising edge starts the plan from the stop point once one is queued (`resume-ready`); an edge without it is ignored";
+    pos_cmd_x: f64, Out, "pos-cmd-x", "mm", "X position command";
+    pos_cmd_y: f64, Out, "pos-cmd-y", "mm", "Y position command";
+    pos_cmd_z: f64, Out, "pos-cmd-z", "mm", "Z position command (0 on a 2-D path)";
+    feed: f64, Out, "feed", "mm/s", "path feed at this sample";
+    u: f64, Out, "u", "", "curve parameter";
+    curve: u32, Out, "curve", "", "index of the path element (curve)";
+    active: bool, Out, "active", "", "a new sample was produced this period";
+    done: bool, Out, "done", "", "the last segment has been completed (at rest at its end)";
+    fault: bool, Out, "fault", "",
+        "malformed channel, geometry or record, or a resumed plan that does not start where the machine stands; latched, outputs hold";
+    fault_code: u32, Out, "fault-code", "", "why (the fault codes below)";
+    underrun: bool, Out, "underrun", "",
+        "the planner fell behind; the module stops or stopped on the path; set until the resumed motion starts (or an abort)";
+    underruns: u32, Out, "underruns", "", "underrun stops so far";
+    records: u32, Out, "records", "", "records taken so far";
+    seq: u32, Out, "seq", "", "sequence number of the last record taken";
+    buffered: f64, Out, "buffered", "s", "motion time queued ahead of the current sample";
+    resume_ready: bool, Out, "resume-ready", "",
+        "stopped (hold or underrun) and a plan from the stop point is queued: releasing `hold` / a `resume` edge starts it";
+    held: bool, Out, "held", "", "at rest on the path after a stop (hold, underrun or abort), not moving";
 }
 
 /// The geometry stream the motion runs on: its header, how far its curves are checked, and the
@@ -1304,33 +1309,8 @@ unsafe fn create(comp_id: c_int) -> c_int {
         error(c"nurbs_interp: hal_malloc failed");
         return -ENOMEM;
     }
-    let p = addr_of_mut!((*inst).pins);
-    let (i, o) = (sys::HAL_IN, sys::HAL_OUT);
-    let id = comp_id;
-    let results = [
-        Pin::create(addr_of_mut!((*p).enable), c"nurbs_interp.enable", i, id),
-        Pin::create(addr_of_mut!((*p).hold), c"nurbs_interp.hold", i, id),
-        Pin::create(addr_of_mut!((*p).abort), c"nurbs_interp.abort", i, id),
-        Pin::create(addr_of_mut!((*p).resume), c"nurbs_interp.resume", i, id),
-        Pin::create(addr_of_mut!((*p).pos_cmd_x), c"nurbs_interp.pos-cmd-x", o, id),
-        Pin::create(addr_of_mut!((*p).pos_cmd_y), c"nurbs_interp.pos-cmd-y", o, id),
-        Pin::create(addr_of_mut!((*p).pos_cmd_z), c"nurbs_interp.pos-cmd-z", o, id),
-        Pin::create(addr_of_mut!((*p).feed), c"nurbs_interp.feed", o, id),
-        Pin::create(addr_of_mut!((*p).u), c"nurbs_interp.u", o, id),
-        Pin::create(addr_of_mut!((*p).curve), c"nurbs_interp.curve", o, id),
-        Pin::create(addr_of_mut!((*p).active), c"nurbs_interp.active", o, id),
-        Pin::create(addr_of_mut!((*p).done), c"nurbs_interp.done", o, id),
-        Pin::create(addr_of_mut!((*p).fault), c"nurbs_interp.fault", o, id),
-        Pin::create(addr_of_mut!((*p).fault_code), c"nurbs_interp.fault-code", o, id),
-        Pin::create(addr_of_mut!((*p).underrun), c"nurbs_interp.underrun", o, id),
-        Pin::create(addr_of_mut!((*p).underruns), c"nurbs_interp.underruns", o, id),
-        Pin::create(addr_of_mut!((*p).records), c"nurbs_interp.records", o, id),
-        Pin::create(addr_of_mut!((*p).seq), c"nurbs_interp.seq", o, id),
-        Pin::create(addr_of_mut!((*p).buffered), c"nurbs_interp.buffered", o, id),
-        Pin::create(addr_of_mut!((*p).resume_ready), c"nurbs_interp.resume-ready", o, id),
-        Pin::create(addr_of_mut!((*p).held), c"nurbs_interp.held", o, id),
-    ];
-    if let Some(&rc) = results.iter().find(|&&rc| rc < 0) {
+    let rc = Pins::create(addr_of_mut!((*inst).pins), comp_id);
+    if rc < 0 {
         error(c"nurbs_interp: pin export failed");
         return rc;
     }
