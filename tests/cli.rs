@@ -890,3 +890,41 @@ fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
     assert!(!verify(&csv, &tip_limits, "off").status.success());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// The limits may come from a LinuxCNC INI file (`--ini`, as `nurbs-planner` reads it): the
+/// plan is the one of the same limits given as flags, bit for bit, and a flag wins over the INI.
+#[test]
+fn limits_from_an_ini_file_are_the_flags_limits() {
+    let dir = scratch_dir("nurbs-cli-ini");
+    let ini = Path::new(env!("CARGO_MANIFEST_DIR")).join("halfiles/sim.ini");
+    let plan = |args: &[&str], out: &str| {
+        let o = bin()
+            .arg("plan")
+            .arg(example("trident.json"))
+            .args(args)
+            .arg("--out")
+            .arg(dir.join(out))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(dir.join(out)).unwrap()
+    };
+    let flags = plan(&LAB1, "flags.csv");
+    let from_ini = plan(&["--ini", ini.to_str().unwrap()], "ini.csv");
+    assert!(flags == from_ini, "the INI's limits plan differently");
+    // A flag wins: a lower feed than the INI's gives a longer motion.
+    let slower = plan(&["--ini", ini.to_str().unwrap(), "--feed", "100"], "slow.csv");
+    assert!(slower.len() > flags.len());
+    // Missing everything: a clear error naming the flag and the INI key.
+    let o = bin()
+        .arg("plan")
+        .arg(example("trident.json"))
+        .args(["--feed", "100", "--out"])
+        .arg(dir.join("none.csv"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("--chord-tol") && err.contains("CHORD_TOLERANCE"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}

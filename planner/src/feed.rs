@@ -29,13 +29,6 @@ use nurbs_rtcore::block_stop::block_stop;
 use nurbs_rtcore::executor::{Interpolator, Step};
 use nurbs_rtcore::{CachedCurve, SpanCache, StopRun};
 
-/// Which planner `nurbs-planner` runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PlannerKind {
-    Erwinski,
-    Vpop,
-}
-
 /// Where a plan from the module's stop point starts: there, or where the machine stands at
 /// the end of an element (not the last), at the start of the next one (the module accepts
 /// either).

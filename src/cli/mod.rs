@@ -2,11 +2,13 @@
 
 pub mod corners;
 mod inspect;
+pub mod limits;
 mod machine;
 mod plan;
 mod plot;
 mod verify;
 
+pub use limits::LimitArgs;
 pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};
@@ -130,49 +132,11 @@ impl From<Interp> for crate::planner::simulate::Interpolation {
     }
 }
 
-/// Which feedrate planner `plan` runs.
+/// Which feedrate planner `nurbs-plan plan` and `nurbs-planner` run.
 #[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlannerKind {
     Erwinski,
     Vpop,
-}
-
-/// Limit flags shared by `plan` and `verify` (mm, s). Axis lists are comma-separated in axis
-/// order; one value applies to all axes.
-#[derive(clap::Args, Clone, Debug)]
-pub struct LimitArgs {
-    /// Programmed feed F (mm/s).
-    #[arg(long)]
-    pub feed: f64,
-    /// Axial acceleration limit(s) (mm/s^2).
-    #[arg(long, value_delimiter = ',', required = true)]
-    pub accel: Vec<f64>,
-    /// Axial jerk limit(s) (mm/s^3).
-    #[arg(long, value_delimiter = ',', required = true)]
-    pub jerk: Vec<f64>,
-    /// Axial velocity limit(s) (mm/s); default: the feed.
-    #[arg(long, value_delimiter = ',')]
-    pub vel: Option<Vec<f64>>,
-    /// Chord error tolerance (mm).
-    #[arg(long = "chord-tol")]
-    pub chord_tol: f64,
-    /// Interpolation period (s).
-    #[arg(long)]
-    pub period: f64,
-}
-
-impl LimitArgs {
-    pub fn limits(&self, axes: usize) -> Result<crate::planner::Limits, crate::planner::LimitsError> {
-        crate::planner::Limits {
-            feed: self.feed,
-            velocity: self.vel.clone().unwrap_or_else(|| vec![self.feed]),
-            acceleration: self.accel.clone(),
-            jerk: self.jerk.clone(),
-            chord_tolerance: self.chord_tol,
-            period: self.period,
-        }
-        .for_axes(axes)
-    }
 }
 
 /// Runs the command line; errors are printed to stderr with a non-zero exit code.

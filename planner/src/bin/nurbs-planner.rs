@@ -18,10 +18,11 @@
 //! ahead of it. `--planner vpop` plans with VPOp (one tool-tip position per servo period,
 //! 2-/3-axis paths) before the motion, checks the module's stop from every block end, and sends
 //! the positions as path blocks, which the module outputs exactly.
-//! With `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
-//! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given on
-//! the command line win. The period must equal the servo thread's for the motion to be the one
-//! the planner checked.
+//! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_motion::cli::LimitArgs`): with
+//! `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
+//! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given
+//! on the command line win. The period must equal the servo thread's for the motion to be the
+//! one the planner checked.
 //!
 //! Pins: `nurbs-planner.ready` (bit out: first records queued), `.running` (bit out: records
 //! remain to be sent), `.error` (bit out), `.records-sent` (u32 out), `.buffered` (float out,
@@ -35,7 +36,7 @@
 //! (underrun). (To start a different job instead, abort first: `nurbs_interp.abort` clears the
 //! stop point.)
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -44,9 +45,10 @@ use clap::Parser;
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
 use nurbs_motion::cli::corners::{open, prepare, RoundCorners};
+use nurbs_motion::cli::{LimitArgs, PlannerKind};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{self, PlannerKind, Source, Streamer};
+use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 
 #[derive(Parser, Debug)]
@@ -57,27 +59,8 @@ use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 struct Args {
     /// Toolpath (.json, .ngc/.nc/.gcode/.tap, .dxf).
     toolpath: PathBuf,
-    /// Programmed feed F (mm/s).
-    #[arg(long)]
-    feed: Option<f64>,
-    /// Axial acceleration limit(s) (mm/s^2), comma-separated in axis order.
-    #[arg(long, value_delimiter = ',')]
-    accel: Option<Vec<f64>>,
-    /// Axial jerk limit(s) (mm/s^3).
-    #[arg(long, value_delimiter = ',')]
-    jerk: Option<Vec<f64>>,
-    /// Axial velocity limit(s) (mm/s); default: the feed.
-    #[arg(long, value_delimiter = ',')]
-    vel: Option<Vec<f64>>,
-    /// Chord error tolerance (mm).
-    #[arg(long = "chord-tol")]
-    chord_tol: Option<f64>,
-    /// Servo period (s); must equal the servo thread's.
-    #[arg(long)]
-    period: Option<f64>,
-    /// LinuxCNC INI file for the period and limits not given as flags.
-    #[arg(long)]
-    ini: Option<PathBuf>,
+    #[command(flatten)]
+    limits: LimitArgs,
     /// Motion time (s) to keep queued ahead of the module.
     #[arg(long, default_value_t = 2.0)]
     margin: f64,
@@ -88,8 +71,8 @@ struct Args {
     stop_fraction: f64,
     /// Planner: `erwinski` (S-curve segments, streamed as records) or `vpop` (per-period
     /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
-    #[arg(long, value_enum, default_value_t = Planner::Erwinski)]
-    planner: Planner,
+    #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
+    planner: PlannerKind,
     /// G1 corners: `auto` rounds them within the chord tolerance when the whole path is a
     /// straight-line program (as `nurbs-plan plan` does), `on` requires that, `off` stops at
     /// every corner.
@@ -97,109 +80,11 @@ struct Args {
     round_corners: RoundCorners,
 }
 
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-enum Planner {
-    Erwinski,
-    Vpop,
-}
-
-/// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).
-struct Ini {
-    entries: Vec<(String, String, String)>,
-}
-
-impl Ini {
-    fn read(path: &Path) -> Result<Ini, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let mut section = String::new();
-        let mut entries = Vec::new();
-        for line in text.lines() {
-            let line = line.trim();
-            if line.starts_with('#') || line.starts_with(';') || line.is_empty() {
-                continue;
-            }
-            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
-                section = name.trim().to_owned();
-            } else if let Some((k, v)) = line.split_once('=') {
-                entries.push((section.clone(), k.trim().to_owned(), v.trim().to_owned()));
-            }
-        }
-        Ok(Ini { entries })
-    }
-
-    fn number(&self, section: &str, key: &str) -> Result<Option<f64>, String> {
-        match self.entries.iter().find(|(s, k, _)| s == section && k == key) {
-            None => Ok(None),
-            Some((_, _, v)) => v
-                .parse()
-                .map(Some)
-                .map_err(|_| format!("[{section}]{key} = {v} is not a number")),
-        }
-    }
-
-    /// One value per axis (X, Y[, Z]) if every axis has it.
-    fn per_axis(&self, key: &str, axes: usize) -> Result<Option<Vec<f64>>, String> {
-        let mut out = Vec::new();
-        for axis in ["AXIS_X", "AXIS_Y", "AXIS_Z"].iter().take(axes) {
-            match self.number(axis, key)? {
-                Some(v) => out.push(v),
-                None => return Ok(None),
-            }
-        }
-        Ok(Some(out))
-    }
-}
-
-/// The chord tolerance: `--chord-tol`, else `[NURBS]CHORD_TOLERANCE` of the INI.
-fn chord_tolerance(args: &Args) -> Result<f64, String> {
-    let ini = args.ini.as_deref().map(Ini::read).transpose()?;
-    match args.chord_tol {
-        Some(t) => Ok(t),
-        None => ini
-            .as_ref()
-            .map_or(Ok(None), |i| i.number("NURBS", "CHORD_TOLERANCE"))?
-            .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE".into()),
-    }
-}
-
-fn limits(args: &Args, axes: usize) -> Result<Limits, String> {
-    let ini = args.ini.as_deref().map(Ini::read).transpose()?;
-    let from_ini = |section: &str, key: &str| -> Result<Option<f64>, String> {
-        ini.as_ref().map_or(Ok(None), |i| i.number(section, key))
-    };
-    let axis_ini =
-        |key: &str| -> Result<Option<Vec<f64>>, String> { ini.as_ref().map_or(Ok(None), |i| i.per_axis(key, axes)) };
-    let period = match args.period {
-        Some(p) => p,
-        None => from_ini("EMCMOT", "SERVO_PERIOD")?
-            .map(|ns| ns / 1e9)
-            .ok_or("no period: give --period or --ini with [EMCMOT]SERVO_PERIOD")?,
-    };
-    let need = |v: Option<Vec<f64>>, what: &str| v.ok_or(format!("no {what} limit given"));
-    let vel = args.vel.clone().or(axis_ini("MAX_VELOCITY")?);
-    let feed = match args.feed.or(from_ini("NURBS", "FEED")?) {
-        Some(f) => f,
-        None => vel
-            .as_ref()
-            .and_then(|v| v.iter().copied().reduce(f64::min))
-            .ok_or("no feed: give --feed, [NURBS]FEED or axis velocities")?,
-    };
-    Limits {
-        feed,
-        velocity: vel.unwrap_or_else(|| vec![feed]),
-        acceleration: need(args.accel.clone().or(axis_ini("MAX_ACCELERATION")?), "acceleration")?,
-        jerk: need(args.jerk.clone().or(axis_ini("MAX_JERK")?), "jerk")?,
-        chord_tolerance: chord_tolerance(args)?,
-        period,
-    }
-    .for_axes(axes)
-    .map_err(|e| e.to_string())
-}
-
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
 /// the same tolerance (and `verify` checks), its first element read.
 fn open_path(args: &Args) -> Result<PathCurves, String> {
-    let mut stream = open(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
+    let mut stream =
+        open(&args.toolpath, args.round_corners, args.limits.chord_tolerance()?).map_err(|e| e.to_string())?;
     PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())
 }
 
@@ -318,15 +203,6 @@ fn start_motion<'a>(
     Ok(streamer)
 }
 
-impl From<Planner> for PlannerKind {
-    fn from(p: Planner) -> PlannerKind {
-        match p {
-            Planner::Erwinski => PlannerKind::Erwinski,
-            Planner::Vpop => PlannerKind::Vpop,
-        }
-    }
-}
-
 fn run(args: &Args) -> Result<(), String> {
     // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
     // prepares it with the same tolerance (and `verify` checks it).
@@ -334,16 +210,16 @@ fn run(args: &Args) -> Result<(), String> {
     // dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
     // half-started component.
     let (path, tip) = match args.planner {
-        Planner::Erwinski => (PathSource::Stream, open_path(args)?.tip_dim()),
-        Planner::Vpop => {
-            let prepared =
-                prepare(&args.toolpath, args.round_corners, chord_tolerance(args)?).map_err(|e| e.to_string())?;
+        PlannerKind::Erwinski => (PathSource::Stream, open_path(args)?.tip_dim()),
+        PlannerKind::Vpop => {
+            let prepared = prepare(&args.toolpath, args.round_corners, args.limits.chord_tolerance()?)
+                .map_err(|e| e.to_string())?;
             feed::check_tip_path(&prepared.toolpath)?;
             let tip = prepared.toolpath.tip_dim();
             (PathSource::Whole(Arc::new(prepared.toolpath)), tip)
         }
     };
-    let limits = limits(args, tip)?;
+    let limits = args.limits.limits(tip)?;
     // Until here a signal ends the process at once (nothing to clean up); from here on it is
     // a request the loops below honour, so that the component and the channel are released.
     install_signal_handlers();

@@ -1,0 +1,143 @@
+//! The limit flags `nurbs-plan` and `nurbs-planner` share, and the LinuxCNC INI file they may come
+//! from: one set of names, one way to read them.
+
+use crate::planner::Limits;
+use std::path::{Path, PathBuf};
+
+/// Limits (mm, s) from flags, or from a LinuxCNC INI file where a flag is not given. Axis lists
+/// are comma-separated in axis order; one value applies to all axes.
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct LimitArgs {
+    /// Programmed feed F (mm/s); default: `[NURBS]FEED` of --ini, else the lowest axis
+    /// velocity.
+    #[arg(long)]
+    pub feed: Option<f64>,
+    /// Axial acceleration limit(s) (mm/s^2); default: `[AXIS_X|Y|Z]MAX_ACCELERATION`.
+    #[arg(long, value_delimiter = ',')]
+    pub accel: Option<Vec<f64>>,
+    /// Axial jerk limit(s) (mm/s^3); default: `[AXIS_X|Y|Z]MAX_JERK`.
+    #[arg(long, value_delimiter = ',')]
+    pub jerk: Option<Vec<f64>>,
+    /// Axial velocity limit(s) (mm/s); default: `[AXIS_X|Y|Z]MAX_VELOCITY`, else the feed.
+    #[arg(long, value_delimiter = ',')]
+    pub vel: Option<Vec<f64>>,
+    /// Chord error tolerance (mm); default: `[NURBS]CHORD_TOLERANCE`.
+    #[arg(long = "chord-tol")]
+    pub chord_tol: Option<f64>,
+    /// Interpolation period (s): the servo thread's; default: `[EMCMOT]SERVO_PERIOD` (ns).
+    #[arg(long)]
+    pub period: Option<f64>,
+    /// LinuxCNC INI file for the limits not given as flags.
+    #[arg(long)]
+    pub ini: Option<PathBuf>,
+}
+
+impl LimitArgs {
+    fn ini(&self) -> Result<Option<Ini>, String> {
+        self.ini.as_deref().map(Ini::read).transpose()
+    }
+
+    /// The chord tolerance: `--chord-tol`, else `[NURBS]CHORD_TOLERANCE` of the INI.
+    pub fn chord_tolerance(&self) -> Result<f64, String> {
+        if let Some(t) = self.chord_tol {
+            return Ok(t);
+        }
+        self.ini()?
+            .map_or(Ok(None), |i| i.number("NURBS", "CHORD_TOLERANCE"))?
+            .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE in --ini".into())
+    }
+
+    /// The limits of an `axes`-axis path (flags first, then the INI), checked.
+    pub fn limits(&self, axes: usize) -> Result<Limits, String> {
+        let ini = self.ini()?;
+        let section = |section: &str, key: &str| ini.as_ref().map_or(Ok(None), |i| i.number(section, key));
+        let per_axis = |key: &str| ini.as_ref().map_or(Ok(None), |i| i.per_axis(key, axes));
+        let period = match self.period {
+            Some(p) => p,
+            None => section("EMCMOT", "SERVO_PERIOD")?
+                .map(|ns| ns / 1e9)
+                .ok_or("no period: give --period or [EMCMOT]SERVO_PERIOD in --ini")?,
+        };
+        let vel = match &self.vel {
+            Some(v) => Some(v.clone()),
+            None => per_axis("MAX_VELOCITY")?,
+        };
+        let feed = match self.feed {
+            Some(f) => f,
+            None => match section("NURBS", "FEED")? {
+                Some(f) => f,
+                None => vel
+                    .as_ref()
+                    .and_then(|v| v.iter().copied().reduce(f64::min))
+                    .ok_or("no feed: give --feed, [NURBS]FEED or the axis velocities")?,
+            },
+        };
+        let need = |flag: &Option<Vec<f64>>, key: &str, name: &str| -> Result<Vec<f64>, String> {
+            match flag {
+                Some(v) => Ok(v.clone()),
+                None => per_axis(key)?.ok_or(format!("no {name} limit: give --{name} or [AXIS_X|Y|Z]{key} in --ini")),
+            }
+        };
+        Limits {
+            feed,
+            velocity: vel.unwrap_or_else(|| vec![feed]),
+            acceleration: need(&self.accel, "MAX_ACCELERATION", "accel")?,
+            jerk: need(&self.jerk, "MAX_JERK", "jerk")?,
+            chord_tolerance: self.chord_tolerance()?,
+            period,
+        }
+        .for_axes(axes)
+        .map_err(|e| e.to_string())
+    }
+}
+
+/// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).
+struct Ini {
+    file: PathBuf,
+    entries: Vec<(String, String, String)>,
+}
+
+impl Ini {
+    fn read(path: &Path) -> Result<Ini, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let mut section = String::new();
+        let mut entries = Vec::new();
+        for line in text.lines() {
+            let line = line.trim();
+            if line.starts_with('#') || line.starts_with(';') || line.is_empty() {
+                continue;
+            }
+            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
+                section = name.trim().to_owned();
+            } else if let Some((k, v)) = line.split_once('=') {
+                entries.push((section.clone(), k.trim().to_owned(), v.trim().to_owned()));
+            }
+        }
+        Ok(Ini {
+            file: path.to_owned(),
+            entries,
+        })
+    }
+
+    fn number(&self, section: &str, key: &str) -> Result<Option<f64>, String> {
+        match self.entries.iter().find(|(s, k, _)| s == section && k == key) {
+            None => Ok(None),
+            Some((_, _, v)) => v
+                .parse()
+                .map(Some)
+                .map_err(|_| format!("{}: [{section}]{key} = {v} is not a number", self.file.display())),
+        }
+    }
+
+    /// One value per axis (X, Y[, Z]) if every axis has it.
+    fn per_axis(&self, key: &str, axes: usize) -> Result<Option<Vec<f64>>, String> {
+        let mut out = Vec::new();
+        for axis in ["AXIS_X", "AXIS_Y", "AXIS_Z"].iter().take(axes) {
+            match self.number(axis, key)? {
+                Some(v) => out.push(v),
+                None => return Ok(None),
+            }
+        }
+        Ok(Some(out))
+    }
+}
