@@ -95,6 +95,9 @@ pub enum FaultCode {
     /// A path block's positions do not match its arc lengths or the curve (parameter outside
     /// the curve, chord longer than the arc, a step back, or not continuing the previous block).
     BlockPath = 9,
+    /// The interpolator produced a position, feed or parameter that is not a finite number (a
+    /// record that does not fit its curve): not written, the last position held.
+    NonFinite = 10,
 }
 
 crate::declare_pins! { "nurbs_interp", Pins, PINS,
@@ -832,8 +835,7 @@ impl Instance {
                     self.resuming = false;
                     self.held = None;
                 }
-                self.output(&s);
-                true
+                self.output(&s)
             }
             (Step::Finished, _) => false,
             (Step::BadRecord, _) => {
@@ -878,10 +880,7 @@ impl Instance {
                     return false;
                 }
                 match step {
-                    Step::Sample(s) => {
-                        self.output(&s);
-                        true
-                    }
+                    Step::Sample(s) => self.output(&s),
                     Step::BadRecord => {
                         self.fault = FaultCode::BadRecord;
                         false
@@ -946,10 +945,7 @@ impl Instance {
     fn advance_blocks(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
         if self.stopping {
             return match self.interp.step(&self.geometry, dt, &mut || None) {
-                Step::Sample(s) => {
-                    self.output(&s);
-                    true
-                }
+                Step::Sample(s) => self.output(&s),
                 Step::BadRecord => {
                     self.fault = FaultCode::BadRecord;
                     false
@@ -1087,10 +1083,12 @@ impl Instance {
             self.fault = FaultCode::BlockPath;
             return false;
         }
-        self.output(&Sample {
+        if !self.output(&Sample {
             feed: chord / self.period,
             ..sample
-        });
+        }) {
+            return false;
+        }
         c.next = c.next.saturating_add(2);
         c.run_left = c.run_left.saturating_sub(1);
         c.left = c.left.saturating_sub(1);
@@ -1194,7 +1192,9 @@ impl Instance {
                 return false;
             }
         }
-        self.output(&sample);
+        if !self.output(&sample) {
+            return false;
+        }
         let player = &mut self.player;
         player.index = k + 1;
         player.curve = b.curve();
@@ -1231,15 +1231,22 @@ impl Instance {
         });
     }
 
-    fn output(&self, s: &Sample) {
-        let pins = &self.pins;
+    /// Writes sample `s` to the pins; a sample that is not finite is not written (the outputs
+    /// hold their last position) and faults the module. Whether it was written.
+    fn output(&mut self, s: &Sample) -> bool {
         let [x, y, z] = self.point_of(s);
+        if !(x.is_finite() && y.is_finite() && z.is_finite() && s.feed.is_finite() && s.u.is_finite()) {
+            self.fault = FaultCode::NonFinite;
+            return false;
+        }
+        let pins = &self.pins;
         pins.pos_cmd_x.set(x);
         pins.pos_cmd_y.set(y);
         pins.pos_cmd_z.set(z);
         pins.feed.set(s.feed);
         pins.u.set(s.u);
         pins.curve.set(s.curve as u32);
+        true
     }
 }
 
