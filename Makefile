@@ -6,7 +6,8 @@
 #   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
 #   make bench         criterion: per-period cost of nurbs_interp.update (mock HAL)
 #   make man           the pin table of docs/integration.md and docs/man/nurbs_interp.9 from the
-#                      module's pin declarations (committed; the tests check them)
+#                      module's pin declarations, the preset table of docs/planners.md from the
+#                      presets (committed; the tests check them)
 #   make headers       cbindgen -> include/nurbs_rt.h   (committed)
 #   make bindings      bindgen  -> hal/src/bindings.rs (committed; a normal build needs no libclang)
 #   make check-generated   fail if the committed header or bindings are stale
@@ -97,6 +98,7 @@ test-hal: install
 
 man:
 	UPDATE_DOCS=1 $(CARGO) test -p nurbs-planner --test pins_doc
+	UPDATE_DOCS=1 $(CARGO) test -p nurbs-motion --test docs
 
 headers: include/nurbs_rt.h
 

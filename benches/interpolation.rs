@@ -9,8 +9,9 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs};
+use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::simulate::fit_fcp;
-use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions};
+use nurbs_motion::planner::{plan, PathCurves, PlanOptions};
 use nurbs_motion::readers::read_toolpath;
 use nurbs_rtcore::executor::{Interpolator, Step};
 use nurbs_rtcore::interp::{fcp_eval, rk2pc_step, sot_step, tot_step, PathCursor};
@@ -21,7 +22,7 @@ use std::path::Path;
 /// Absolute arc-length targets of every period of the planned butterfly motion.
 fn targets() -> (Nurbs, Vec<f64>) {
     let tp = read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/butterfly.json")).unwrap();
-    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let limits = named("lab1").on(2);
     let p = plan(&tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
     let curves = PathCurves::new(&tp);
     let mut interp = Interpolator::new();

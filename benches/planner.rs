@@ -7,6 +7,7 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::{plan, Limits, PathCurves, PlanOptions, Planner};
 use nurbs_motion::readers::read_toolpath;
@@ -46,7 +47,7 @@ fn bench(c: &mut Criterion) {
             read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("examples/{name}.json"))).unwrap()
         })
         .collect();
-    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let limits = named("lab1").on(2);
     for (name, tp) in curves.iter().zip(&paths) {
         let p = plan(tp, &limits, &PlanOptions::default(), &mut |_| {}).unwrap();
         let first = median_ms(11, &|| first_record(tp, &limits));

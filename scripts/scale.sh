@@ -8,7 +8,7 @@
 # Usage: scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
-limits="--feed 500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+limits="--limits lab1 --feed 500"
 echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | peak RSS (MB) | verify |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for lines in ${LINES:-1000 10000 100000}; do

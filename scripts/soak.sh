@@ -14,7 +14,7 @@ minutes=${1:-30}
 work=$(mktemp -d /tmp/nurbs-soak.XXXXXX)
 chmod 755 "$work"
 realtime=/usr/lib/linuxcnc/realtime
-limits="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001 --period 0.00025"
+limits="--limits lab1"
 
 # A closed dense G1 loop: a five-lobed flower around (0, 25), r = 35 + 5 sin(5 t) every
 # ~0.05 mm, from (0, 60) back to it: the start and end of star_g1.ngc, so that every program

@@ -11,16 +11,15 @@ use common::{
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::geometry::Nurbs;
 use nurbs_motion::planner::flf::{critical_points, flf, CriticalPointSearch, FlfScan};
+use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::{plan, Limits, PlanOptions, Planner};
-
-const LAB_SETS: [(f64, f64, f64); 2] = [(2500.0, 1e4, 6e4), (2500.0, 1.5e4, 2e5)];
 
 fn lab(name: &str) {
     let tp = example(name);
-    for (f, a, j) in LAB_SETS {
-        let limits = Limits::uniform(tp.tip_dim(), f, a, j, 0.001, 0.00025);
+    for set in ["lab1", "lab2"] {
+        let limits = named(set).on(tp.tip_dim());
         let t = plan_and_verify(&tp, &limits);
-        eprintln!("{name} F{f} A{a} J{j}: {t:.4} s");
+        eprintln!("{name} {set}: {t:.4} s");
     }
 }
 
@@ -48,9 +47,9 @@ fn fan_5axis_tip_polyline_lab_sets() {
 #[test]
 fn butterfly_table_iii_sets() {
     let tp = example("butterfly.json");
-    for (f, a, j) in [(40.0, 500.0, 2e4), (250.0, 2000.0, 2e4), (300.0, 2500.0, 5e4)] {
-        let t = plan_and_verify(&tp, &Limits::uniform(2, f, a, j, 0.001, 0.00025));
-        eprintln!("butterfly F{f} A{a} J{j}: {t:.4} s");
+    for set in ["table3-f40", "table3-f250", "table3-f300"] {
+        let t = plan_and_verify(&tp, &named(set).on(2));
+        eprintln!("butterfly {set}: {t:.4} s");
     }
 }
 
@@ -69,7 +68,7 @@ fn trident_with_vpop_limits() {
 fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
     for name in ["trident.json", "butterfly.json", "fan.json", "open_pocket.json"] {
         let tp = example(name);
-        let limits = Limits::uniform(tp.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let limits = named("lab1").on(tp.tip_dim());
         let mut planner = Planner::new(
             &tp,
             &limits,
@@ -113,7 +112,7 @@ fn records_stream_before_the_path_is_scanned_and_are_never_revised() {
 /// weights 0.2-5. Above degree 3 it takes the basis functions, and the samples are equal.
 #[test]
 fn scan_samples_agree_with_the_flf_by_basis_functions() {
-    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let limits = named("lab1").on(2);
     let rational = |degree: usize| {
         let cps: Vec<Vec<f64>> = (0..9)
             .map(|i| {
@@ -168,7 +167,7 @@ fn scan_samples_agree_with_the_flf_by_basis_functions() {
 fn lazy_scans_equal_full_scans() {
     for name in ["trident.json", "butterfly.json", "fan.json"] {
         let tp = example(name);
-        let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let limits = named("lab1").on(2);
         let curve = &tp.elements[0].curve;
         let view = curve.view();
         let full = FlfScan::new(&view, 2, &limits, 500);

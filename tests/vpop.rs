@@ -274,14 +274,14 @@ fn cli_plan_vpop_and_verify() {
     let out = plan_and_verify_cli(&trident, "vpop", &TRIDENT_VPOP, &dir.join("trident.csv"));
     let head = std::fs::read_to_string(&out).unwrap();
     assert!(head.starts_with("t,u,x,y,feed,element\n"));
-    assert_tighter_limit_fails(&out, &trident, &TRIDENT_VPOP, "5000,5000", "4950,4950");
+    assert_tighter_limit_fails(&out, &trident, &TRIDENT_VPOP, "--jerk", "4950,4950");
 
     let pocket = example_path("open_pocket.json");
     let out5 = plan_and_verify_cli(&pocket, "vpop", &TABLE1, &dir.join("pocket.csv"));
     assert!(std::fs::read_to_string(&out5)
         .unwrap()
         .starts_with("t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element\n"));
-    assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "500,500,500,90,120", "500,500,500,90,100");
+    assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "--vel", "500,500,500,90,100");
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -6,7 +6,8 @@
 //! whole plan of the 200-line program in the same process.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use nurbs_motion::planner::{Limits, PathCurves};
+use nurbs_motion::planner::presets::named;
+use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent};
 
 #[path = "../tests/common/test_paths.rs"]
@@ -14,7 +15,7 @@ use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent};
 mod test_paths;
 
 fn bench_start(c: &mut Criterion) {
-    let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+    let limits = named("lab1").on(2);
     let mut g = c.benchmark_group("start");
     g.sample_size(10);
     for lines in [200, 2000] {

@@ -14,7 +14,7 @@ use nurbs_hal::channel::{check_curve, trusted_curve, valid_curve, CurveDesc};
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main, VALIDATION_VALUES_PER_PERIOD};
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::Limits;
+use nurbs_motion::planner::presets::named;
 use nurbs_motion::readers::read_toolpath;
 use nurbs_planner::feed::{block_plan, plan_groups, vpop_plan, Source, Streamer};
 use nurbs_planner::hal_user::Component;
@@ -35,7 +35,7 @@ fn bench_update(c: &mut Criterion) {
             .join("../examples")
             .join(format!("{name}.json"));
         let toolpath = read_toolpath(&path).unwrap();
-        let limits = Limits::uniform(toolpath.tip_dim(), 2500.0, 1e4, 6e4, 0.001, 0.00025);
+        let limits = named("lab1").on(toolpath.tip_dim());
         let label = if blocks {
             format!("update/{name} (VPOp blocks)")
         } else {

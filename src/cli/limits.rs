@@ -1,11 +1,13 @@
 //! The limit flags `nurbs-plan` and `nurbs-planner` share, and the LinuxCNC INI file they may come
 //! from: one set of names, one way to read them.
 
+use crate::planner::presets::{preset, Preset};
 use crate::planner::Limits;
 use std::path::{Path, PathBuf};
 
-/// Limits (mm, s) from flags, or from a LinuxCNC INI file where a flag is not given. Axis lists
-/// are comma-separated in axis order; one value applies to all axes.
+/// Limits (mm, s) from flags; where a flag is not given, from a named limit set (`--limits`),
+/// else from a LinuxCNC INI file (`--ini`). Axis lists are comma-separated in axis order; one
+/// value applies to all axes.
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct LimitArgs {
     /// Programmed feed F (mm/s); default: `[NURBS]FEED` of --ini, else the lowest axis
@@ -27,7 +29,10 @@ pub struct LimitArgs {
     /// Interpolation period (s): the servo thread's; default: `[EMCMOT]SERVO_PERIOD` (ns).
     #[arg(long)]
     pub period: Option<f64>,
-    /// LinuxCNC INI file for the limits not given as flags.
+    /// A named limit set for the limits not given as flags (`nurbs-plan presets` lists them).
+    #[arg(long = "limits", value_name = "NAME")]
+    pub preset: Option<String>,
+    /// LinuxCNC INI file for the limits given neither as flags nor by --limits.
     #[arg(long)]
     pub ini: Option<PathBuf>,
 }
@@ -37,9 +42,22 @@ impl LimitArgs {
         self.ini.as_deref().map(Ini::read).transpose()
     }
 
-    /// The chord tolerance: `--chord-tol`, else `[NURBS]CHORD_TOLERANCE` of the INI.
+    fn preset(&self) -> Result<Option<&'static Preset>, String> {
+        self.preset
+            .as_deref()
+            .map(|name| {
+                preset(name).ok_or_else(|| {
+                    let names: Vec<&str> = crate::planner::presets::PRESETS.iter().map(|p| p.name).collect();
+                    format!("no limit set {name}: one of {}", names.join(", "))
+                })
+            })
+            .transpose()
+    }
+
+    /// The chord tolerance: `--chord-tol`, else the --limits set's, else
+    /// `[NURBS]CHORD_TOLERANCE` of the INI.
     pub fn chord_tolerance(&self) -> Result<f64, String> {
-        if let Some(t) = self.chord_tol {
+        if let Some(t) = self.chord_tol.or(self.preset()?.map(|p| p.chord_tolerance)) {
             return Ok(t);
         }
         self.ini()?
@@ -47,8 +65,26 @@ impl LimitArgs {
             .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE in --ini".into())
     }
 
-    /// The limits of an `axes`-axis path (flags first, then the INI), checked.
+    /// The limits of an `axes`-axis path (flags first, then the named set, then the INI),
+    /// checked.
     pub fn limits(&self, axes: usize) -> Result<Limits, String> {
+        let named = self.preset()?;
+        let list = |v: &'static [f64]| (!v.is_empty()).then(|| v.to_vec());
+        let flags = LimitArgs {
+            feed: self.feed.or(named.map(|p| p.feed)),
+            accel: self.accel.clone().or(named.and_then(|p| list(p.acceleration))),
+            jerk: self.jerk.clone().or(named.and_then(|p| list(p.jerk))),
+            vel: self.vel.clone().or(named.and_then(|p| list(p.velocity))),
+            chord_tol: self.chord_tol.or(named.map(|p| p.chord_tolerance)),
+            period: self.period.or(named.map(|p| p.period)),
+            preset: None,
+            ini: self.ini.clone(),
+        };
+        flags.resolve(axes)
+    }
+
+    /// [`LimitArgs::limits`] of the flags and the INI alone.
+    fn resolve(&self, axes: usize) -> Result<Limits, String> {
         let ini = self.ini()?;
         let section = |section: &str, key: &str| ini.as_ref().map_or(Ok(None), |i| i.number(section, key));
         let per_axis = |key: &str| ini.as_ref().map_or(Ok(None), |i| i.per_axis(key, axes));

@@ -30,6 +30,8 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// List the named limit sets that `--limits NAME` takes (the papers' and the benchmarks').
+    Presets,
     /// Report each path element: kind, degree, control points, arc length, bounding box, maximum curvature.
     Inspect {
         /// Toolpath file (.json, .ngc, .dxf).
@@ -143,6 +145,10 @@ pub enum PlannerKind {
 pub fn run() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Presets => {
+            print!("{}", crate::planner::presets::markdown_table());
+            Ok(())
+        }
         Command::Inspect { toolpath, json } => inspect::run(&toolpath, json),
         Command::Plan {
             toolpath,

@@ -1690,7 +1690,7 @@ mod tests {
             let curve = &tp.elements[0].curve;
             let view = curve.view();
             let tip = tp.tip_dim();
-            let limits = Limits::uniform(tip, 2500.0, 1e4, 6e4, 0.001, 0.00025);
+            let limits = crate::planner::presets::named("lab1").on(tip);
             let mut grid = ArcGrid::empty(tip);
             FlfScan::lazy(&view, PlanOptions::default().samples_per_control_point).extend(
                 &view,

@@ -8,6 +8,7 @@ pub mod erwinski;
 pub mod flf;
 mod limits;
 mod nodes;
+pub mod presets;
 mod quick_check;
 pub mod scurve_fit;
 pub mod simulate;

@@ -86,13 +86,10 @@ pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: 
     csv.to_path_buf()
 }
 
-pub fn assert_tighter_limit_fails(csv: &Path, program: &Path, limits: &[&str], value: &str, tighter: &str) {
-    let mut tight = limits.to_vec();
-    let k = tight
-        .iter()
-        .position(|a| *a == value)
-        .unwrap_or_else(|| panic!("no limit value {value} in {limits:?}"));
-    tight[k] = tighter;
+/// `verify` must refuse `csv` of `program` under `limits` with `flag` made tighter (`tighter`,
+/// given after them: a flag wins over a named set).
+pub fn assert_tighter_limit_fails(csv: &Path, program: &Path, limits: &[&str], flag: &str, tighter: &str) {
+    let tight = [limits, &[flag, tighter]].concat();
     let bad = verify_cli(csv, program, &tight);
     assert!(
         !bad.status.success(),

@@ -14,7 +14,7 @@ toolpath=$(realpath "$1")
 planner=${2:-erwinski}
 flags=${3:-}
 PERIOD=0.00025
-LIMITS="--feed 2500 --accel 1e4 --jerk 6e4 --chord-tol 0.001"
+LIMITS="--limits lab1"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"

@@ -39,7 +39,7 @@ esac
 
 PERIOD=0.00025
 JERK=6e4
-LIMITS="--feed 2500 --accel 1e4 --jerk $JERK --chord-tol 0.001"
+LIMITS="--limits lab1 --jerk $JERK"
 
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"

@@ -14,7 +14,7 @@ use nurbs_hal::channel::{Slot, SEGMENT_SLOTS};
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::Limits;
+use nurbs_motion::planner::presets::named;
 use nurbs_motion::readers::read_toolpath;
 use nurbs_planner::feed::{block_plan, plan_groups, vpop_plan, BlockPlan, SegmentGroup, Source, Streamer};
 use nurbs_planner::hal_user::Component;
@@ -31,9 +31,7 @@ pub fn plans() -> &'static Plans {
     PLANS.get_or_init(|| {
         let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../examples/trident.json"));
         let toolpath = read_toolpath(path).unwrap();
-        let limits = Limits::uniform(2, 2500.0, 1e4, 6e4, 0.001, 0.00025)
-            .for_axes(2)
-            .unwrap();
+        let limits = named("lab1").on(2);
         let groups = plan_groups(&toolpath, &limits, None).unwrap();
         let vpop = vpop_plan(&toolpath, &limits, None).unwrap();
         let blocks = block_plan(&toolpath, &vpop, None, 1.0).unwrap();

@@ -169,7 +169,9 @@ pub struct Job {
 }
 
 pub fn lab1(tip: usize) -> Limits {
-    Limits::uniform(tip, 2500.0, 1e4, 6e4, 0.001, PERIOD)
+    let limits = nurbs_motion::planner::presets::named("lab1").on(tip);
+    assert_eq!(limits.period, PERIOD, "the module's tests run at lab set 1's period");
+    limits
 }
 
 /// The job of a bundled example.
