@@ -1399,6 +1399,21 @@ impl Builder {
         Ok(())
     }
 
+    /// An arc or NURBS block starting at Z `z` is taken: the polyline before it goes out; its
+    /// Z, on a 3-D path.
+    fn begin_curve(
+        &mut self,
+        line: usize,
+        z: Option<f64>,
+        z_word: bool,
+        out: &mut VecDeque<PathElement>,
+    ) -> Result<Option<f64>, ReadError> {
+        let three_d = self.dimension(line, z, z_word)?;
+        self.feed_move()?;
+        self.flush(out)?;
+        three_d.then(|| self.z_of(line, z)).transpose()
+    }
+
     fn push(&mut self, m: Move, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
         match m {
             Move::Rapid { line, col, from, to } => {
@@ -1449,10 +1464,7 @@ impl Builder {
                 feed,
                 z_word,
             } => {
-                let three_d = self.dimension(line, z, z_word)?;
-                self.feed_move()?;
-                self.flush(out)?;
-                let z = if three_d { Some(self.z_of(line, z)?) } else { None };
+                let z = self.begin_curve(line, z, z_word, out)?;
                 let curve = arc_nurbs(&arc, z).map_err(self.geometry(line))?;
                 out.push_back(PathElement {
                     kind: ElementKind::Arc,
@@ -1469,10 +1481,7 @@ impl Builder {
                 z,
                 feed,
             } => {
-                let three_d = self.dimension(line, z, false)?;
-                self.feed_move()?;
-                self.flush(out)?;
-                let z = if three_d { Some(self.z_of(line, z)?) } else { None };
+                let z = self.begin_curve(line, z, false, out)?;
                 let pts: Vec<Vec<f64>> = points
                     .iter()
                     .map(|p| match z {
