@@ -66,7 +66,7 @@ $(STATICLIB): FORCE
 
 planner: FORCE
 	$(CARGO) build --release -p nurbs-planner --features linuxcnc --bins
-	$(CARGO) build --release -p nurbs-motion --bin nurbs-plan
+	$(CARGO) build --release -p nurbs-cli --bin nurbs-plan
 
 module: $(MODULE)
 

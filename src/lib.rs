@@ -7,7 +7,6 @@
 // The numerical loops mirror the indices of the published algorithms.
 #![allow(clippy::needless_range_loop)]
 
-pub mod cli;
 pub mod geometry;
 pub mod kinematics;
 pub mod panics;

@@ -4,10 +4,7 @@
 
 mod common;
 
-use common::{
-    assert_tighter_limit_fails, example, example_path, lab1, plan_and_verify_cli, scratch_dir, table1, tip_vpop,
-    trident_vpop, TABLE1, TRIDENT_VPOP,
-};
+use common::{example, lab1, table1, tip_vpop, trident_vpop};
 use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::verify::{verify, Report, Row};
 use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan, BRAKES};
@@ -262,27 +259,6 @@ fn fan_5axis_tip_polyline_rounded() {
     assert!(dev <= eps * (1.0 + 1e-9), "{dev}");
     // At least the length at the programmed feed.
     assert!(plan.motion_time >= 342.0 / 166.667);
-}
-
-/// `nurbs-plan plan --planner vpop` writes a CSV that `nurbs-plan verify` accepts, and rejects
-/// against a tighter jerk limit; a two-curve toolpath is planned on the XYZAC machine
-/// (columns t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element) and verified per joint.
-#[test]
-fn cli_plan_vpop_and_verify() {
-    let dir = scratch_dir("vpop-cli");
-    let trident = example_path("trident.json");
-    let out = plan_and_verify_cli(&trident, "vpop", &TRIDENT_VPOP, &dir.join("trident.csv"));
-    let head = std::fs::read_to_string(&out).unwrap();
-    assert!(head.starts_with("t,u,x,y,feed,element\n"));
-    assert_tighter_limit_fails(&out, &trident, &TRIDENT_VPOP, "--jerk", "4950,4950");
-
-    let pocket = example_path("open_pocket.json");
-    let out5 = plan_and_verify_cli(&pocket, "vpop", &TABLE1, &dir.join("pocket.csv"));
-    assert!(std::fs::read_to_string(&out5)
-        .unwrap()
-        .starts_with("t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element\n"));
-    assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "--vel", "500,500,500,90,100");
-    std::fs::remove_dir_all(&dir).ok();
 }
 
 /// VPOp on the random curves of the planner's property test (`random_curve`: degree 1-7, 2-D

@@ -9,18 +9,26 @@ use nurbs_motion::planner::{Limits, PathCurves, PlanError, PlanOptions, Planner}
 use nurbs_motion::readers::read_toolpath;
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 pub mod limits;
 pub use limits::*;
 
 pub fn example(name: &str) -> Toolpath {
-    read_toolpath(&Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)).unwrap()
+    read_toolpath(&example_path(name)).unwrap()
+}
+
+/// The workspace's root folder (these helpers serve the root package's tests and the CLI's).
+pub fn root() -> PathBuf {
+    let here = Path::new(env!("CARGO_MANIFEST_DIR"));
+    match here.join("examples").is_dir() {
+        true => here.to_path_buf(),
+        false => here.parent().expect("a package folder of the workspace").to_path_buf(),
+    }
 }
 
 /// Path of a bundled example.
 pub fn example_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("examples").join(name)
+    root().join("examples").join(name)
 }
 
 /// A fresh scratch folder `name-<pid>` in the system's temporary folder.
@@ -28,74 +36,6 @@ pub fn scratch_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
-}
-
-/// The `nurbs-plan` binary.
-pub fn nurbs_plan() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_nurbs-plan"))
-}
-
-/// `nurbs-plan verify csv program limits`.
-pub fn verify_cli(csv: &Path, program: &Path, limits: &[&str]) -> std::process::Output {
-    nurbs_plan()
-        .arg("verify")
-        .arg(csv)
-        .arg(program)
-        .args(limits)
-        .output()
-        .unwrap()
-}
-
-/// `nurbs-plan verify` passes on `csv` planned from `program` under `limits`.
-pub fn assert_verifies(csv: &Path, program: &Path, limits: &[&str]) {
-    let out = verify_cli(csv, program, limits);
-    assert!(
-        out.status.success(),
-        "{}: {}{}",
-        csv.display(),
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-/// `nurbs-plan plan program --planner planner limits --out csv` must succeed; returns `csv`.
-pub fn plan_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
-    let out = nurbs_plan()
-        .arg("plan")
-        .arg(program)
-        .args(["--planner", planner])
-        .arg("--out")
-        .arg(csv)
-        .args(limits)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{} {planner}: {}",
-        program.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    csv.to_path_buf()
-}
-
-/// [`plan_cli`], and `nurbs-plan verify` must accept its setpoints under the same limits;
-/// returns `csv`.
-pub fn plan_and_verify_cli(program: &Path, planner: &str, limits: &[&str], csv: &Path) -> PathBuf {
-    plan_cli(program, planner, limits, csv);
-    assert_verifies(csv, program, limits);
-    csv.to_path_buf()
-}
-
-/// `verify` must refuse `csv` of `program` under `limits` with `flag` made tighter (`tighter`,
-/// given after them: a flag wins over a named set).
-pub fn assert_tighter_limit_fails(csv: &Path, program: &Path, limits: &[&str], flag: &str, tighter: &str) {
-    let tight = [limits, &[flag, tighter]].concat();
-    let bad = verify_cli(csv, program, &tight);
-    assert!(
-        !bad.status.success(),
-        "verify passed with {tight:?}: {}",
-        String::from_utf8_lossy(&bad.stdout)
-    );
 }
 
 /// Why a plan did not pass.

@@ -18,7 +18,7 @@
 //! ahead of it. `--planner vpop` plans with VPOp (one tool-tip position per servo period,
 //! 2-/3-axis paths) before the motion, checks the module's stop from every block end, and sends
 //! the positions as path blocks, which the module outputs exactly.
-//! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_motion::cli::LimitArgs`): with
+//! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_cli::LimitArgs`): with
 //! `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given
 //! on the command line win. The period must equal the servo thread's for the motion to be the
@@ -42,10 +42,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
+use nurbs_cli::corners::{open, prepare, RoundCorners};
+use nurbs_cli::{LimitArgs, PlannerKind};
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
-use nurbs_motion::cli::corners::{open, prepare, RoundCorners};
-use nurbs_motion::cli::{LimitArgs, PlannerKind};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, Source, Streamer};

@@ -9,10 +9,10 @@ use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use nurbs_cli::corners::{prepare, RoundCorners};
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
-use nurbs_motion::cli::corners::{prepare, RoundCorners};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::verify::{verify, Row};

@@ -2,9 +2,9 @@
 //! use is read and rounded here, deterministically from the file, the mode and `--chord-tol`,
 //! as a stream ([`open`]) or whole ([`prepare`], the same stream collected).
 
-use crate::geometry::Toolpath;
-use crate::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
-use crate::readers::{open_toolpath, ElementStream};
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
+use nurbs_motion::readers::{open_toolpath, ElementStream};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 

@@ -1,10 +1,10 @@
 use super::corners::{describe, open, prepare, Prepared, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::LimitArgs;
-use crate::planner::corner::Deviation;
-use crate::planner::corner::ProgramPolyline;
-use crate::planner::verify::{verify, Row, Verifier};
-use crate::planner::PathCurves;
+use nurbs_motion::planner::corner::Deviation;
+use nurbs_motion::planner::corner::ProgramPolyline;
+use nurbs_motion::planner::verify::{verify, Row, Verifier};
+use nurbs_motion::planner::PathCurves;
 use std::path::Path;
 
 /// The rows of a setpoint CSV written by `plan` (columns t,u,x,y[,z] then optional extras; an
@@ -141,11 +141,11 @@ fn run_five_axis(
     prepared: &Prepared,
     mut program: ProgramPolyline,
     limits: &LimitArgs,
-    machine: crate::kinematics::TableTilting,
+    machine: nurbs_motion::kinematics::TableTilting,
 ) -> Result<bool, Box<dyn std::error::Error>> {
     let names = machine.joint_names();
-    use crate::planner::axial::FiniteDifferences;
-    use crate::planner::verify::SLACK;
+    use nurbs_motion::planner::axial::FiniteDifferences;
+    use nurbs_motion::planner::verify::SLACK;
     use nurbs_rtcore::executor::CurveSet;
     let toolpath = &prepared.toolpath;
     let joint_limits = limits.limits(5)?;
@@ -195,7 +195,7 @@ fn run_five_axis(
             "the joints' tool axis is {axis_error:.3e} off the programmed tool axis (same --machine as plan?)"
         ));
     }
-    let tip_limits = crate::planner::Limits {
+    let tip_limits = nurbs_motion::planner::Limits {
         velocity: vec![f64::MAX; 3],
         acceleration: vec![f64::MAX; 3],
         jerk: vec![f64::MAX; 3],
@@ -257,7 +257,7 @@ fn check_program_deviation<'a>(
 
 /// A violation when the largest distance to the programmed polyline exceeds --chord-tol.
 fn report_deviation(deviation: Option<f64>, tolerance: f64, violations: &mut Vec<String>) {
-    if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + crate::planner::verify::SLACK)) {
+    if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + nurbs_motion::planner::verify::SLACK)) {
         violations.push(format!(
             "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}"
         ));

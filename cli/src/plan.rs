@@ -2,10 +2,10 @@ use super::corners::{describe, open, prepare, summary_fields, RoundCorners};
 use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
-use crate::planner::axial::{FiniteDifferences, MAX_AXES};
-use crate::planner::corner::{Deviation, ProgramPolyline};
-use crate::planner::simulate::{run_segment, setpoints_with, Interpolation, SimState};
-use crate::planner::{FinalRecord, PathCurves, PlanOptions, Planner};
+use nurbs_motion::planner::axial::{FiniteDifferences, MAX_AXES};
+use nurbs_motion::planner::corner::{Deviation, ProgramPolyline};
+use nurbs_motion::planner::simulate::{run_segment, setpoints_with, Interpolation, SimState};
+use nurbs_motion::planner::{FinalRecord, PathCurves, PlanOptions, Planner};
 use nurbs_rtcore::executor::Sample;
 use std::io::Write;
 use std::path::Path;
@@ -36,7 +36,7 @@ fn with_fields(mut summary: serde_json::Value, extra: serde_json::Value) -> serd
 fn summary_common(
     args: &PlanArgs,
     planner: &str,
-    limits: &crate::planner::Limits,
+    limits: &nurbs_motion::planner::Limits,
     check: &FiniteDifferences,
     axes: usize,
 ) -> serde_json::Value {
@@ -56,7 +56,7 @@ fn summary_common(
 }
 
 /// Figure title: file, planner, limits and motion time.
-fn plot_title(args: &PlanArgs, planner: &str, limits: &crate::planner::Limits, motion_time: f64) -> String {
+fn plot_title(args: &PlanArgs, planner: &str, limits: &nurbs_motion::planner::Limits, motion_time: f64) -> String {
     let name = args.toolpath.file_name().map_or_else(
         || args.toolpath.display().to_string(),
         |n| n.to_string_lossy().into_owned(),
@@ -298,7 +298,7 @@ impl Groups {
 /// polyline, and (when asked) a copy of every sample.
 struct SetpointSink<'a> {
     out: std::io::BufWriter<std::fs::File>,
-    limits: &'a crate::planner::Limits,
+    limits: &'a nurbs_motion::planner::Limits,
     axes: usize,
     check: FiniteDifferences,
     program: Option<(&'a mut ProgramPolyline, Deviation)>,
@@ -318,7 +318,7 @@ impl<'a> SetpointSink<'a> {
     fn create(
         path: &Path,
         names: &[&str],
-        limits: &'a crate::planner::Limits,
+        limits: &'a nurbs_motion::planner::Limits,
         program: Option<&'a mut ProgramPolyline>,
         streaming: bool,
     ) -> Result<Self, Box<dyn std::error::Error>> {
@@ -369,7 +369,7 @@ impl<'a> SetpointSink<'a> {
 /// `--planner vpop`: the tool-tip path planned by constraint intersection at the servo period
 /// (same CSV columns and summary keys as the default planner).
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use crate::planner::vpop::{plan_five_axis, plan_tip, SearchOptions};
+    use nurbs_motion::planner::vpop::{plan_five_axis, plan_tip, SearchOptions};
     let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tolerance()?)?;
     let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
@@ -395,7 +395,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let mut points = Vec::new();
     for (j, p) in plan.points.iter().enumerate() {
         let feed = prev.map_or(0.0, |a| {
-            crate::planner::vpop::constraints::tip_distance(&p.tip, &a, tip) / plan.limits.period
+            nurbs_motion::planner::vpop::constraints::tip_distance(&p.tip, &a, tip) / plan.limits.period
         });
         if args.plot.is_some() {
             let mut q = [0.0; MAX_AXES];

@@ -1,4 +1,10 @@
-//! The `nurbs-plan` command line: `inspect` (geometry report), `plan` and `verify`.
+//! The `nurbs-plan` command line: `inspect` (geometry report), `plan`, `verify` and `presets`;
+//! and what `nurbs-planner` shares with it: the limit flags with `--ini` and `--limits`
+//! ([`LimitArgs`]), the planner choice ([`PlannerKind`]) and the toolpath as both prepare it
+//! ([`corners`]).
+
+// Axis loops index several per-axis arrays at once, as the formulas do.
+#![allow(clippy::needless_range_loop)]
 
 pub mod corners;
 mod inspect;
@@ -122,9 +128,9 @@ pub enum Interp {
     Fcp,
 }
 
-impl From<Interp> for crate::planner::simulate::Interpolation {
+impl From<Interp> for nurbs_motion::planner::simulate::Interpolation {
     fn from(i: Interp) -> Self {
-        use crate::planner::simulate::Interpolation;
+        use nurbs_motion::planner::simulate::Interpolation;
         match i {
             Interp::Rk2pc => Interpolation::Rk2pc,
             Interp::Sot => Interpolation::Sot,
@@ -146,7 +152,7 @@ pub fn run() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Presets => {
-            print!("{}", crate::planner::presets::markdown_table());
+            print!("{}", nurbs_motion::planner::presets::markdown_table());
             Ok(())
         }
         Command::Inspect { toolpath, json } => inspect::run(&toolpath, json),

@@ -2,8 +2,8 @@
 //! every element) is planned and verified on. Built here, in one place, for `plan` and
 //! `verify`, so that `verify` recovers the tool tip with the kinematics `plan` used.
 
-use crate::geometry::Toolpath;
-use crate::kinematics::{TableTilting, Tilt};
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::kinematics::{TableTilting, Tilt};
 
 /// Machine structures by name. Another structure is another variant here and another arm in
 /// [`MachineArgs::kinematics`].

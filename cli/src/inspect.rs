@@ -1,5 +1,5 @@
-use crate::geometry::{analyze, CurveStats, ElementKind};
-use crate::readers::read_toolpath;
+use nurbs_motion::geometry::{analyze, CurveStats, ElementKind};
+use nurbs_motion::readers::read_toolpath;
 use serde::Serialize;
 use std::path::Path;
 

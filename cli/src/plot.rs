@@ -7,10 +7,10 @@
 //! drawn with a font compiled into the binary (assets/fonts), so no font library or font file
 //! is needed at build or run time.
 
-use crate::geometry::Toolpath;
-use crate::planner::axial::MAX_AXES;
-use crate::planner::flf::{flf, CriticalPoint, FlfValue};
-use crate::planner::Limits;
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::axial::MAX_AXES;
+use nurbs_motion::planner::flf::{flf, CriticalPoint, FlfValue};
+use nurbs_motion::planner::Limits;
 use plotters::coord::Shift;
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
@@ -557,7 +557,7 @@ fn legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> Result<(), PlotError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::planner::axial::FiniteDifferences;
+    use nurbs_motion::planner::axial::FiniteDifferences;
 
     #[test]
     fn differences_match_the_verify_check() {

@@ -1,8 +1,8 @@
 //! The limit flags `nurbs-plan` and `nurbs-planner` share, and the LinuxCNC INI file they may come
 //! from: one set of names, one way to read them.
 
-use crate::planner::presets::{preset, Preset};
-use crate::planner::Limits;
+use nurbs_motion::planner::presets::{preset, Preset};
+use nurbs_motion::planner::Limits;
 use std::path::{Path, PathBuf};
 
 /// Limits (mm, s) from flags; where a flag is not given, from a named limit set (`--limits`),
@@ -47,7 +47,7 @@ impl LimitArgs {
             .as_deref()
             .map(|name| {
                 preset(name).ok_or_else(|| {
-                    let names: Vec<&str> = crate::planner::presets::PRESETS.iter().map(|p| p.name).collect();
+                    let names: Vec<&str> = nurbs_motion::planner::presets::PRESETS.iter().map(|p| p.name).collect();
                     format!("no limit set {name}: one of {}", names.join(", "))
                 })
             })

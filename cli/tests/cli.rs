@@ -4,8 +4,8 @@
 mod common;
 
 use common::{
-    assert_verifies, example_path as example, nurbs_plan as bin, plan_cli, scratch_dir, verify_cli, LAB1, TABLE1,
-    TABLE1_TIP, TIP_VPOP,
+    assert_tighter_limit_fails, assert_verifies, example_path as example, nurbs_plan as bin, plan_and_verify_cli,
+    plan_cli, scratch_dir, verify_cli, LAB1, TABLE1, TABLE1_TIP, TIP_VPOP, TRIDENT_VPOP,
 };
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -174,7 +174,7 @@ fn plan_interpolation_methods_and_streaming() {
     }
     // A streamed plan that fails says how much of it had already been handed out (on the
     // machine, running): the property test's case 1246, refused at u = 0, before any.
-    let refused = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/hal/refused_stream.json");
+    let refused = common::root().join("tests/hal/refused_stream.json");
     let limits = [
         "--feed",
         "4191.755008993316",
@@ -896,7 +896,7 @@ fn five_axis_g1_corners_are_rounded_tip_and_axis_together() {
 #[test]
 fn limits_from_an_ini_file_are_the_flags_limits() {
     let dir = scratch_dir("nurbs-cli-ini");
-    let ini = Path::new(env!("CARGO_MANIFEST_DIR")).join("halfiles/sim.ini");
+    let ini = common::root().join("halfiles/sim.ini");
     let plan = |args: &[&str], out: &str| {
         let o = bin()
             .arg("plan")
@@ -926,5 +926,26 @@ fn limits_from_an_ini_file_are_the_flags_limits() {
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("--chord-tol") && err.contains("CHORD_TOLERANCE"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `nurbs-plan plan --planner vpop` writes a CSV that `nurbs-plan verify` accepts, and rejects
+/// against a tighter jerk limit; a two-curve toolpath is planned on the XYZAC machine
+/// (columns t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element) and verified per joint.
+#[test]
+fn cli_plan_vpop_and_verify() {
+    let dir = scratch_dir("vpop-cli");
+    let trident = example("trident.json");
+    let out = plan_and_verify_cli(&trident, "vpop", &TRIDENT_VPOP, &dir.join("trident.csv"));
+    let head = std::fs::read_to_string(&out).unwrap();
+    assert!(head.starts_with("t,u,x,y,feed,element\n"));
+    assert_tighter_limit_fails(&out, &trident, &TRIDENT_VPOP, "--jerk", "4950,4950");
+
+    let pocket = example("open_pocket.json");
+    let out5 = plan_and_verify_cli(&pocket, "vpop", &TABLE1, &dir.join("pocket.csv"));
+    assert!(std::fs::read_to_string(&out5)
+        .unwrap()
+        .starts_with("t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element\n"));
+    assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "--vel", "500,500,500,90,100");
     std::fs::remove_dir_all(&dir).ok();
 }
