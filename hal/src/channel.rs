@@ -21,6 +21,9 @@
 //! on a second stream. Our own block keeps one ABI-checked layout (magic, version, record size,
 //! capacities) for both and grows without limits of HAL's.
 
+// Reached from the update path: no unwrap, expect, panic or indexing that can fail.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)]
+
 use core::cell::UnsafeCell;
 use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
@@ -656,6 +659,7 @@ impl Progress {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)]
 mod tests {
     use super::*;
 

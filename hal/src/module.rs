@@ -41,6 +41,9 @@
 //! faults ([`FaultCode::ResumePoint`]). `abort` while stopped ends the stopped motion (and
 //! withdraws the stop point): the next geometry is a new motion from its own first record.
 
+// The update path must not panic: no unwrap, expect, panic or indexing that can fail.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)]
+
 use core::cell::Cell;
 use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};

@@ -5,6 +5,9 @@
 //! (inside the component's instance struct), and every access reloads it: both loads are
 //! volatile, as in C where the pin is `hal_float_t *` and the value `volatile double`.
 
+// Reached from the update path: no unwrap, expect, panic or indexing that can fail.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)]
+
 use core::cell::UnsafeCell;
 use core::ffi::{c_int, CStr};
 use core::ptr;

@@ -2,6 +2,9 @@
 //! planner: S-curve segments, in a [`SegmentSlot`] with the stop after it) and [`PathBlock`]
 //! (VPOp: per-period positions), each in a tagged ring [`Slot`].
 
+// Reached from the update path: no unwrap, expect, panic or indexing that can fail.
+#![deny(clippy::unwrap_used, clippy::expect_used, clippy::panic, clippy::indexing_slicing)]
+
 pub use nurbs_rtcore::records::{PathBlock, SegmentRecord, FLAG_LAST};
 
 /// Number of phases of a jerk-limited S-curve (the length of the records' phase arrays;

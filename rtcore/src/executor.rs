@@ -53,6 +53,48 @@ pub enum Step {
 }
 
 /// Interpolation state between periods (plain data, `Copy`, so the planner can checkpoint it).
+///
+/// One 10 mm line, one record from rest to rest at 10 mm/s (ramps of jerk 4,000 mm/s³), run at
+/// a 1 ms period as the servo thread runs it:
+///
+/// ```
+/// use nurbs_rtcore::executor::{CurveSet, Interpolator, Step};
+/// use nurbs_rtcore::records::FLAG_LAST;
+/// use nurbs_rtcore::{CurveView, SegmentRecord};
+///
+/// struct Line;
+/// impl CurveSet for Line {
+///     fn curve(&self, index: usize) -> Option<CurveView<'_>> {
+///         const KNOTS: [f64; 4] = [0.0, 0.0, 10.0, 10.0];
+///         const POINTS: [f64; 4] = [0.0, 0.0, 10.0, 0.0];
+///         (index == 0).then(|| CurveView::new(1, 2, &KNOTS, &POINTS, &[1.0, 1.0]).unwrap())
+///     }
+///     fn tip_axes(&self) -> usize {
+///         2
+///     }
+/// }
+///
+/// let (j, t1) = (4000.0, 0.05); // peak feed j t1^2 = 10 mm/s, each ramp 0.5 mm
+/// let record = SegmentRecord {
+///     flags: FLAG_LAST,
+///     u_end: 10.0,
+///     length: 10.0,
+///     durations: [t1, 0.0, t1, 0.9, t1, 0.0, t1],
+///     jerks: [j, 0.0, -j, 0.0, -j, 0.0, j],
+///     ..SegmentRecord::default()
+/// };
+/// let mut interp = Interpolator::new();
+/// let mut queue = Some(record);
+/// let mut last = [0.0; 2];
+/// loop {
+///     match interp.step(&Line, 0.001, &mut || queue.take()) {
+///         Step::Sample(s) => last = [s.point[0], s.point[1]],
+///         Step::Finished => break,
+///         Step::Starved | Step::BadRecord => unreachable!(),
+///     }
+/// }
+/// assert!((last[0] - 10.0).abs() < 1e-9 && last[1] == 0.0);
+/// ```
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Interpolator {
     cursor: PathCursor,

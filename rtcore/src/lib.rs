@@ -5,6 +5,8 @@
 //! curve parameter. The crate is `no_std` and does not link `alloc`, so nothing here can
 //! allocate; it knows nothing of HAL, files or the planner.
 #![cfg_attr(not(test), no_std)]
+// Safe Rust only: what the servo thread runs has no unsafe of its own (the HAL glue is in nurbs-hal).
+#![forbid(unsafe_code)]
 // The numerical loops mirror the indices of the published algorithms (P&T A2.3, A4.2).
 #![allow(clippy::needless_range_loop)]
 

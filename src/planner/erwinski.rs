@@ -182,6 +182,24 @@ impl From<LimitsError> for PlanError {
 /// The nodes come from [`NodeStream`], which scans the path only as far as needed to commit
 /// them. [`plan`] collects this stream: a batch plan and a streamed one run the same code and
 /// differ only in when records settle.
+///
+/// ```
+/// use nurbs_motion::planner::{presets::named, PlanOptions, Planner};
+/// use nurbs_motion::readers::read_toolpath;
+///
+/// let file = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/trident.json");
+/// let toolpath = read_toolpath(std::path::Path::new(file)).unwrap();
+/// let limits = named("lab1").on(toolpath.tip_dim());
+/// // As a stream: each record is final when it comes, the stop after it planned too.
+/// let options = PlanOptions { stream: true, ..PlanOptions::default() };
+/// let mut planner = Planner::new(&toolpath, &limits, &options).unwrap();
+/// let mut motion = 0.0;
+/// while let Some(next) = planner.next_final() {
+///     let last = next.unwrap();
+///     motion += last.record.profile().total_time();
+/// }
+/// assert!((motion - planner.finish().motion_time).abs() < 0.001);
+/// ```
 pub struct Planner {
     /// The path, read as far as the scan has reached and forgotten behind the settled records.
     curves: PathCurves,
