@@ -5,9 +5,10 @@
 #   make install       module into $(MODULE_DIR), planner, recorder and nurbs-plan into $(BINDIR)
 #   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
 #   make bench         criterion: per-period cost of nurbs_interp.update (mock HAL)
-#   make man           the pin table of docs/integration.md and docs/man/nurbs_interp.9 from the
-#                      module's pin declarations, the preset table of docs/planners.md from the
-#                      presets (committed; the tests check them)
+#   make man           docs/man/nurbs_interp.9 and the pin table of docs/integration.md from the
+#                      module's pin declarations, docs/man/nurbs-plan.1 and nurbs-planner.1 from
+#                      the command lines, the preset table of docs/planners.md from the presets
+#                      (committed; the tests check them)
 #   make headers       cbindgen -> include/nurbs_rt.h   (committed)
 #   make bindings      bindgen  -> hal/src/bindings.rs (committed; a normal build needs no libclang)
 #   make check-generated   fail if the committed header or bindings are stale
@@ -75,13 +76,15 @@ $(MODULE): $(STATICLIB) hal/module.ver
 		-Wl,-Bsymbolic -Wl,--version-script=hal/module.ver -Wl,--gc-sections $(NATIVE_LIBS)
 
 install: all
-	install -d $(DESTDIR)$(MODULE_DIR) $(DESTDIR)$(BINDIR) $(DESTDIR)$(MANDIR)/man9
+	install -d $(DESTDIR)$(MODULE_DIR) $(DESTDIR)$(BINDIR) $(DESTDIR)$(MANDIR)/man9 $(DESTDIR)$(MANDIR)/man1
 	install -m 0644 $(MODULE) $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so
 	install -m 0644 docs/man/nurbs_interp.9 $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
+	install -m 0644 docs/man/nurbs-plan.1 docs/man/nurbs-planner.1 $(DESTDIR)$(MANDIR)/man1/
 	for b in $(BINS); do install -m 0755 $(OUT)/$$b $(DESTDIR)$(BINDIR)/$$b; done
 
 uninstall:
 	rm -f $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
+	rm -f $(DESTDIR)$(MANDIR)/man1/nurbs-plan.1 $(DESTDIR)$(MANDIR)/man1/nurbs-planner.1
 	for b in $(BINS); do rm -f $(DESTDIR)$(BINDIR)/$$b; done
 
 test: test-cargo test-hal
@@ -98,6 +101,7 @@ test-hal: install
 
 man:
 	UPDATE_DOCS=1 $(CARGO) test -p nurbs-planner --test pins_doc
+	UPDATE_DOCS=1 $(CARGO) test -p nurbs-cli --test man
 	UPDATE_DOCS=1 $(CARGO) test -p nurbs-motion --test docs
 
 headers: include/nurbs_rt.h

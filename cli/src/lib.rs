@@ -11,10 +11,12 @@ mod inspect;
 pub mod limits;
 mod machine;
 mod plan;
+mod planner_args;
 mod plot;
 mod verify;
 
 pub use limits::LimitArgs;
+pub use planner_args::PlannerArgs;
 pub use verify::read_rows;
 
 use clap::{Parser, Subcommand};

@@ -36,49 +36,19 @@
 //! (underrun). (To start a different job instead, abort first: `nurbs_interp.abort` clears the
 //! stop point.)
 
-use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::Parser;
-use nurbs_cli::corners::{open, prepare, RoundCorners};
-use nurbs_cli::{LimitArgs, PlannerKind};
+use nurbs_cli::corners::{open, prepare};
+use nurbs_cli::{PlannerArgs as Args, PlannerKind};
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::HAL_OUT;
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
-
-#[derive(Parser, Debug)]
-#[command(
-    name = "nurbs-planner",
-    about = "Plan a NURBS toolpath and stream it to nurbs_interp"
-)]
-struct Args {
-    /// Toolpath (.json, .ngc/.nc/.gcode/.tap, .dxf).
-    toolpath: PathBuf,
-    #[command(flatten)]
-    limits: LimitArgs,
-    /// Motion time (s) to keep queued ahead of the module.
-    #[arg(long, default_value_t = 2.0)]
-    margin: f64,
-    /// VPOp: largest tangential deceleration and jerk of the module's stop after a path block,
-    /// as a fraction of what the axes allow along the path there. The planner runs the stop
-    /// from every block end and lowers it where the axis limits need it.
-    #[arg(long, default_value_t = 1.0)]
-    stop_fraction: f64,
-    /// Planner: `erwinski` (S-curve segments, streamed as records) or `vpop` (per-period
-    /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
-    #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
-    planner: PlannerKind,
-    /// G1 corners: `auto` rounds them within the chord tolerance when the whole path is a
-    /// straight-line program (as `nurbs-plan plan` does), `on` requires that, `off` stops at
-    /// every corner.
-    #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
-    round_corners: RoundCorners,
-}
 
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
 /// the same tolerance (and `verify` checks), its first element read.
