@@ -5,18 +5,14 @@
 pub mod axial;
 pub mod corner;
 pub mod erwinski;
-pub mod flf;
 mod limits;
-mod nodes;
 pub mod presets;
-mod quick_check;
-pub mod scurve_fit;
 pub mod simulate;
 pub mod verify;
 pub mod vpop;
 mod window;
 
-pub use erwinski::{plan, FinalRecord, Plan, PlanError, PlanOptions, PlanReport, Planner};
+pub use erwinski::{flf, plan, scurve_fit, FinalRecord, Plan, PlanError, PlanOptions, PlanReport, Planner};
 pub use limits::{Limits, LimitsError};
 
 use crate::geometry::{PathElement, Toolpath};

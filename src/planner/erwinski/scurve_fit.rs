@@ -1,5 +1,6 @@
 //! Fitting a seven-phase S-curve between two feeds over a given distance (Erwinski et al. 2022, eq. 15-21).
 
+use super::tuning::*;
 use nurbs_rtcore::scurve::{SCurve, PHASES};
 
 /// Durations (T1, T2, T3) of a jerk-limited change of feed by `dv >= 0`: trapezoidal
@@ -110,9 +111,6 @@ fn reachable_by_bisection(v_from: f64, length: f64, accel: f64, jerk: f64, cap: 
     }
     lo
 }
-
-/// Halvings of the peak-feed bisection at most: the paper's 30, more only for slivers.
-const MAX_HALVINGS: i32 = 60;
 
 /// Why no profile fits.
 #[derive(Clone, Copy, Debug, PartialEq)]

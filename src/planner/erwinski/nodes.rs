@@ -21,13 +21,14 @@
 //!
 //! The nodes only steer the segment solver; whatever it emits is checked by finite differences.
 
-use super::erwinski::{PlanOptions, PlanStart, FEED_HEADROOM};
 use super::flf::{flf, CriticalPoint, CriticalPointSearch, FlfScan};
 use super::quick_check::ArcGrid;
 use super::scurve_fit::reachable_feed;
-use super::window::Window;
-use super::{Limits, PathCurves};
+use super::tuning::*;
+use super::{PlanOptions, PlanStart, FEED_HEADROOM};
 use crate::geometry::ArcLengthTable;
+use crate::planner::window::Window;
+use crate::planner::{Limits, PathCurves};
 use nurbs_rtcore::executor::Derivs;
 use nurbs_rtcore::math::{dot, norm, sub};
 use nurbs_rtcore::CurveView;
@@ -120,12 +121,6 @@ pub(super) struct NodeStream {
     /// Every node of the path has been produced.
     exhausted: bool,
 }
-
-/// A node is kept when the look-ahead reaches at least this fraction of its cap.
-const MERGE_TOLERANCE: f64 = 0.999;
-
-/// Successor feeds sampled by [`NodeStream::backward_lowest`].
-const SUCCESSOR_FEEDS: usize = 16;
 
 impl NodeStream {
     pub fn new(tip: usize, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {

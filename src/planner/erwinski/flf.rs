@@ -9,13 +9,10 @@
 //! For a planar curve |x''| = kappa, so the acceleration cap is never below eq. 11; the jerk cap
 //! also counts the change of curvature (x''' = kappa' n - kappa^2 t), which eq. 12 leaves out.
 
-use super::Limits;
+use super::tuning::*;
+use crate::planner::Limits;
 use nurbs_rtcore::math::dot;
 use nurbs_rtcore::{CachedCurve, CurveView, SpanCache, Vector};
-
-/// Fraction of the chord tolerance the planner plans for: its per-period check measures the
-/// sagitta at the middle parameter only, `verify` searches the whole step for the largest one.
-pub const CHORD_MARGIN: f64 = 0.9;
 
 /// The components of the FLF at one parameter value (mm/s).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -122,14 +119,6 @@ pub struct CriticalPoint {
     pub u: f64,
     pub flf: f64,
 }
-
-/// Closest spacing of FLF samples on a curve's control polygon (mm): far below any chord
-/// tolerance or servo step that matters, and far above what a 0.02 mm G1 line at 500 samples
-/// per control point would get.
-pub const MIN_SAMPLE_SPACING: f64 = 1e-4;
-
-/// FLF samples per control point at least, however short the curve.
-pub const MIN_SAMPLES_PER_POINT: usize = 16;
 
 /// FLF samples over a curve: `u[i]`, `value[i]` (full FLF) and `speed[i]` (speed caps only).
 ///
@@ -248,9 +237,6 @@ impl Default for CriticalPointSearch {
         CriticalPointSearch { next: 1 }
     }
 }
-
-/// Neighbours on each side a critical sample must not exceed.
-const NEIGHBOURS: usize = 5;
 
 impl CriticalPointSearch {
     /// Judges every sample whose neighbours `scan` holds, appending the critical points to `out`.

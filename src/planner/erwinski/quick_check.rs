@@ -7,7 +7,7 @@
 //! with x', x'', x''' (arc-length derivatives) tabulated once per curve. Whatever the searches
 //! choose is then confirmed by the exact check; nothing is emitted on this estimate alone.
 
-use super::Limits;
+use crate::planner::Limits;
 use nurbs_rtcore::scurve::SCurveTable;
 use nurbs_rtcore::Vector;
 

@@ -4,22 +4,29 @@
 //! jerk and acceleration (steps 1-7) gets a lower end feed (step 8) and, failing that, a lower
 //! start feed by re-planning the previous segment (step 9). Nothing that violates is emitted.
 
+pub mod flf;
+mod nodes;
+mod quick_check;
+pub mod scurve_fit;
+mod tuning;
+
 use super::axial::FiniteDifferences;
-use super::flf::CriticalPoint;
-use super::nodes::{Node, NodeStream};
-use super::quick_check::{estimate, ArcGrid, Estimate, Scope};
-use super::scurve_fit::{fit_ramps, ramp_distance, reachable_feed, Ramp};
 use super::simulate::{run_segment, SimState};
 use super::window::Window;
 use super::{Limits, LimitsError, PathCurves};
 use crate::geometry::Toolpath;
+use flf::CriticalPoint;
+use nodes::{Node, NodeStream};
 use nurbs_rtcore::executor::CurveSet;
 use nurbs_rtcore::records::FLAG_LAST;
 use nurbs_rtcore::scurve::SCurve;
 use nurbs_rtcore::SegmentRecord;
+use quick_check::{estimate, ArcGrid, Estimate, Scope};
+use scurve_fit::{fit_ramps, ramp_distance, reachable_feed, Ramp};
 use std::cell::Cell;
 use std::fmt;
 use std::time::Instant;
+use tuning::*;
 
 /// Tuning of the planner (the paper's values by default).
 #[derive(Clone, Debug)]
@@ -262,20 +269,6 @@ pub struct Planner {
 fn can_absorb(feed: f64, length: f64, accel: f64, jerk: f64) -> bool {
     2.0 * ramp_distance(feed, 0.0, accel, jerk) <= length
 }
-
-/// Segments accepted after an absorbing one before the records before it are final.
-const ABSORBER_LOOK_BEHIND: usize = 1;
-
-/// Motion time (s) of records not final before a stop chain settles them.
-const CHAIN_AFTER: f64 = 0.1;
-/// Segments a stop chain stays behind the planning front: back-tracking cascades on dense G1
-/// programs reach some 40 short segments back, and a cascade that reaches a chain makes the
-/// plan stop there.
-const CHAIN_LOOK_BEHIND: usize = 64;
-/// The same before the first record: the motion waits for it.
-const FIRST_CHAIN_LOOK_BEHIND: usize = 16;
-/// Most segments of a stop chain.
-const CHAIN_MAX: usize = 256;
 
 impl Planner {
     /// Checks the inputs; no planning happens before the first [`Planner::next_record`].
@@ -822,17 +815,6 @@ fn holds_after(ctx: &SegmentContext, from: &SimState, stop: SegmentRecord) -> bo
     state.check.worst_ratio(ctx.limits) <= 1.0
 }
 
-/// Nodes inserted at most by segment splits (each one makes a segment shorter).
-const MAX_SPLITS: usize = 10_000;
-
-/// Fraction of the feed cap at or below which a segment counts as starting from rest.
-const REST_FEED: f64 = 1e-9;
-/// Servo periods the exact trials may simulate before the plan is refused: this many, plus
-/// so many per period planned so far. The bundled curves simulate 3-10 per planned period;
-/// the base is some 20 s of planning.
-const WORK_BUDGET_BASE: u64 = 20_000_000;
-const WORK_PER_PLANNED_PERIOD: u64 = 200;
-
 /// Why a segment could not be planned.
 enum SegmentFailure {
     /// Not from this start feed: retry with the previous segment ending at most this fast.
@@ -846,9 +828,6 @@ enum SegmentFailure {
     /// attempts can take long when the trials crawl).
     OutOfWork,
 }
-
-/// Relative headroom of the planned feed below the programmed feed.
-pub(super) const FEED_HEADROOM: f64 = 1e-7;
 
 /// Limits a hair below the user's, so that the check has headroom for the last rounding.
 fn strict(limits: &Limits) -> Limits {
@@ -974,7 +953,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     let tip = ctx.limits.velocity.len();
     let mut prev: Option<nurbs_rtcore::executor::Sample> = from.last_sample;
     let last_sample = Cell::new(from.last_sample);
-    let eps = super::flf::CHORD_MARGIN * ctx.limits.chord_tolerance;
+    let eps = CHORD_MARGIN * ctx.limits.chord_tolerance;
     let (period, feed) = (ctx.limits.period, ctx.limits.feed);
     let mut worst_speed = (0.0f64, ctx.node_start.start_u, 0.0, 0usize);
     let mut count = 0usize;
@@ -1069,15 +1048,6 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     })
 }
 
-/// Margin of the estimate: the searches aim this far inside the limits, so that the exact check
-/// of their choice usually passes.
-const ESTIMATE_MARGIN: f64 = 0.995;
-/// An estimated ratio above this after the searches means: lower the end feed straight away.
-const HOPELESS_ESTIMATE: f64 = 1.05;
-/// An estimated speed-cap ratio below this: the exact trial is not expected to exceed a speed
-/// cap.
-const CLEAR_OF_SPEED_CAPS: f64 = 0.9;
-
 fn quick(
     ctx: &SegmentContext,
     from: &SimState,
@@ -1162,13 +1132,6 @@ fn curvature_bound(grid: &ArcGrid, s0: f64, s1: f64, hint: &mut usize) -> Option
 fn length_bound(l: f64, c: f64) -> f64 {
     0.5 * (l * l - c * c).max(0.0).sqrt()
 }
-
-/// Fraction of the planning tolerance above which a step's chord error is measured exactly.
-const EXACT_CHORD_ABOVE: f64 = 0.3;
-/// A step whose sagitta bound is below this fraction of the planning tolerance is not probed.
-const PROBE_BELOW: f64 = 0.1;
-/// Safety factor on the sagitta bound from the tabulated curvature.
-const SAGITTA_BOUND_FACTOR: f64 = 2.0;
 
 /// Golden-section search (eq. 24-27) over `x in (0, upper]` for the better profile by the
 /// paper's rules: violating vs violating, the smaller violation; both fine, the shorter; else
@@ -1273,17 +1236,6 @@ fn duration(ctx: &SegmentContext, v0: f64, v1: f64, ramp: Ramp) -> Option<f64> {
         .ok()
         .map(|p| p.total_time())
 }
-
-/// Factors applied to the end feed when a segment cannot be made to fit (step 8), one per
-/// lowering in turn, the last repeated: fine steps first, since the highest end feed that fits
-/// is often a few percent below the first one tried, coarser ones after, to reach low feeds in
-/// few attempts (a constant 0.8 made the bundled plans up to 5 % longer).
-const END_FEED_STEPS: [f64; 4] = [0.95, 0.9, 0.85, 0.8];
-/// Factor applied to the start feed asked of the previous segment when even a stop at the end
-/// fails (step 9).
-const START_FEED_STEP: f64 = 0.9;
-/// Factor applied to the peak of a segment from rest to rest ([`lower_peak_at_rest`]).
-const PEAK_STEP: f64 = 0.8;
 
 /// The end feed after the `lowerings`-th lowering (counted from 0) of `v1`; a crawl becomes a
 /// stop.
@@ -1549,15 +1501,6 @@ fn with_phase_jerks(
     }
 }
 
-/// Bisections of a phase's jerk between the segment's jerk and the limit in
-/// [`with_phase_jerks`].
-const PHASE_JERK_BISECTIONS: usize = 4;
-/// Where [`with_phase_jerks`] aims, as a fraction of the limits by the calibrated estimate,
-/// and the bounds of the estimate's margin there.
-const PHASE_JERK_AIM: f64 = 0.998;
-const MIN_PHASE_MARGIN: f64 = 0.98;
-const MAX_PHASE_MARGIN: f64 = 1.03;
-
 /// The last resort of a segment from rest: the exact golden-section search of the jerk over
 /// `(0, J]`, and where its best still violates in the lowest cell (the excess shrinks with the
 /// jerk, down to the search's resolution of 0.1 % of the range), the lowest 0.2 % again,
@@ -1593,11 +1536,6 @@ fn exact_jerk_search(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up
     })
 }
 
-/// Finer jerk searches of [`crawl_search`], each over this fraction of the range of the one
-/// before.
-const FINER_JERK_SEARCHES: usize = 2;
-const FINER_CELL: f64 = 2e-3;
-
 /// Step 8 when the segment already starts and ends at rest, so that neither end feed can be
 /// lowered: a lower peak instead (PEAK_STEP below the sampled one). What fails then is
 /// a term that grows with the feed, such as the centripetal acceleration or jerk of a bend
@@ -1621,9 +1559,6 @@ fn lower_peak_at_rest(
     true
 }
 
-/// A lowering of the peak must bring the worst ratio below this fraction of what it was.
-const PEAK_PROGRESS: f64 = 0.999;
-
 /// A failed trial whose worst acceleration or jerk excess comes at its highest feed (a cruise
 /// through a bend, the turn from rising to falling feed), well above both end feeds: lower end
 /// feeds and gentler ramps leave it (the centripetal terms grow with the feed there), a lower
@@ -1632,24 +1567,6 @@ fn excess_at_peak(t: &Trial, v0: f64, v1: f64) -> Option<(f64, f64)> {
     (t.speed_at_worst >= AT_PEAK * t.peak_feed && v0.max(v1) < BELOW_PEAK * t.peak_feed)
         .then_some((t.peak_feed, t.ratio))
 }
-const AT_PEAK: f64 = 0.98;
-const BELOW_PEAK: f64 = 0.9;
-/// Factor on the sampled peak for an excess there.
-const PEAK_STEP_INSIDE: f64 = 0.95;
-
-/// Start feeds below this fraction of the programmed feed crawl: see [`solve_segment`].
-const CRAWL_FEED: f64 = 1e-3;
-/// The end-feed attempt before which a crawling segment tries a stop at its end.
-const CRAWL_CHECK_AT: usize = 3;
-
-/// End-feed attempts in a row whose nominal trial's worst ratio improved by less than
-/// `STALL_PROGRESS` before a segment tries a stop at its end (see [`solve_segment`]).
-const STALLED_ATTEMPTS: usize = 3;
-const STALL_PROGRESS: f64 = 0.999;
-
-/// A speed excess inside a segment is split off as a node when the profile there is below this
-/// fraction of the peak (at the peak, lowering the peak is the cure).
-const SPLIT_BELOW_PEAK: f64 = 0.99;
 
 #[cfg(test)]
 mod tests {

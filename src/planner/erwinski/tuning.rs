@@ -1,0 +1,144 @@
+//! The Erwinski planner's tuning constants, in one place, each with the reason for its value
+//! (measured on the bundled curves and the random-curve runs unless it says otherwise).
+
+// Segments, trials and searches (`mod.rs`)
+
+/// Segments accepted after an absorbing one before the records before it are final.
+pub(super) const ABSORBER_LOOK_BEHIND: usize = 1;
+
+/// Motion time (s) of records not final before a stop chain settles them.
+pub(super) const CHAIN_AFTER: f64 = 0.1;
+
+/// Segments a stop chain stays behind the planning front: back-tracking cascades on dense G1
+/// programs reach some 40 short segments back, and a cascade that reaches a chain makes the
+/// plan stop there.
+pub(super) const CHAIN_LOOK_BEHIND: usize = 64;
+
+/// The same before the first record: the motion waits for it.
+pub(super) const FIRST_CHAIN_LOOK_BEHIND: usize = 16;
+
+/// Most segments of a stop chain.
+pub(super) const CHAIN_MAX: usize = 256;
+
+/// Nodes inserted at most by segment splits (each one makes a segment shorter).
+pub(super) const MAX_SPLITS: usize = 10_000;
+
+/// Fraction of the feed cap at or below which a segment counts as starting from rest.
+pub(super) const REST_FEED: f64 = 1e-9;
+
+/// Servo periods the exact trials may simulate before the plan is refused: this many, plus
+/// so many per period planned so far. The bundled curves simulate 3-10 per planned period;
+/// the base is some 20 s of planning.
+pub(super) const WORK_BUDGET_BASE: u64 = 20_000_000;
+
+pub(super) const WORK_PER_PLANNED_PERIOD: u64 = 200;
+
+/// Relative headroom of the planned feed below the programmed feed.
+pub(super) const FEED_HEADROOM: f64 = 1e-7;
+
+/// Margin of the estimate: the searches aim this far inside the limits, so that the exact check
+/// of their choice usually passes.
+pub(super) const ESTIMATE_MARGIN: f64 = 0.995;
+
+/// An estimated ratio above this after the searches means: lower the end feed straight away.
+pub(super) const HOPELESS_ESTIMATE: f64 = 1.05;
+
+/// An estimated speed-cap ratio below this: the exact trial is not expected to exceed a speed
+/// cap.
+pub(super) const CLEAR_OF_SPEED_CAPS: f64 = 0.9;
+
+/// Fraction of the planning tolerance above which a step's chord error is measured exactly.
+pub(super) const EXACT_CHORD_ABOVE: f64 = 0.3;
+
+/// A step whose sagitta bound is below this fraction of the planning tolerance is not probed.
+pub(super) const PROBE_BELOW: f64 = 0.1;
+
+/// Safety factor on the sagitta bound from the tabulated curvature.
+pub(super) const SAGITTA_BOUND_FACTOR: f64 = 2.0;
+
+/// Factors applied to the end feed when a segment cannot be made to fit (step 8), one per
+/// lowering in turn, the last repeated: fine steps first, since the highest end feed that fits
+/// is often a few percent below the first one tried, coarser ones after, to reach low feeds in
+/// few attempts (a constant 0.8 made the bundled plans up to 5 % longer).
+pub(super) const END_FEED_STEPS: [f64; 4] = [0.95, 0.9, 0.85, 0.8];
+
+/// Factor applied to the start feed asked of the previous segment when even a stop at the end
+/// fails (step 9).
+pub(super) const START_FEED_STEP: f64 = 0.9;
+
+/// Factor applied to the peak of a segment from rest to rest ([`lower_peak_at_rest`]).
+pub(super) const PEAK_STEP: f64 = 0.8;
+
+/// Bisections of a phase's jerk between the segment's jerk and the limit in
+/// [`with_phase_jerks`].
+pub(super) const PHASE_JERK_BISECTIONS: usize = 4;
+
+/// Where [`with_phase_jerks`] aims, as a fraction of the limits by the calibrated estimate,
+/// and the bounds of the estimate's margin there.
+pub(super) const PHASE_JERK_AIM: f64 = 0.998;
+
+pub(super) const MIN_PHASE_MARGIN: f64 = 0.98;
+
+pub(super) const MAX_PHASE_MARGIN: f64 = 1.03;
+
+/// Finer jerk searches of [`crawl_search`], each over this fraction of the range of the one
+/// before.
+pub(super) const FINER_JERK_SEARCHES: usize = 2;
+
+pub(super) const FINER_CELL: f64 = 2e-3;
+
+/// A lowering of the peak must bring the worst ratio below this fraction of what it was.
+pub(super) const PEAK_PROGRESS: f64 = 0.999;
+
+pub(super) const AT_PEAK: f64 = 0.98;
+
+pub(super) const BELOW_PEAK: f64 = 0.9;
+
+/// Factor on the sampled peak for an excess there.
+pub(super) const PEAK_STEP_INSIDE: f64 = 0.95;
+
+/// Start feeds below this fraction of the programmed feed crawl: see [`solve_segment`].
+pub(super) const CRAWL_FEED: f64 = 1e-3;
+
+/// The end-feed attempt before which a crawling segment tries a stop at its end.
+pub(super) const CRAWL_CHECK_AT: usize = 3;
+
+/// End-feed attempts in a row whose nominal trial's worst ratio improved by less than
+/// `STALL_PROGRESS` before a segment tries a stop at its end (see [`solve_segment`]).
+pub(super) const STALLED_ATTEMPTS: usize = 3;
+
+pub(super) const STALL_PROGRESS: f64 = 0.999;
+
+/// A speed excess inside a segment is split off as a node when the profile there is below this
+/// fraction of the peak (at the peak, lowering the peak is the cure).
+pub(super) const SPLIT_BELOW_PEAK: f64 = 0.99;
+
+// Nodes and the look-ahead (`nodes.rs`)
+
+/// A node is kept when the look-ahead reaches at least this fraction of its cap.
+pub(super) const MERGE_TOLERANCE: f64 = 0.999;
+
+/// Successor feeds sampled by [`NodeStream::backward_lowest`].
+pub(super) const SUCCESSOR_FEEDS: usize = 16;
+
+// The feedrate limit function and its scan (`flf.rs`)
+
+/// Fraction of the chord tolerance the planner plans for: its per-period check measures the
+/// sagitta at the middle parameter only, `verify` searches the whole step for the largest one.
+pub(super) const CHORD_MARGIN: f64 = 0.9;
+
+/// Closest spacing of FLF samples on a curve's control polygon (mm): far below any chord
+/// tolerance or servo step that matters, and far above what a 0.02 mm G1 line at 500 samples
+/// per control point would get.
+pub(super) const MIN_SAMPLE_SPACING: f64 = 1e-4;
+
+/// FLF samples per control point at least, however short the curve.
+pub(super) const MIN_SAMPLES_PER_POINT: usize = 16;
+
+/// Neighbours on each side a critical sample must not exceed.
+pub(super) const NEIGHBOURS: usize = 5;
+
+// S-curve fitting (`scurve_fit.rs`)
+
+/// Halvings of the peak-feed bisection at most: the paper's 30, more only for slivers.
+pub(super) const MAX_HALVINGS: i32 = 60;
