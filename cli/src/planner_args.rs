@@ -34,4 +34,10 @@ pub struct PlannerArgs {
     /// stops at every corner.
     #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
     pub round_corners: RoundCorners,
+    /// Exit (status 0) once the module has run the whole motion and no stop of it is left to
+    /// re-plan: the motion finished, or was aborted or ended by the machine switched off. For
+    /// G-code-triggered jobs (`M101` of the sim configuration); without it the planner keeps
+    /// serving until a signal ends it.
+    #[arg(long)]
+    pub exit_when_done: bool,
 }

@@ -1,5 +1,6 @@
 //! The realtime module `nurbs_interp`: `loadrt nurbs_interp`, then
-//! `addf nurbs_interp.update servo-thread`.
+//! `addf nurbs_interp.update servo-thread` (after `motion-controller` in a LinuxCNC machine,
+//! with `nurbs_interp.feedback` before it: the hand-over, [`nurbs_rtcore::handover`]).
 //!
 //! `rtapi_app_main` creates the component, its pins (all instance state lives in `hal_malloc`'d
 //! memory, as in C components), the shared-memory [`Channel`] the planner writes to, and exports
@@ -51,6 +52,7 @@ use core::sync::atomic::{AtomicI32, Ordering};
 
 use nurbs_rtcore::block_stop::{block_stop, step_fits};
 use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
+use nurbs_rtcore::handover::{self, Handover};
 use nurbs_rtcore::{CurveView, StopRun};
 
 use crate::channel::{
@@ -132,6 +134,40 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
     resume_ready: bool, Out, "resume-ready", "",
         "stopped (hold or underrun) and a plan from the stop point is queued: releasing `hold` / a `resume` edge starts it";
     held: bool, Out, "held", "", "at rest on the path after a stop (hold, underrun or abort), not moving";
+    path_ready: bool, Out, "path-ready", "",
+        "a motion is loaded and has not started: `pos-cmd-*` show its start (where the machine must stand to engage)";
+    engage: bool, In, "engage", "",
+        "hand-over: take the drives (at rest, our start within 1e-6 mm of `joint.N.pos-cmd`); false: give them back once every offset is within 1e-6 mm";
+    machine_on: bool, In, "machine-on", "",
+        "hand-over: `motion.motion-enabled`; off while engaged releases at once (drives follow their feedback) and ends our motion where it stands";
+    engaged: bool, Out, "engaged", "",
+        "hand-over: the drives follow our path (wire to `enable`: the path moves only while engaged)";
+    handover_refused: u32, Out, "handover-refused", "",
+        "hand-over: why `engage` (or its release) is not carried out: 0 none, 1 machine off, 2 no path loaded, 3 not at rest, 4 our start is elsewhere, 5 offset left (release)";
+    j0_pos_cmd: f64, In, "joint.0.pos-cmd", "mm", "hand-over: motion's `joint.0.pos-cmd` (X)";
+    j0_motor_pos_cmd: f64, In, "joint.0.motor-pos-cmd", "mm", "hand-over: motion's `joint.0.motor-pos-cmd`";
+    j0_drive_fb: f64, In, "joint.0.drive-fb", "mm", "hand-over: the drive's position feedback (motor coordinates)";
+    j0_drive_cmd: f64, Out, "joint.0.drive-cmd", "mm",
+        "hand-over: to the drive: `motor-pos-cmd`, plus our position less motion's while engaged";
+    j0_motor_pos_fb: f64, Out, "joint.0.motor-pos-fb", "mm",
+        "hand-over: to motion's `joint.0.motor-pos-fb`: `drive-fb`, less our position less motion's while engaged";
+    j0_offset: f64, Out, "joint.0.offset", "mm", "hand-over: our position less motion's `pos-cmd` while engaged, else 0";
+    j1_pos_cmd: f64, In, "joint.1.pos-cmd", "mm", "hand-over: motion's `joint.1.pos-cmd` (Y)";
+    j1_motor_pos_cmd: f64, In, "joint.1.motor-pos-cmd", "mm", "hand-over: motion's `joint.1.motor-pos-cmd`";
+    j1_drive_fb: f64, In, "joint.1.drive-fb", "mm", "hand-over: the drive's position feedback (motor coordinates)";
+    j1_drive_cmd: f64, Out, "joint.1.drive-cmd", "mm",
+        "hand-over: to the drive: `motor-pos-cmd`, plus our position less motion's while engaged";
+    j1_motor_pos_fb: f64, Out, "joint.1.motor-pos-fb", "mm",
+        "hand-over: to motion's `joint.1.motor-pos-fb`: `drive-fb`, less our position less motion's while engaged";
+    j1_offset: f64, Out, "joint.1.offset", "mm", "hand-over: our position less motion's `pos-cmd` while engaged, else 0";
+    j2_pos_cmd: f64, In, "joint.2.pos-cmd", "mm", "hand-over: motion's `joint.2.pos-cmd` (Z)";
+    j2_motor_pos_cmd: f64, In, "joint.2.motor-pos-cmd", "mm", "hand-over: motion's `joint.2.motor-pos-cmd`";
+    j2_drive_fb: f64, In, "joint.2.drive-fb", "mm", "hand-over: the drive's position feedback (motor coordinates)";
+    j2_drive_cmd: f64, Out, "joint.2.drive-cmd", "mm",
+        "hand-over: to the drive: `motor-pos-cmd`, plus our position less motion's while engaged";
+    j2_motor_pos_fb: f64, Out, "joint.2.motor-pos-fb", "mm",
+        "hand-over: to motion's `joint.2.motor-pos-fb`: `drive-fb`, less our position less motion's while engaged";
+    j2_offset: f64, Out, "joint.2.offset", "mm", "hand-over: our position less motion's `pos-cmd` while engaged, else 0";
 }
 
 /// The geometry stream the motion runs on: its header, how far its curves are checked, and the
@@ -334,6 +370,13 @@ pub struct Instance {
     period: f64,
     /// Path-block motion: the block being output.
     player: BlockPlayer,
+    /// The position pins hold a position of the path (its start, shown before the motion, or
+    /// the last sample).
+    position_known: bool,
+    /// The current stream's start is on the position pins (or the motion has started).
+    start_shown: bool,
+    /// Between motion's joints and the drives.
+    handover: Handover,
 }
 
 /// Where the rest of a stop chain is read ([`SegmentSlot::chain_offset`]).
@@ -698,6 +741,83 @@ impl Instance {
             moving: self.in_motion(),
             curve: u32::try_from(self.current_curve()).unwrap_or(u32::MAX),
         });
+        self.show_start();
+        self.hand_over(channel);
+    }
+
+    /// Before the motion starts, its start on the position pins: where the machine must stand
+    /// for the hand-over to engage (a G-code program reads it with `M66`).
+    fn show_start(&mut self) {
+        let waiting = self.fault == FaultCode::None
+            && self.geometry.is_valid()
+            && !self.started()
+            && !self.aborted
+            && !self.awaiting_resume;
+        if waiting && !self.start_shown {
+            let first = self.geometry.header.first_curve as usize;
+            let start = self.geometry.valid(first).map(|view| view.u_min());
+            if let Some(point) = start.and_then(|u| self.interp.point_at(&self.geometry, first, u)) {
+                let sample = Sample {
+                    curve: first,
+                    u: start.unwrap_or(0.0),
+                    s: 0.0,
+                    point,
+                    feed: 0.0,
+                    accel: 0.0,
+                };
+                self.start_shown = self.output(&sample);
+            }
+        }
+        self.pins
+            .path_ready
+            .set(waiting && self.start_shown && self.fault == FaultCode::None);
+    }
+
+    /// The first half of the hand-over, before motion runs: its feedback from the drives'.
+    pub fn feedback(&self) {
+        let pins = &self.pins;
+        let drive_fb = [pins.j0_drive_fb.get(), pins.j1_drive_fb.get(), pins.j2_drive_fb.get()];
+        let [f0, f1, f2] = self.handover.motor_pos_fb(&drive_fb);
+        pins.j0_motor_pos_fb.set(f0);
+        pins.j1_motor_pos_fb.set(f1);
+        pins.j2_motor_pos_fb.set(f2);
+    }
+
+    /// The second half of the hand-over between motion's joints and the drives
+    /// ([`nurbs_rtcore::handover`]); the machine switched off while engaged ends our motion
+    /// where it stands.
+    fn hand_over(&mut self, channel: &Channel) {
+        let pins = &self.pins;
+        let ours = [pins.pos_cmd_x.get(), pins.pos_cmd_y.get(), pins.pos_cmd_z.get()];
+        let inputs = handover::Inputs {
+            engage: pins.engage.get(),
+            machine_on: pins.machine_on.get(),
+            ours: self.position_known.then_some(ours),
+            driven: [true, true, self.geometry.tip >= 3],
+            ours_at_rest: !self.in_motion(),
+            pos_cmd: [pins.j0_pos_cmd.get(), pins.j1_pos_cmd.get(), pins.j2_pos_cmd.get()],
+            motor_pos_cmd: [
+                pins.j0_motor_pos_cmd.get(),
+                pins.j1_motor_pos_cmd.get(),
+                pins.j2_motor_pos_cmd.get(),
+            ],
+            drive_fb: [pins.j0_drive_fb.get(), pins.j1_drive_fb.get(), pins.j2_drive_fb.get()],
+        };
+        let out = self.handover.step(&inputs);
+        let [c0, c1, c2] = out.drive_cmd;
+        let [o0, o1, o2] = out.offset;
+        pins.j0_drive_cmd.set(c0);
+        pins.j1_drive_cmd.set(c1);
+        pins.j2_drive_cmd.set(c2);
+        pins.j0_offset.set(o0);
+        pins.j1_offset.set(o1);
+        pins.j2_offset.set(o2);
+        pins.engaged.set(out.engaged);
+        pins.handover_refused.set(out.refused as u32);
+        if out.machine_off && (self.geometry.is_valid() && !self.aborted) {
+            // The drives are off: nothing of this motion may run when they come back.
+            self.end_motion(channel);
+        }
     }
 
     /// The first curve the motion may still use: the one it is on.
@@ -761,6 +881,7 @@ impl Instance {
         self.stopping = false;
         self.stopped = false;
         self.aborted = false;
+        self.start_shown = false;
     }
 
     /// The stopped (or aborted) motion is over: nothing of it resumes.
@@ -1242,6 +1363,7 @@ impl Instance {
             self.fault = FaultCode::NonFinite;
             return false;
         }
+        self.position_known = true;
         let pins = &self.pins;
         pins.pos_cmd_x.set(x);
         pins.pos_cmd_y.set(y);
@@ -1308,6 +1430,13 @@ unsafe extern "C" fn update(arg: *mut c_void, period: c_long) {
     instance.update(i64::from(period));
 }
 
+/// The exported HAL function `nurbs_interp.feedback` (before `motion-controller`).
+unsafe extern "C" fn feedback(arg: *mut c_void, _period: c_long) {
+    // SAFETY: as in `update`; the two functions run on the same thread, one after the other.
+    let instance = &*(arg as *const Instance);
+    instance.feedback();
+}
+
 fn error(msg: &CStr) {
     sys::print_msg(sys::RTAPI_MSG_ERR, msg);
 }
@@ -1366,10 +1495,25 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).mode).write(Mode::Undecided);
     addr_of_mut!((*inst).player).write(BlockPlayer::IDLE);
     addr_of_mut!((*inst).period).write(0.0);
+    addr_of_mut!((*inst).position_known).write(false);
+    addr_of_mut!((*inst).start_shown).write(false);
+    addr_of_mut!((*inst).handover).write(Handover::new());
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),
         Some(update),
+        inst as *mut c_void,
+        1,
+        0,
+        comp_id,
+    );
+    if rc < 0 {
+        error(c"nurbs_interp: hal_export_funct failed");
+        return rc;
+    }
+    let rc = sys::hal_export_funct(
+        c"nurbs_interp.feedback".as_ptr(),
+        Some(feedback),
         inst as *mut c_void,
         1,
         0,

@@ -12,6 +12,7 @@
 
 pub mod block_stop;
 pub mod executor;
+pub mod handover;
 pub mod interp;
 pub mod math;
 pub mod nurbs;

@@ -27,7 +27,8 @@
 //! Pins: `nurbs-planner.ready` (bit out: first records queued), `.running` (bit out: records
 //! remain to be sent), `.error` (bit out), `.records-sent` (u32 out), `.buffered` (float out,
 //! s: motion time queued in the ring).
-//! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send), at any stage.
+//! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send), at any stage;
+//! with `--exit-when-done`, also once the module is done with the motion.
 //!
 //! Resume after a hold or an underrun: when the module has stopped on the path it publishes the
 //! stop point in the channel. A planner that starts then, or that is running when it happens,
@@ -173,6 +174,18 @@ fn start_motion<'a>(
     Ok(streamer)
 }
 
+/// The module has taken stream `generation` and is done with it: nothing queued, nothing
+/// moving, and no stop point newer than `from` to plan from (the module publishes a stop before
+/// it reports the motion at rest, so reading the stop last sees it).
+fn motion_over(channel: &Channel, generation: u32, from: Option<StopPoint>) -> bool {
+    let report = channel.progress.read();
+    let idle = report.generation == generation && !report.moving && channel.segments.is_empty();
+    idle && channel
+        .stop
+        .read()
+        .is_none_or(|p| from.is_some_and(|f| f.epoch == p.epoch))
+}
+
 fn run(args: &Args) -> Result<(), String> {
     // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
     // prepares it with the same tolerance (and `verify` checks it).
@@ -240,6 +253,10 @@ fn run(args: &Args) -> Result<(), String> {
                     error.set(true);
                 }
                 reported = true;
+            }
+            if args.exit_when_done && streamer.done() && motion_over(channel, streamer.writer().generation(), from) {
+                eprintln!("nurbs-planner: the motion is over, exiting (--exit-when-done)");
+                return Ok(());
             }
             if !progressed {
                 std::thread::sleep(Duration::from_millis(1));
