@@ -136,6 +136,7 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
     held: bool, Out, "held", "", "at rest on the path after a stop (hold, underrun or abort), not moving";
     path_ready: bool, Out, "path-ready", "",
         "a motion is loaded and has not started: `pos-cmd-*` show its start (where the machine must stand to engage)";
+    path_3d: bool, Out, "path-3d", "", "the loaded path drives Z (a 2-D path leaves joint 2 to motion)";
     engage: bool, In, "engage", "",
         "hand-over: take the drives (at rest, our start within 1e-6 mm of `joint.N.pos-cmd`); false: give them back once every offset is within 1e-6 mm";
     machine_on: bool, In, "machine-on", "",
@@ -771,6 +772,7 @@ impl Instance {
         self.pins
             .path_ready
             .set(waiting && self.start_shown && self.fault == FaultCode::None);
+        self.pins.path_3d.set(self.geometry.tip >= 3);
     }
 
     /// The first half of the hand-over, before motion runs: its feedback from the drives'.

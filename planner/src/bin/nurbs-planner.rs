@@ -186,7 +186,9 @@ fn motion_over(channel: &Channel, generation: u32, from: Option<StopPoint>) -> b
         .is_none_or(|p| from.is_some_and(|f| f.epoch == p.epoch))
 }
 
-fn run(args: &Args) -> Result<(), String> {
+/// Plans and streams until a signal (or, with `--exit-when-done`, the motion's end); why it
+/// ended, or the error.
+fn run(args: &Args) -> Result<&'static str, String> {
     // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
     // prepares it with the same tolerance (and `verify` checks it).
     // The Erwinski planner reads the file as it plans (here only its first element, for the
@@ -255,14 +257,13 @@ fn run(args: &Args) -> Result<(), String> {
                 reported = true;
             }
             if args.exit_when_done && streamer.done() && motion_over(channel, streamer.writer().generation(), from) {
-                eprintln!("nurbs-planner: the motion is over, exiting (--exit-when-done)");
-                return Ok(());
+                return Ok("the motion is over (--exit-when-done)");
             }
             if !progressed {
                 std::thread::sleep(Duration::from_millis(1));
             }
         }
-        Ok(())
+        Ok("stopped by signal")
     })();
     if result.is_err() {
         error.set(true);
@@ -283,8 +284,8 @@ fn main() -> ExitCode {
         ))
     });
     match result {
-        Ok(()) => {
-            eprintln!("nurbs-planner: stopped by signal, exiting cleanly");
+        Ok(why) => {
+            eprintln!("nurbs-planner: {why}, exiting cleanly");
             ExitCode::SUCCESS
         }
         Err(e) => {

@@ -1,0 +1,92 @@
+"""What M101-M103 share: the INI, nurbs_interp's pins, waiting, and errors LinuxCNC shows.
+
+LinuxCNC runs a user M-code (M100-M199) as a program with P and Q as its arguments, once motion
+is idle, and waits for it to exit; a non-zero exit aborts the G-code program. On abort or
+E-stop the program gets SIGINT.
+"""
+import os
+import signal
+import sys
+import time
+
+import hal
+import linuxcnc
+
+# HAL's Python API reads and sets pins only from a component of its own (gone at exit).
+_component = hal.component(f"nurbs-mcode-{os.getpid()}")
+_component.ready()
+
+# Values of nurbs_interp.handover-refused.
+REFUSALS = {
+    1: "the machine is off",
+    2: "no toolpath is loaded",
+    3: "the machine is not at rest",
+    4: "the machine does not stand at the toolpath's start",
+    5: "motion does not stand at the toolpath's end yet (offset left)",
+}
+
+
+def fail(message):
+    """Show `message` in LinuxCNC's error channel and abort the G-code program."""
+    linuxcnc.command().error_msg(f"nurbs: {message}")
+    print(f"nurbs: {message}", file=sys.stderr, flush=True)
+    sys.exit(1)
+
+
+def log(message):
+    print(f"nurbs: {message}", file=sys.stderr, flush=True)
+
+
+def ini():
+    """The machine's INI (parsed) and its file name."""
+    name = os.environ.get("INI_FILE_NAME")
+    if not name:
+        fail("INI_FILE_NAME is not set (not started by linuxcnc?)")
+    return linuxcnc.ini(name), name
+
+
+def p_word():
+    """The integer P word of the M-code."""
+    try:
+        return int(float(sys.argv[1]))
+    except (IndexError, ValueError):
+        fail(f"{os.path.basename(sys.argv[0])} needs a P word (the toolpath's number)")
+
+
+def pin(name):
+    return hal.get_value(f"nurbs_interp.{name}")
+
+
+def set_pin(name, value):
+    hal.set_p(f"nurbs_interp.{name}", "1" if value is True else "0" if value is False else str(value))
+
+
+def wait_until(condition, timeout, what, poll=0.005):
+    """Polls `condition` until it returns a true value (returned) or `timeout` s pass (fail)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = condition()
+        if value:
+            return value
+        time.sleep(poll)
+    fail(f"timed out after {timeout} s waiting for {what() if callable(what) else what}")
+
+
+def positions():
+    """Our position and motion's, for messages."""
+    ours = [pin(f"pos-cmd-{a}") for a in "xyz"]
+    motion = [hal.get_value(f"joint.{j}.pos-cmd") for j in range(3)]
+    fmt = lambda p: "(" + ", ".join(f"{v:.6f}" for v in p) + ")"
+    return f"toolpath at {fmt(ours)}, motion at {fmt(motion)}"
+
+
+def abort_on_signal():
+    """On SIGINT/SIGTERM (LinuxCNC's abort or E-stop): nurbs_interp stops on the path."""
+
+    def handler(signum, frame):
+        set_pin("abort", True)
+        log("aborted: nurbs_interp stops on the path")
+        sys.exit(1)
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

@@ -1,0 +1,189 @@
+#!/usr/bin/env python3
+"""Checks a recorded run of test_machine.sh, every servo period:
+
+- LinuxCNC: the program ran to its end with an empty error channel, the joints are still
+  homed, the motor offsets are not zero, and at the end the interpreter's (motion's) position,
+  motion's joint command and the drive command less the motor offset agree, released;
+- our paths (one per engagement, in order): the periods nurbs_interp produced a setpoint are
+  the offline plan's setpoints (count, and every position to 1e-9 mm); each written as a CSV
+  for `nurbs-plan verify`;
+- the hand-over: while engaged the drive command is our position plus the motor offset; the
+  drive command never steps: from two periods before engaging to two after releasing its
+  finite differences stay within the axis velocity, acceleration and jerk (relative slack 1e-6);
+  during the catch-up move (path done, still engaged) the drive stands still while motion's
+  command moves to the path's end;
+- following error (motion's joint.N.f-error): 0 (1e-9) while engaged, and within one period of
+  the largest velocity (the simulated drive's lag) everywhere (motion compares the feedback with
+  its command of the period before, so with this drive it sees 0 there too).
+"""
+import argparse
+import configparser
+import csv
+import json
+import sys
+
+
+def ini_limits(path):
+    # LinuxCNC INI files repeat keys (HALFILE): read leniently.
+    cp = configparser.ConfigParser(strict=False, interpolation=None, inline_comment_prefixes=("#",))
+    cp.optionxform = str
+    cp.read(path)
+    axes = "XYZ"
+    v = [float(cp[f"AXIS_{a}"]["MAX_VELOCITY"]) for a in axes]
+    a = [float(cp[f"AXIS_{a}"]["MAX_ACCELERATION"]) for a in axes]
+    j = [float(cp[f"AXIS_{a}"]["MAX_JERK"]) for a in axes]
+    period = float(cp["EMCMOT"]["SERVO_PERIOD"]) * 1e-9
+    return v, a, j, period
+
+
+def read(path):
+    rows = []
+    with open(path) as f:
+        for line in f:
+            x = line.split()
+            f_ = [float(t) for t in x[1:13]]
+            rows.append({
+                "n": int(x[0]), "drive": f_[0:3], "ferror": f_[3:6], "pos_cmd": f_[6:9],
+                "ours": f_[9:12], "engaged": x[13] == "1", "active": x[14] == "1",
+                "u": float(x[15]), "feed": float(x[16]), "curve": int(x[17]),
+            })
+    return rows
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    for flag in ("--samples", "--result", "--ini"):
+        ap.add_argument(flag, required=True)
+    ap.add_argument("--offline", action="append", required=True, help="each toolpath's offline plan, in order")
+    ap.add_argument("--recorded-csv", action="append", required=True, help="where to write each one's setpoints")
+    a = ap.parse_args()
+    vmax, amax, jmax, T = ini_limits(a.ini)
+    with open(a.result) as f:
+        result = json.load(f)
+    rows = read(a.samples)
+    errors = []
+    fail = errors.append
+
+    # LinuxCNC's view.
+    for e in result["errors"]:
+        fail(f"LinuxCNC error: {e}")
+    if not all(result.get("homed", [])):
+        fail(f"joints not homed at the end: {result.get('homed')}")
+    offset = result["motor_offset"]
+    if not all(abs(o) > 0.1 for o in offset):
+        fail(f"motor offsets {offset}: the test needs non-zero ones")
+    if result["engaged"]:
+        fail("still engaged at the end")
+    end_checks = [("motion's joint command", result["joint_pos_cmd"]),
+                  ("drive less motor offset", [d - o for d, o in zip(result["drive"], offset)])]
+    for name, p in end_checks:
+        if max(abs(x - y) for x, y in zip(p, result["position"])) > 1e-9:
+            fail(f"at the end, {name} {p} != the interpreter's position {result['position']}")
+
+    if not rows:
+        fail("no samples recorded")
+    for k in range(1, len(rows)):
+        if rows[k]["n"] != rows[k - 1]["n"] + 1:
+            fail(f"sample numbers jump at {k}: {rows[k-1]['n']} -> {rows[k]['n']} (sampler overrun)")
+            break
+    engaged = [k for k, r in enumerate(rows) if r["engaged"]]
+    windows = []
+    for k in engaged:
+        if windows and windows[-1][1] == k - 1:
+            windows[-1][1] = k
+        else:
+            windows.append([k, k])
+    if len(windows) != len(a.offline):
+        fail(f"engaged {len(windows)} times, {len(a.offline)} toolpaths expected")
+    if errors:
+        report(errors)
+    worst_ratio = [0.0, 0.0, 0.0]
+    summary = []
+    for (e0, e1), offline, recorded in zip(windows, a.offline, a.recorded_csv):
+        summary.append(check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail))
+    if errors:
+        report(errors)
+    if max(moved for _, _, moved in summary) < 1.0:
+        fail("no toolpath with a catch-up move of 1 mm or more")
+
+    # Following error as motion sees it.
+    fe_engaged = max(abs(f) for k in engaged for f in rows[k]["ferror"])
+    fe_all = max(abs(f) for r in rows for f in r["ferror"])
+    if fe_engaged > 1e-9:
+        fail(f"following error {fe_engaged:.3e} mm while engaged")
+    if fe_all > max(vmax) * T * (1 + 1e-6):
+        fail(f"following error {fe_all:.6g} mm > one period at the largest velocity")
+    if errors:
+        report(errors)
+    paths = "; ".join(f"{n} setpoints = offline plan, catch-up {moved:.3f} mm in {c} periods with the drive still"
+                      for n, c, moved in summary)
+    print(f"ok: {len(rows)} periods; {paths}; drive v/a/jerk through the hand-overs at most "
+          f"{worst_ratio[0]:.3f} / {worst_ratio[1]:.3f} / {worst_ratio[2]:.3f} of the limits; "
+          f"following error at most {fe_engaged:.1e} mm while engaged, {fe_all:.1e} mm overall; "
+          f"motor offsets {offset}; homed, positions agree at the end")
+
+
+def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail):
+    """One engagement (periods e0..e1): its setpoints against the offline plan, the drive
+    following them, no step, the catch-up. Returns (setpoints, catch-up periods, catch-up mm)."""
+    active = [k for k in range(e0, e1 + 1) if rows[k]["active"]]
+    if not active or active[0] == e0:
+        fail(f"engagement at {e0}: no setpoint, or one in the engaging period")
+        return (0, 0, 0.0)
+    with open(offline) as f:
+        plan = list(csv.DictReader(f))
+    axes = [c for c in "xyz" if c in plan[0]]
+    ours = [rows[k] for k in active]
+    if len(ours) != len(plan):
+        fail(f"{offline}: {len(ours)} setpoints, the offline plan has {len(plan)}")
+    worst = 0.0
+    for r, p in zip(ours, plan):
+        worst = max(worst, max(abs(r["ours"][i] - float(p[c])) for i, c in enumerate(axes)))
+    if worst > 1e-9:
+        fail(f"{offline}: setpoints differ from the offline plan by {worst:.3e} mm")
+    with open(recorded, "w") as f:
+        f.write("t,u," + ",".join(axes) + ",feed,element\n")
+        for k, r in enumerate(ours):
+            f.write(f"{k * T!r},{r['u']!r}," + ",".join(repr(r["ours"][i]) for i in range(len(axes)))
+                    + f",{r['feed']!r},{r['curve']}\n")
+
+    # The drive follows our position while engaged (on the axes the path drives).
+    follow = max(abs(rows[k]["drive"][i] - offset[i] - rows[k]["ours"][i])
+                 for k in range(e0, e1 + 1) for i in range(len(axes)))
+    if follow > 1e-9:
+        fail(f"{offline}: engaged, the drive command is off our position by {follow:.3e} mm")
+
+    # No step: finite differences of the drive command around and through the hand-over.
+    lo, hi = max(e0 - 2, 3), min(e1 + 3, len(rows) - 1)
+    for k in range(lo, hi + 1):
+        for i in range(3):
+            d = [rows[k - m]["drive"][i] for m in range(4)]
+            v = (d[0] - d[1]) / T
+            acc = (d[0] - 2 * d[1] + d[2]) / T**2
+            jerk = (d[0] - 3 * d[1] + 3 * d[2] - d[3]) / T**3
+            for n, (x, lim) in enumerate(((v, vmax[i]), (acc, amax[i]), (jerk, jmax[i]))):
+                worst_ratio[n] = max(worst_ratio[n], abs(x) / lim)
+                if abs(x) > lim * (1 + 1e-6):
+                    fail(f"period {k}, joint {i}: drive {['velocity', 'acceleration', 'jerk'][n]} "
+                         f"{x:.6g} exceeds {lim:g}")
+    # The catch-up move: from the path's last setpoint to the release, the drive stands still
+    # while motion's command goes to the path's end.
+    catch_up = range(active[-1] + 1, e1 + 1)
+    still = max((abs(rows[k]["drive"][i] - rows[active[-1]]["drive"][i]) for k in catch_up for i in range(3)),
+                default=0.0)
+    moved = max(abs(rows[e1]["pos_cmd"][i] - rows[active[-1]]["pos_cmd"][i]) for i in range(3))
+    arrived = max(abs(rows[e1]["pos_cmd"][i] - rows[active[-1]]["ours"][i]) for i in range(len(axes)))
+    if still > 1e-9:
+        fail(f"{offline}: the drive moved by {still:.3e} mm during the catch-up move")
+    if arrived > 1e-6:
+        fail(f"{offline}: released with motion {arrived:.3e} mm from the path's end")
+    return (len(ours), len(catch_up), moved)
+
+
+def report(errors):
+    print("FAIL:\n  " + "\n  ".join(errors))
+    sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,78 @@
+#!/usr/bin/python3
+"""The test's user interface for a headless LinuxCNC ([DISPLAY]DISPLAY): E-stop reset, machine
+on, home, run the program named by $NURBS_TEST_PROGRAM to its end with the sampler recording,
+then write what the machine says of itself to $NURBS_TEST_RESULT (JSON) and switch off, which
+ends LinuxCNC."""
+import json
+import os
+import sys
+import time
+
+import hal
+import linuxcnc
+
+c, s, e = linuxcnc.command(), linuxcnc.stat(), linuxcnc.error_channel()
+# HAL's Python API reads and sets pins only from a component of its own.
+ui = hal.component("nurbs-test-ui")
+ui.ready()
+result = {"errors": [], "messages": []}
+
+
+def drain():
+    while (m := e.poll()):
+        kind, text = m
+        (result["errors"] if kind in (linuxcnc.NML_ERROR, linuxcnc.OPERATOR_ERROR) else result["messages"]).append(text)
+
+
+def wait(cond, timeout, what):
+    end = time.time() + timeout
+    while time.time() < end:
+        s.poll()
+        drain()
+        if cond():
+            return True
+        time.sleep(0.01)
+    result["errors"].append(f"test-ui: timed out waiting for {what}")
+    return False
+
+
+def finish():
+    drain()
+    s.poll()
+    result["homed"] = list(s.homed[:3])
+    result["position"] = list(s.position[:3])  # motion's commanded position (machine coordinates)
+    result["actual"] = list(s.actual_position[:3])
+    result["joint_pos_cmd"] = [hal.get_value(f"joint.{j}.pos-cmd") for j in range(3)]
+    result["motor_offset"] = [hal.get_value(f"joint.{j}.motor-offset") for j in range(3)]
+    result["drive"] = [hal.get_value(f"nurbs_interp.joint.{j}.drive-cmd") for j in range(3)]
+    result["engaged"] = hal.get_value("nurbs_interp.engaged")
+    result["task_state"] = s.task_state
+    with open(os.environ["NURBS_TEST_RESULT"], "w") as f:
+        json.dump(result, f, indent=1)
+    c.state(linuxcnc.STATE_OFF)
+    c.wait_complete()
+    sys.exit(0)
+
+
+c.state(linuxcnc.STATE_ESTOP_RESET)
+c.state(linuxcnc.STATE_ON)
+if not wait(lambda: s.task_state == linuxcnc.STATE_ON, 10, "machine on"):
+    finish()
+c.mode(linuxcnc.MODE_MANUAL)
+c.wait_complete()
+c.home(-1)
+if not wait(lambda: all(s.homed[:3]), 30, "homing"):
+    finish()
+c.mode(linuxcnc.MODE_AUTO)
+c.wait_complete()
+hal.set_p("sampler.0.enable", "1")
+c.program_open(os.environ["NURBS_TEST_PROGRAM"])
+c.wait_complete()
+c.auto(linuxcnc.AUTO_RUN, 0)
+wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")
+wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.exec_state == linuxcnc.EXEC_DONE, 600, "the program's end")
+time.sleep(0.1)
+hal.set_p("sampler.0.enable", "0")
+# The recorder ends once no sample came for its idle time.
+wait(lambda: not hal.component_exists("nurbs-hal-record0"), 30, "the recorder to finish")
+finish()
