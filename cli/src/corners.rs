@@ -2,9 +2,10 @@
 //! use is read and rounded here, deterministically from the file, the mode and `--chord-tol`,
 //! as a stream ([`open`]) or whole ([`prepare`], the same stream collected).
 
+use crate::limits::{LimitArgs, Travel};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
-use nurbs_motion::readers::{open_toolpath, ElementStream};
+use nurbs_motion::readers::{open_toolpath, ElementStream, ReadError};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
@@ -62,8 +63,11 @@ impl PreparedStream {
     }
 }
 
-/// Opens `file` as a stream of elements and applies `mode` with `tolerance` (`--chord-tol`).
-pub fn open(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<PreparedStream, Box<dyn std::error::Error>> {
+/// Opens `file` as a stream of elements and applies `mode` with the chord tolerance of `limits`;
+/// with `--ini`, an element that leaves the machine's travel ends the stream with an error
+/// ([`within_travel`]).
+pub fn open(file: &Path, mode: RoundCorners, limits: &LimitArgs) -> Result<PreparedStream, Box<dyn std::error::Error>> {
+    let tolerance = limits.chord_tolerance()?;
     let elements = open_toolpath(file)?;
     let name = file.display().to_string();
     let (elements, stats): (ElementStream, _) = match mode {
@@ -75,11 +79,50 @@ pub fn open(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<PreparedS
             (Box::new(rounder), Some(stats))
         }
     };
+    let elements = match limits.travel()? {
+        Some(travel) => within_travel(elements, travel, name),
+        None => elements,
+    };
     Ok(PreparedStream {
         elements,
         file: file.to_owned(),
         stats,
     })
+}
+
+/// The elements of `elements` while they stay within `travel`: every control point of the tool
+/// tip inside it (a NURBS curve lies in the convex hull of its control points, so the path does
+/// too); the first one that does not ends the stream with an error naming it.
+pub fn within_travel(elements: ElementStream, travel: Travel, name: String) -> ElementStream {
+    let mut index = 0usize;
+    Box::new(elements.scan(false, move |failed, item| {
+        if *failed {
+            return None;
+        }
+        let i = index;
+        index += 1;
+        Some(item.and_then(|e| {
+            let tip = e.curve.tip_dim().min(travel.min.len());
+            for k in 0..e.curve.control_point_count() {
+                let p = &e.curve.control_point(k)[..tip];
+                if let Some(axis) = (0..tip).find(|&a| !(travel.min[a] <= p[a] && p[a] <= travel.max[a])) {
+                    *failed = true;
+                    let letter = ["X", "Y", "Z"][axis];
+                    let what = format!(
+                        "control point {p:?} leaves the machine's travel: {letter} {} .. {} mm ([AXIS_{letter}]MIN_LIMIT/MAX_LIMIT of {})",
+                        travel.min[axis],
+                        travel.max[axis],
+                        travel.source
+                    );
+                    return Err(match e.source_line {
+                        Some(line) => ReadError::at(&name, line, None, format!("the path element that starts here: {what}")),
+                        None => ReadError::new(&name, format!("path element {i}: {what}")),
+                    });
+                }
+            }
+            Ok(e)
+        }))
+    }))
 }
 
 /// The path to plan or verify, whole: the programmed path, or the rounded one.
@@ -90,8 +133,8 @@ pub struct Prepared {
 }
 
 /// [`open`], read whole.
-pub fn prepare(file: &Path, mode: RoundCorners, tolerance: f64) -> Result<Prepared, Box<dyn std::error::Error>> {
-    let PreparedStream { elements, stats, .. } = open(file, mode, tolerance)?;
+pub fn prepare(file: &Path, mode: RoundCorners, limits: &LimitArgs) -> Result<Prepared, Box<dyn std::error::Error>> {
+    let PreparedStream { elements, stats, .. } = open(file, mode, limits)?;
     let toolpath = Toolpath {
         elements: elements.collect::<Result<Vec<_>, _>>()?,
     };

@@ -65,6 +65,27 @@ impl LimitArgs {
             .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE in --ini".into())
     }
 
+    /// The machine's travel from `--ini` (`[AXIS_X|Y|Z]MIN_LIMIT`, `MAX_LIMIT`; an axis without
+    /// them is not bounded); `None` without `--ini`.
+    pub fn travel(&self) -> Result<Option<Travel>, String> {
+        let Some(ini) = self.ini()? else {
+            return Ok(None);
+        };
+        let (mut min, mut max) = (Vec::new(), Vec::new());
+        for axis in ["AXIS_X", "AXIS_Y", "AXIS_Z"] {
+            min.push(ini.number(axis, "MIN_LIMIT")?.unwrap_or(f64::NEG_INFINITY));
+            max.push(ini.number(axis, "MAX_LIMIT")?.unwrap_or(f64::INFINITY));
+        }
+        Ok(Some(Travel {
+            min,
+            max,
+            source: ini
+                .file
+                .file_name()
+                .map_or_else(|| ini.file.display().to_string(), |f| f.to_string_lossy().into_owned()),
+        }))
+    }
+
     /// The limits of an `axes`-axis path (flags first, then the named set, then the INI),
     /// checked.
     pub fn limits(&self, axes: usize) -> Result<Limits, String> {
@@ -125,6 +146,15 @@ impl LimitArgs {
         .for_axes(axes)
         .map_err(|e| e.to_string())
     }
+}
+
+/// The machine's travel per axis X, Y, Z (mm; infinite where the INI does not bound an axis).
+#[derive(Clone, Debug)]
+pub struct Travel {
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+    /// The INI file's name, for messages.
+    pub source: String,
 }
 
 /// `[SECTION]KEY` lookup in a LinuxCNC INI file (first occurrence wins, as in LinuxCNC).

@@ -91,7 +91,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     if args.machine.given().is_some() {
         // Refused either way; read whole to say why.
-        let whole = prepare(args.toolpath, args.round_corners, args.limits.chord_tolerance()?)?;
+        let whole = prepare(args.toolpath, args.round_corners, args.limits)?;
         args.machine.refuse_unless_five_axis(&whole.toolpath, args.toolpath)?;
         args.machine.refuse(
             "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
@@ -105,14 +105,10 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     // program of any length in memory that follows the look-ahead); the comparison methods and
     // the plot need the whole path and every record.
     let keep = args.plot.is_some() || args.interp != Interpolation::Rk2pc;
-    let mut stream = open(args.toolpath, args.round_corners, args.limits.chord_tolerance()?)?;
+    let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
     let mut program = stream.program()?;
     let whole = match keep {
-        true => Some(prepare(
-            args.toolpath,
-            args.round_corners,
-            args.limits.chord_tolerance()?,
-        )?),
+        true => Some(prepare(args.toolpath, args.round_corners, args.limits)?),
         false => None,
     };
     let curves = match &whole {
@@ -370,7 +366,7 @@ impl<'a> SetpointSink<'a> {
 /// (same CSV columns and summary keys as the default planner).
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     use nurbs_motion::planner::vpop::{plan_five_axis, plan_tip, SearchOptions};
-    let prepared = prepare(args.toolpath, args.round_corners, args.limits.chord_tolerance()?)?;
+    let prepared = prepare(args.toolpath, args.round_corners, args.limits)?;
     let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
     args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
@@ -431,7 +427,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         plan.stats.dead_ends,
         plan.stats.brakes
     );
-    let mut program = open(args.toolpath, args.round_corners, args.limits.chord_tolerance()?)?.program()?;
+    let mut program = open(args.toolpath, args.round_corners, args.limits)?.program()?;
     let deviation = program.max_distance(plan.points.iter().map(|p| &p.tip[..tip]));
     if let Some(line) = describe(prepared.rounding, deviation, plan.limits.chord_tolerance) {
         eprintln!("{line}");

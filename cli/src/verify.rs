@@ -292,7 +292,7 @@ pub fn run(
 ) -> Result<bool, Box<dyn std::error::Error>> {
     let file = toolpath;
     if has_columns(setpoints, &["c", "tip_x"])? {
-        let prepared = prepare(toolpath, round_corners, limits.chord_tolerance()?)?;
+        let prepared = prepare(toolpath, round_corners, limits)?;
         machine.refuse_unless_five_axis(&prepared.toolpath, file)?;
         if !is_five_axis(&prepared.toolpath) {
             return Err(format!(
@@ -302,7 +302,7 @@ pub fn run(
             )
             .into());
         }
-        let program = open(toolpath, round_corners, limits.chord_tolerance()?)?.program()?;
+        let program = open(toolpath, round_corners, limits)?.program()?;
         return run_five_axis(setpoints, &prepared, program, limits, machine.kinematics());
     }
     machine.refuse(&format!(
@@ -311,7 +311,7 @@ pub fn run(
     ))?;
     // A row at a time, the path read as the rows reach it: a setpoint file and a program of
     // any length in constant memory.
-    let mut stream = open(toolpath, round_corners, limits.chord_tolerance()?)?;
+    let mut stream = open(toolpath, round_corners, limits)?;
     let mut program = stream.program()?;
     let mut curves = PathCurves::streamed(stream.take_elements())?;
     let tip = curves.tip_dim();

@@ -929,6 +929,53 @@ fn limits_from_an_ini_file_are_the_flags_limits() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// With `--ini`, the machine's travel (`[AXIS_*]MIN_LIMIT/MAX_LIMIT`) bounds the path: a control
+/// point outside it (of the tool tip, after corner rounding) is refused with the point, the
+/// axis, the limits and the line; inside, the plan is the one without the travel.
+#[test]
+fn a_path_outside_the_machines_travel_is_refused() {
+    let dir = scratch_dir("nurbs-cli-travel");
+    let sim = std::fs::read_to_string(common::root().join("halfiles/sim.ini")).unwrap();
+    let ini = |y_max: f64| {
+        let path = dir.join(format!("travel-{y_max}.ini"));
+        let text = sim.replace(
+            "[AXIS_Y]\n",
+            &format!("[AXIS_Y]\nMIN_LIMIT = -1\nMAX_LIMIT = {y_max}\n"),
+        );
+        assert!(text.contains("MAX_LIMIT"));
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let plan = |toolpath: &Path, ini: &Path| {
+        bin()
+            .arg("plan")
+            .arg(toolpath)
+            .arg("--ini")
+            .arg(ini)
+            .arg("--out")
+            .arg(dir.join("out.csv"))
+            .output()
+            .unwrap()
+    };
+    // The trident's control points reach Y 27.
+    let o = plan(&example("trident.json"), &ini(20.0));
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("leaves the machine's travel: Y -1 .. 20 mm") && err.contains("MIN_LIMIT/MAX_LIMIT"),
+        "{err}"
+    );
+    assert!(plan(&example("trident.json"), &ini(30.0)).status.success());
+    // A G-code program that leaves it on its fourth line: refused, naming the file and axis.
+    let ngc = dir.join("leaves.ngc");
+    std::fs::write(&ngc, "G21 G90\nG0 X0 Y0\nG1 X10 Y0 F6000\nG1 X10 Y50\nG1 X0 Y0\nM2\n").unwrap();
+    let o = plan(&ngc, &ini(30.0));
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("leaves.ngc") && err.contains("travel: Y"), "{err}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `nurbs-plan plan --planner vpop` writes a CSV that `nurbs-plan verify` accepts, and rejects
 /// against a tighter jerk limit; a two-curve toolpath is planned on the XYZAC machine
 /// (columns t,u,x,y,z,a,c,tip_x,tip_y,tip_z,feed,element) and verified per joint.

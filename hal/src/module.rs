@@ -144,7 +144,7 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
     engaged: bool, Out, "engaged", "",
         "hand-over: the drives follow our path (wire to `enable`: the path moves only while engaged)";
     handover_refused: u32, Out, "handover-refused", "",
-        "hand-over: why `engage` (or its release) is not carried out: 0 none, 1 machine off, 2 no path loaded, 3 not at rest, 4 our start is elsewhere, 5 offset left (release)";
+        "hand-over: why `engage` (or its release) is not carried out: 0 none, 1 machine off (or switched off since the request: `engage` must go false first), 2 no path loaded, 3 not at rest, 4 our start is elsewhere, 5 offset left (release)";
     j0_pos_cmd: f64, In, "joint.0.pos-cmd", "mm", "hand-over: motion's `joint.0.pos-cmd` (X)";
     j0_motor_pos_cmd: f64, In, "joint.0.motor-pos-cmd", "mm", "hand-over: motion's `joint.0.motor-pos-cmd`";
     j0_drive_fb: f64, In, "joint.0.drive-fb", "mm", "hand-over: the drive's position feedback (motor coordinates)";

@@ -82,6 +82,9 @@ pub struct Outputs {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Handover {
     engaged: bool,
+    /// Released by the machine switched off: `engage` must go false before it counts again (an
+    /// old request must not take the drives when the machine comes back).
+    rearm: bool,
     offset: [f64; JOINTS],
     last_pos_cmd: Option<[f64; JOINTS]>,
 }
@@ -90,6 +93,7 @@ impl Handover {
     pub const fn new() -> Handover {
         Handover {
             engaged: false,
+            rearm: false,
             offset: [0.0; JOINTS],
             last_pos_cmd: None,
         }
@@ -115,6 +119,7 @@ impl Handover {
             // Drives disabled: let motion take the drives' feedback (it re-syncs while disabled).
             self.engaged = false;
             self.offset = [0.0; JOINTS];
+            self.rearm = true;
             machine_off = true;
             return Outputs {
                 drive_cmd: i.drive_fb,
@@ -136,7 +141,11 @@ impl Handover {
                     refused = Refusal::OffsetLeft;
                 }
             }
-        } else if i.engage {
+        } else if !i.engage {
+            self.rearm = false;
+        } else if self.rearm {
+            refused = Refusal::MachineOff;
+        } else {
             refused = match i.ours {
                 _ if !i.machine_on => Refusal::MachineOff,
                 None => Refusal::NoPath,
@@ -281,6 +290,24 @@ mod tests {
         let o = h.step(&i);
         assert!(o.machine_off && !o.engaged);
         assert_eq!((o.drive_cmd, h.motor_pos_fb(&i.drive_fb)), (i.drive_fb, i.drive_fb));
+    }
+
+    #[test]
+    fn after_machine_off_an_old_request_does_not_engage_again() {
+        let mut h = Handover::new();
+        let start = [0.0; 3];
+        h.step(&inputs(true, start, start));
+        assert!(h.step(&inputs(true, start, start)).engaged);
+        let mut off = inputs(true, start, start);
+        off.machine_on = false;
+        assert!(h.step(&off).machine_off);
+        // On again, `engage` still high from before: refused until it has been low.
+        for _ in 0..3 {
+            let o = h.step(&inputs(true, start, start));
+            assert!(!o.engaged && o.refused == Refusal::MachineOff);
+        }
+        h.step(&inputs(false, start, start));
+        assert!(h.step(&inputs(true, start, start)).engaged);
     }
 
     #[test]

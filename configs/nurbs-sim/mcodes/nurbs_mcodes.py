@@ -18,7 +18,7 @@ _component.ready()
 
 # Values of nurbs_interp.handover-refused.
 REFUSALS = {
-    1: "the machine is off",
+    1: "the machine is off (or was switched off since the request)",
     2: "no toolpath is loaded",
     3: "the machine is not at rest",
     4: "the machine does not stand at the toolpath's start",
@@ -53,6 +53,21 @@ def p_word():
         fail(f"{os.path.basename(sys.argv[0])} needs a P word (the toolpath's number)")
 
 
+# nurbs-planner's messages (M101 starts it with its standard error here; the last line says
+# why it refused or stopped).
+PLANNER_LOG = os.path.join(os.environ.get("TMPDIR", "/tmp"), "nurbs-planner.log")
+
+
+def planner_said():
+    """The planner's last message, for an error shown in LinuxCNC."""
+    try:
+        with open(PLANNER_LOG) as f:
+            lines = [line.strip() for line in f if line.strip()]
+        return lines[-1] if lines else "(no message)"
+    except OSError as e:
+        return f"(its log {PLANNER_LOG}: {e})"
+
+
 def pin(name):
     return hal.get_value(f"nurbs_interp.{name}")
 
@@ -85,7 +100,10 @@ def abort_on_signal():
 
     def handler(signum, frame):
         set_pin("abort", True)
-        log("aborted: nurbs_interp stops on the path")
+        # Release as soon as that is possible without a step: when motion stands where our path
+        # stopped, or (the usual way out) at once when the machine is switched off.
+        set_pin("engage", False)
+        log("aborted: nurbs_interp stops on the path; switch the machine off and on to give motion the drives' position")
         sys.exit(1)
 
     signal.signal(signal.SIGINT, handler)

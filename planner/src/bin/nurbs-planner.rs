@@ -54,8 +54,7 @@ use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
 /// the same tolerance (and `verify` checks), its first element read.
 fn open_path(args: &Args) -> Result<PathCurves, String> {
-    let mut stream =
-        open(&args.toolpath, args.round_corners, args.limits.chord_tolerance()?).map_err(|e| e.to_string())?;
+    let mut stream = open(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
     PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())
 }
 
@@ -197,8 +196,7 @@ fn run(args: &Args) -> Result<&'static str, String> {
     let (path, tip) = match args.planner {
         PlannerKind::Erwinski => (PathSource::Stream, open_path(args)?.tip_dim()),
         PlannerKind::Vpop => {
-            let prepared = prepare(&args.toolpath, args.round_corners, args.limits.chord_tolerance()?)
-                .map_err(|e| e.to_string())?;
+            let prepared = prepare(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
             feed::check_tip_path(&prepared.toolpath)?;
             let tip = prepared.toolpath.tip_dim();
             (PathSource::Whole(Arc::new(prepared.toolpath)), tip)

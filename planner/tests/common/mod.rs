@@ -10,6 +10,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use nurbs_cli::corners::{prepare, RoundCorners};
+use nurbs_cli::LimitArgs;
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::mock::{self, Value};
 use nurbs_hal::module::{rtapi_app_exit, rtapi_app_main};
@@ -174,9 +175,17 @@ pub fn lab1(tip: usize) -> Limits {
     limits
 }
 
+/// Limit flags with only the chord tolerance (what the path's preparation needs).
+pub fn chord_tolerance(tolerance: f64) -> LimitArgs {
+    LimitArgs {
+        chord_tol: Some(tolerance),
+        ..LimitArgs::default()
+    }
+}
+
 /// The job of a bundled example.
 pub fn job(name: &str) -> Job {
-    let prepared = prepare(&examples().join(name), RoundCorners::Auto, 0.001).unwrap();
+    let prepared = prepare(&examples().join(name), RoundCorners::Auto, &chord_tolerance(0.001)).unwrap();
     job_of(prepared.toolpath)
 }
 

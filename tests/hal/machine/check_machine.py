@@ -12,6 +12,11 @@
   finite differences stay within the axis velocity, acceleration and jerk (relative slack 1e-6);
   during the catch-up move (path done, still engaged) the drive stands still while motion's
   command moves to the path's end;
+- with --action abort: one engagement whose setpoints are the plan's for at least 0.25 s, then
+  the stop on the path (checked by `verify`), the drive within every limit to the end of the
+  recording (machine off and on included); with --action estop: the drive never steps (its
+  position; the drives are off, what they do then is theirs) and stands still after the E-stop;
+  either way LinuxCNC takes the drives' position, homed;
 - following error (motion's joint.N.f-error): 0 (1e-9) while engaged, and within one period of
   the largest velocity (the simulated drive's lag) everywhere (motion compares the feedback with
   its command of the period before, so with this drive it sees 0 there too).
@@ -56,6 +61,8 @@ def main():
         ap.add_argument(flag, required=True)
     ap.add_argument("--offline", action="append", required=True, help="each toolpath's offline plan, in order")
     ap.add_argument("--recorded-csv", action="append", required=True, help="where to write each one's setpoints")
+    ap.add_argument("--action", choices=("abort", "estop", "travel"),
+                    help="the run was aborted or E-stopped mid-path, or its first toolpath leaves the travel")
     a = ap.parse_args()
     vmax, amax, jmax, T = ini_limits(a.ini)
     with open(a.result) as f:
@@ -65,8 +72,16 @@ def main():
     fail = errors.append
 
     # LinuxCNC's view.
+    expected_error = {"estop": "switched off during the toolpath",
+                      "travel": "toolpath 1 (trident.json) refused: "}.get(a.action)
     for e in result["errors"]:
-        fail(f"LinuxCNC error: {e}")
+        if not (expected_error and expected_error in e):
+            fail(f"LinuxCNC error: {e}")
+    said = [e for e in result["errors"] if a.action == "travel" and "leaves the machine's travel: Y" in e]
+    if a.action == "travel" and not said:
+        fail(f"no refusal naming the travel in LinuxCNC's errors: {result['errors']}")
+    elif a.action in ("abort", "estop") and not result.get("action_moving"):
+        fail(f"the {a.action} did not come while our path moved")
     if not all(result.get("homed", [])):
         fail(f"joints not homed at the end: {result.get('homed')}")
     offset = result["motor_offset"]
@@ -93,54 +108,72 @@ def main():
             windows[-1][1] = k
         else:
             windows.append([k, k])
-    if len(windows) != len(a.offline):
-        fail(f"engaged {len(windows)} times, {len(a.offline)} toolpaths expected")
+    expected = {None: len(a.offline), "travel": 0}.get(a.action, 1)
+    if len(windows) != expected:
+        fail(f"engaged {len(windows)} times, {expected} expected")
     if errors:
         report(errors)
+    if a.action == "travel":
+        if any(r["active"] for r in rows):
+            fail("refused, yet nurbs_interp produced setpoints")
+            report(errors)
+        print(f"ok: {len(rows)} periods; toolpath 1 refused before any motion: {said[0]}; "
+              f"motor offsets {offset}; homed, positions agree at the end")
+        return
     worst_ratio = [0.0, 0.0, 0.0]
     summary = []
     for (e0, e1), offline, recorded in zip(windows, a.offline, a.recorded_csv):
-        summary.append(check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail))
+        summary.append(check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail,
+                                    a.action))
     if errors:
         report(errors)
-    if max(moved for _, _, moved in summary) < 1.0:
+    if not a.action and max(moved for _, _, moved in summary) < 1.0:
         fail("no toolpath with a catch-up move of 1 mm or more")
 
     # Following error as motion sees it.
     fe_engaged = max(abs(f) for k in engaged for f in rows[k]["ferror"])
     fe_all = max(abs(f) for r in rows for f in r["ferror"])
+    if a.action:
+        # Released by the machine switched off, motion's feedback steps to the drives' position
+        # (by the offset) while motion is disabled and re-syncs to it: its error is moot there.
+        fe_all = max(abs(f) for r in rows[: engaged[-1] + 1] for f in r["ferror"])
     if fe_engaged > 1e-9:
         fail(f"following error {fe_engaged:.3e} mm while engaged")
     if fe_all > max(vmax) * T * (1 + 1e-6):
         fail(f"following error {fe_all:.6g} mm > one period at the largest velocity")
     if errors:
         report(errors)
-    paths = "; ".join(f"{n} setpoints = offline plan, catch-up {moved:.3f} mm in {c} periods with the drive still"
-                      for n, c, moved in summary)
+    paths = "; ".join(text for text, _, _ in summary)
     print(f"ok: {len(rows)} periods; {paths}; drive v/a/jerk through the hand-overs at most "
           f"{worst_ratio[0]:.3f} / {worst_ratio[1]:.3f} / {worst_ratio[2]:.3f} of the limits; "
           f"following error at most {fe_engaged:.1e} mm while engaged, {fe_all:.1e} mm overall; "
           f"motor offsets {offset}; homed, positions agree at the end")
 
 
-def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail):
+def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail, action=None):
     """One engagement (periods e0..e1): its setpoints against the offline plan, the drive
-    following them, no step, the catch-up. Returns (setpoints, catch-up periods, catch-up mm)."""
+    following them, no step, the catch-up (or, after `action`, the stop and what follows).
+    Returns (what it saw, catch-up periods, catch-up mm)."""
     active = [k for k in range(e0, e1 + 1) if rows[k]["active"]]
     if not active or active[0] == e0:
         fail(f"engagement at {e0}: no setpoint, or one in the engaging period")
-        return (0, 0, 0.0)
+        return ("", 0, 0.0)
     with open(offline) as f:
         plan = list(csv.DictReader(f))
     axes = [c for c in "xyz" if c in plan[0]]
     ours = [rows[k] for k in active]
-    if len(ours) != len(plan):
-        fail(f"{offline}: {len(ours)} setpoints, the offline plan has {len(plan)}")
-    worst = 0.0
+    same = 0
     for r, p in zip(ours, plan):
-        worst = max(worst, max(abs(r["ours"][i] - float(p[c])) for i, c in enumerate(axes)))
-    if worst > 1e-9:
-        fail(f"{offline}: setpoints differ from the offline plan by {worst:.3e} mm")
+        if max(abs(r["ours"][i] - float(p[c])) for i, c in enumerate(axes)) > 1e-9:
+            break
+        same += 1
+    worst = 0.0 if same else float("inf")
+    if action:
+        if same < int(0.25 / T) or len(ours) >= len(plan):
+            fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all (plan {len(plan)}): "
+                 f"not a stop after 0.25 s or more of the plan")
+    elif same != len(plan) or len(ours) != len(plan):
+        fail(f"{offline}: {len(ours)} setpoints, the first {same} of them as the offline plan's {len(plan)}")
     with open(recorded, "w") as f:
         f.write("t,u," + ",".join(axes) + ",feed,element\n")
         for k, r in enumerate(ours):
@@ -153,8 +186,19 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
     if follow > 1e-9:
         fail(f"{offline}: engaged, the drive command is off our position by {follow:.3e} mm")
 
-    # No step: finite differences of the drive command around and through the hand-over.
+    # No step: finite differences of the drive command around and through the hand-over (after
+    # an abort to the end of the recording; after an E-stop only up to it, and the position).
     lo, hi = max(e0 - 2, 3), min(e1 + 3, len(rows) - 1)
+    if action == "abort":
+        hi = len(rows) - 1
+    if action == "estop":
+        hi = e1
+        moved = max(abs(rows[k]["drive"][i] - rows[k - 1]["drive"][i]) / T for k in range(e1, len(rows))
+                    for i in range(3))
+        still = max(abs(rows[k]["drive"][i] - rows[e1 + 1]["drive"][i]) for k in range(e1 + 1, len(rows))
+                    for i in range(3))
+        if moved > max(vmax) * (1 + 1e-6) or still > 1e-9:
+            fail(f"E-stop: the drive command stepped ({moved:.6g} mm/s) or moved after it ({still:.3e} mm)")
     for k in range(lo, hi + 1):
         for i in range(3):
             d = [rows[k - m]["drive"][i] for m in range(4)]
@@ -166,6 +210,8 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
                 if abs(x) > lim * (1 + 1e-6):
                     fail(f"period {k}, joint {i}: drive {['velocity', 'acceleration', 'jerk'][n]} "
                          f"{x:.6g} exceeds {lim:g}")
+    if action:
+        return (f"{len(ours)} setpoints, the first {same} as planned, then the {action}", 0, 0.0)
     # The catch-up move: from the path's last setpoint to the release, the drive stands still
     # while motion's command goes to the path's end.
     catch_up = range(active[-1] + 1, e1 + 1)
@@ -177,7 +223,8 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
         fail(f"{offline}: the drive moved by {still:.3e} mm during the catch-up move")
     if arrived > 1e-6:
         fail(f"{offline}: released with motion {arrived:.3e} mm from the path's end")
-    return (len(ours), len(catch_up), moved)
+    return (f"{len(ours)} setpoints = offline plan, catch-up {moved:.3f} mm in {len(catch_up)} periods "
+            "with the drive still", len(catch_up), moved)
 
 
 def report(errors):
