@@ -6,7 +6,7 @@ use nurbs_motion::planner::axial::{FiniteDifferences, MAX_AXES};
 use nurbs_motion::planner::corner::{Deviation, ProgramPolyline};
 use nurbs_motion::planner::simulate::{run_segment, setpoints_with, Interpolation, SimState};
 use nurbs_motion::planner::{FinalRecord, PathCurves, PlanOptions, Planner};
-use nurbs_rtcore::executor::Sample;
+use nurbs_rtcore::interpolator::Sample;
 use std::io::Write;
 use std::path::Path;
 

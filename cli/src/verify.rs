@@ -146,7 +146,7 @@ fn run_five_axis(
     let names = machine.joint_names();
     use nurbs_motion::planner::axial::FiniteDifferences;
     use nurbs_motion::planner::verify::SLACK;
-    use nurbs_rtcore::executor::CurveSet;
+    use nurbs_rtcore::interpolator::CurveSet;
     let toolpath = &prepared.toolpath;
     let joint_limits = limits.limits(5)?;
     let joints = read_columns(setpoints, &names)?;

@@ -4,7 +4,7 @@
 //! `rtapi_app_main`, zeroed by RTAPI) and lays a [`Channel`] over it; the planner attaches to the
 //! same key and checks the header before writing. The block holds a single-producer /
 //! single-consumer ring of fixed-size tagged [`Slot`]s (a segment record with the stop after
-//! it, or a [`crate::record::PathBlock`]): the planner only advances `head`, the module only
+//! it, or a [`crate::slot::PathBlock`]): the planner only advances `head`, the module only
 //! advances `tail`, each with release ordering after touching a slot and acquire ordering
 //! before reading the other side's counter. No locks, no syscalls, no allocation.
 //!
@@ -29,7 +29,7 @@ use core::sync::atomic::{fence, AtomicU32, AtomicU64, Ordering};
 
 use nurbs_rtcore::{CurveView, ValuesChecked};
 
-pub use crate::record::{PathBlock, Record, SegmentRecord, SegmentSlot, Slot};
+pub use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, Slot};
 
 /// RTAPI shared-memory key of the channel ("NRB0").
 pub const CHANNEL_KEY: i32 = 0x4E52_4230;

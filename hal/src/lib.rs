@@ -7,7 +7,7 @@
 //!   locks, calls the OS or panics. The crate is `no_std` without `alloc` (except under the
 //!   mock HAL of the tests), so the build itself proves that nothing here allocates; the
 //!   module's shared object is the `nurbs-interp` staticlib (`hal/module/`).
-//! * [`channel`] and [`record`]: the shared-memory layout the userspace planner
+//! * [`channel`] and [`slot`]: the shared-memory layout the userspace planner
 //!   (`nurbs-planner`, crate `planner/`) writes and the module reads.
 //!
 //! The C API is reached through [`sys`] only: the committed bindgen output ([`bindings`]) in a
@@ -25,5 +25,5 @@ pub mod channel;
 pub mod mock;
 pub mod module;
 pub mod pins;
-pub mod record;
+pub mod slot;
 pub mod sys;

@@ -51,8 +51,8 @@ use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
 
 use nurbs_rtcore::block_stop::{block_stop, step_fits};
-use nurbs_rtcore::executor::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::handover::{self, Handover};
+use nurbs_rtcore::interpolator::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::{CurveView, StopRun};
 
 use crate::channel::{
@@ -60,7 +60,7 @@ use crate::channel::{
     StopPoint, ValueCursor, CHANNEL_KEY,
 };
 use crate::pins::Pin;
-use crate::record::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
+use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
 use crate::sys;
 
 /// Component name: must equal the module's file name (`loadrt` dlopens `NAME.so`).
@@ -418,7 +418,7 @@ impl ChainCursor {
 
 /// Where the interpolator takes segment records from: the ring, a group at a time.
 struct SegmentSource<'a> {
-    ring: &'a crate::channel::SpscRing<crate::record::Slot, { crate::channel::SEGMENT_SLOTS }>,
+    ring: &'a crate::channel::SpscRing<crate::slot::Slot, { crate::channel::SEGMENT_SLOTS }>,
     geometry: &'a RtGeometry,
     /// Take nothing more at a group's end.
     no_more: bool,

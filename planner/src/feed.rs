@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use crate::writer::{GeometryWriter, Release, WriteError};
 use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
-use nurbs_hal::record::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
+use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
@@ -26,7 +26,7 @@ use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
 use nurbs_motion::planner::{FinalRecord, Limits, PathCurves, PlanOptions, Planner};
 use nurbs_rtcore::block_stop::block_stop;
-use nurbs_rtcore::executor::{Interpolator, Step};
+use nurbs_rtcore::interpolator::{Interpolator, Step};
 use nurbs_rtcore::{CachedCurve, SpanCache, StopRun};
 
 /// Where a plan from the module's stop point starts: there, or where the machine stands at

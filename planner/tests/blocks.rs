@@ -235,7 +235,7 @@ fn bad_blocks_are_refused_with_the_position_held() {
     while let Ok(Some(slot)) = l.channel.segments.pop() {
         queue.push(slot);
     }
-    queue[0].kind = nurbs_hal::record::KIND_SEGMENT;
+    queue[0].kind = nurbs_hal::slot::KIND_SEGMENT;
     for q in &queue {
         l.channel.segments.push(q).unwrap();
     }

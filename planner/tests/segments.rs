@@ -11,7 +11,7 @@ use common::*;
 use nurbs_hal::channel::Slot;
 use nurbs_hal::mock;
 use nurbs_hal::module::FaultCode;
-use nurbs_hal::record::{SegmentSlot, KIND_BLOCK};
+use nurbs_hal::slot::{SegmentSlot, KIND_BLOCK};
 use nurbs_hal::sys;
 use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{plan_groups, Source, Streamer};

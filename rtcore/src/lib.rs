@@ -11,14 +11,14 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod block_stop;
-pub mod executor;
 pub mod handover;
-pub mod interp;
+pub mod interpolator;
 pub mod math;
 pub mod nurbs;
 pub mod records;
 pub mod scurve;
 pub mod span_cache;
+pub mod step_methods;
 
 pub use math::Vector;
 pub use nurbs::{

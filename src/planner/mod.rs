@@ -17,7 +17,7 @@ pub use limits::{Limits, LimitsError};
 
 use crate::geometry::{PathElement, Toolpath};
 use crate::readers::{ElementStream, ReadError};
-use nurbs_rtcore::executor::CurveSet;
+use nurbs_rtcore::interpolator::CurveSet;
 use nurbs_rtcore::CurveView;
 use window::Window;
 

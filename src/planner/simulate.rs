@@ -3,8 +3,8 @@
 use super::axial::FiniteDifferences;
 use super::{Limits, PathCurves};
 use crate::geometry::{ArcLengthTable, Nurbs, Toolpath};
-use nurbs_rtcore::executor::{Interpolator, Sample, Step};
-use nurbs_rtcore::interp::{fcp_eval, sot_step, tot_step, PathCursor};
+use nurbs_rtcore::interpolator::{Interpolator, Sample, Step};
+use nurbs_rtcore::step_methods::{fcp_eval, sot_step, tot_step, PathCursor};
 use nurbs_rtcore::SegmentRecord;
 use nurbs_rtcore::{CachedCurve, SpanCache};
 

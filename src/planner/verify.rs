@@ -78,7 +78,7 @@ impl<'a> Verifier<'a> {
     }
 
     pub fn push(&mut self, r: &Row) {
-        use nurbs_rtcore::executor::CurveSet;
+        use nurbs_rtcore::interpolator::CurveSet;
         let (limits, tip) = (self.limits, self.tip);
         self.report.rows += 1;
         self.fd.push(&r.q, limits);
@@ -134,7 +134,7 @@ impl<'a> Verifier<'a> {
     }
 
     pub fn finish(mut self) -> Report {
-        use nurbs_rtcore::executor::CurveSet;
+        use nurbs_rtcore::interpolator::CurveSet;
         let (limits, tip) = (self.limits, self.tip);
         let mut report = std::mem::take(&mut self.report);
         let (Some(_), Some(last_row)) = (self.first.take(), self.prev.take()) else {

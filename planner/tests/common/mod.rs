@@ -20,7 +20,7 @@ use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{plan_groups, SegmentGroup, Source, Streamer};
 use nurbs_planner::hal_user::Component;
-use nurbs_rtcore::executor::Sample;
+use nurbs_rtcore::interpolator::Sample;
 
 pub mod test_paths;
 

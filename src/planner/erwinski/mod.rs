@@ -17,7 +17,7 @@ use super::{Limits, LimitsError, PathCurves};
 use crate::geometry::Toolpath;
 use flf::CriticalPoint;
 use nodes::{Node, NodeStream};
-use nurbs_rtcore::executor::CurveSet;
+use nurbs_rtcore::interpolator::CurveSet;
 use nurbs_rtcore::records::FLAG_LAST;
 use nurbs_rtcore::scurve::SCurve;
 use nurbs_rtcore::SegmentRecord;
@@ -951,7 +951,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     // sagitta of a smooth arc peaks), with 10 % kept for the exact check.
     let mut chord_ratio: f64 = 0.0;
     let tip = ctx.limits.velocity.len();
-    let mut prev: Option<nurbs_rtcore::executor::Sample> = from.last_sample;
+    let mut prev: Option<nurbs_rtcore::interpolator::Sample> = from.last_sample;
     let last_sample = Cell::new(from.last_sample);
     let eps = CHORD_MARGIN * ctx.limits.chord_tolerance;
     let (period, feed) = (ctx.limits.period, ctx.limits.feed);
@@ -959,7 +959,7 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
     let mut count = 0usize;
     let mut probe_spans = nurbs_rtcore::SpanCache::new();
     let mut grid_hint = 0usize;
-    let sink = &mut |s: &nurbs_rtcore::executor::Sample| {
+    let sink = &mut |s: &nurbs_rtcore::interpolator::Sample| {
         if let Some(p) = prev {
             let mut ratio = 0.0f64;
             let mut step2 = 0.0;
@@ -1008,8 +1008,8 @@ fn trial(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64, up: Ramp, down
         // As the interpolator places itself there (its evaluation does not depend on its cache).
         let mut spans = nurbs_rtcore::SpanCache::new();
         let curve = &mut nurbs_rtcore::CachedCurve::new(view, &mut spans);
-        let cursor = nurbs_rtcore::interp::PathCursor::at(curve, tip, node.start_u, node.start_s);
-        let at_node = nurbs_rtcore::executor::Sample {
+        let cursor = nurbs_rtcore::step_methods::PathCursor::at(curve, tip, node.start_u, node.start_s);
+        let at_node = nurbs_rtcore::interpolator::Sample {
             curve: node.start_curve,
             u: cursor.u,
             s: cursor.s,
@@ -1070,7 +1070,7 @@ fn quick_with_margin(
     margin: f64,
 ) -> Option<Estimate> {
     let profile = fit_ramps(v0, v1, ctx.length, ctx.peak_cap, up, down).ok()?;
-    // Local time of the segment's first sample (0 from rest at a stop, see the executor).
+    // Local time of the segment's first sample (0 from rest at a stop, see the interpolator).
     let t_first = match from.interp.record() {
         Some(_) if !from.interp.ends_at_rest() => ctx.limits.period - from.interp.time_left_in_segment(),
         _ => 0.0,
@@ -1095,8 +1095,8 @@ fn quick_with_margin(
 fn sagitta(
     curve: &mut nurbs_rtcore::CachedCurve,
     tip: usize,
-    a: &nurbs_rtcore::executor::Sample,
-    b: &nurbs_rtcore::executor::Sample,
+    a: &nurbs_rtcore::interpolator::Sample,
+    b: &nurbs_rtcore::interpolator::Sample,
     eps: f64,
 ) -> f64 {
     let mut probe =

@@ -29,7 +29,7 @@ use super::{PlanOptions, PlanStart, FEED_HEADROOM};
 use crate::geometry::ArcLengthTable;
 use crate::planner::window::Window;
 use crate::planner::{Limits, PathCurves};
-use nurbs_rtcore::executor::Derivs;
+use nurbs_rtcore::interpolator::Derivs;
 use nurbs_rtcore::math::{dot, norm, sub};
 use nurbs_rtcore::CurveView;
 use std::collections::VecDeque;

@@ -6,11 +6,11 @@
 //! parameter. The planner runs this very code to check its plan, so what the servo thread
 //! produces is what was checked.
 
-use crate::interp::{rk2pc_step, PathCursor};
 use crate::nurbs::CurveView;
 use crate::records::SegmentRecord;
 use crate::scurve::SCurveTable;
 use crate::span_cache::{CachedCurve, SpanCache};
+use crate::step_methods::{rk2pc_step, PathCursor};
 use crate::Vector;
 
 pub use crate::nurbs::Derivatives as Derivs;
@@ -58,7 +58,7 @@ pub enum Step {
 /// a 1 ms period as the servo thread runs it:
 ///
 /// ```
-/// use nurbs_rtcore::executor::{CurveSet, Interpolator, Step};
+/// use nurbs_rtcore::interpolator::{CurveSet, Interpolator, Step};
 /// use nurbs_rtcore::records::FLAG_LAST;
 /// use nurbs_rtcore::{CurveView, SegmentRecord};
 ///
