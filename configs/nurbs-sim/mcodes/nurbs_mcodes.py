@@ -90,7 +90,12 @@ def wait_until(condition, timeout, what, poll=0.005):
 def positions():
     """Our position and motion's, for messages."""
     ours = [pin(f"pos-cmd-{a}") for a in "xyz"]
-    motion = [hal.get_value(f"joint.{j}.pos-cmd") for j in range(3)]
+    motion = []
+    for j in range(3):
+        try:
+            motion.append(hal.get_value(f"joint.{j}.pos-cmd"))
+        except RuntimeError:  # a machine with fewer joints
+            break
     fmt = lambda p: "(" + ", ".join(f"{v:.6f}" for v in p) + ")"
     return f"toolpath at {fmt(ours)}, motion at {fmt(motion)}"
 

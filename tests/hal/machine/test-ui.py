@@ -42,12 +42,13 @@ def wait(cond, timeout, what):
 def finish():
     drain()
     s.poll()
-    result["homed"] = list(s.homed[:3])
-    result["position"] = list(s.position[:3])  # motion's commanded position (machine coordinates)
-    result["actual"] = list(s.actual_position[:3])
-    result["joint_pos_cmd"] = [hal.get_value(f"joint.{j}.pos-cmd") for j in range(3)]
-    result["motor_offset"] = [hal.get_value(f"joint.{j}.motor-offset") for j in range(3)]
-    result["drive"] = [hal.get_value(f"nurbs_interp.joint.{j}.drive-cmd") for j in range(3)]
+    joints = range(s.joints)
+    result["homed"] = list(s.homed[: s.joints])
+    result["position"] = list(s.position[: s.joints])  # motion's commanded position (machine coordinates)
+    result["actual"] = list(s.actual_position[: s.joints])
+    result["joint_pos_cmd"] = [hal.get_value(f"joint.{j}.pos-cmd") for j in joints]
+    result["motor_offset"] = [hal.get_value(f"joint.{j}.motor-offset") for j in joints]
+    result["drive"] = [hal.get_value(f"nurbs_interp.joint.{j}.drive-cmd") for j in joints]
     result["engaged"] = hal.get_value("nurbs_interp.engaged")
     result["task_state"] = s.task_state
     with open(os.environ["NURBS_TEST_RESULT"], "w") as f:
@@ -64,7 +65,7 @@ if not wait(lambda: s.task_state == linuxcnc.STATE_ON, 10, "machine on"):
 c.mode(linuxcnc.MODE_MANUAL)
 c.wait_complete()
 c.home(-1)
-if not wait(lambda: all(s.homed[:3]), 30, "homing"):
+if not wait(lambda: s.joints > 0 and all(s.homed[: s.joints]), 30, "homing"):
     finish()
 c.mode(linuxcnc.MODE_AUTO)
 c.wait_complete()
