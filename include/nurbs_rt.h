@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 10
+#define CHANNEL_VERSION 11
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into
@@ -80,6 +80,11 @@
  * [`Slot::kind`] of a [`PathBlock`].
  */
 #define KIND_BLOCK 2
+
+/**
+ * Most checked hold stops one record may carry.
+ */
+#define MAX_HOLD_STOPS (1 << 16)
 
 /**
  * Arena values of the header.
@@ -232,6 +237,14 @@ typedef struct SegmentSlot {
    */
   uint32_t chain_offset;
   uint32_t chain_len;
+  /**
+   * Checked stops inside this record, for a hold or abort that should not wait for the
+   * group's end: `hold_stops_len` triples (motion sample index, deceleration, jerk) in the
+   * arena from value `hold_stops_offset`. At that sample the module may switch to the stop
+   * [`nurbs_rtcore::block_stop::stop_record`] builds from it; the planner checked exactly that.
+   */
+  uint32_t hold_stops_offset;
+  uint32_t hold_stops_len;
   uint32_t reserved;
 } SegmentSlot;
 

@@ -36,7 +36,7 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 10;
+pub const CHANNEL_VERSION: u32 = 11;
 /// Slots in the record ring (a power of two). A group of records that share one stop goes into
 /// the ring whole before the module takes its first record, so the longest group must fit.
 pub const SEGMENT_SLOTS: usize = 8192;
@@ -697,6 +697,8 @@ mod tests {
                 curve_needed: seq,
                 chain_offset: 3 * seq,
                 chain_len: seq % 5,
+                hold_stops_offset: 7 * seq,
+                hold_stops_len: seq % 3,
                 reserved: 0,
             })
         }

@@ -18,14 +18,15 @@
 //! last record of a group carries the stop after it: the next segment re-planned by the planner
 //! to end at rest, checked by finite differences like every segment of the plan and with the
 //! machine holding at its end. The module takes the first record of a group only once the whole
-//! group is queued on checked curves; so an underrun (the next group is not there in time), a
-//! hold or an abort all happen at a group's end, and the module runs that stop record through
-//! the same interpolator: no jump, within the axis limits by the planner's own check, and no
-//! stop checks of its own. The price is that a hold or abort takes effect at the next group end
-//! (on the bundled curves a group is at most about 1 s of motion; on dense G1 programs of tiny
-//! segments, where no single segment can stop, groups are longer), and a hold during the last
-//! group lets the motion end at C(1). Afterwards the module holds that position; records
-//! arriving later are not run (they were planned from a feed the machine no longer has).
+//! group is queued on checked curves; so an underrun (the next group is not there in time) stops
+//! at a group's end, with that stop, through the same interpolator: no jump, within the axis
+//! limits by the planner's own check, and no stop checks of its own. A hold or abort need not
+//! wait for the group's end: records also carry stops the planner checked inside them (every
+//! 20 samples where one passes, `nurbs_planner::hold_stops`), each an S-curve to rest from the
+//! exact sample it starts at, which the module builds with the same function
+//! ([`stop_record`]) at that sample. A hold during the last group with no such stop left lets
+//! the motion end at C(1). Afterwards the module holds that position; records arriving later
+//! are not run (they were planned from a feed the machine no longer has).
 //!
 //! Resume (after a hold or an underrun): at rest, the module publishes where it stands in the
 //! channel ([`crate::channel::StopStatus`]: cause, element, parameter `u`, arc length `s`,
@@ -50,7 +51,7 @@ use core::ffi::{c_int, c_long, c_void, CStr};
 use core::ptr::{self, addr_of_mut};
 use core::sync::atomic::{AtomicI32, Ordering};
 
-use nurbs_rtcore::block_stop::{block_stop, step_fits};
+use nurbs_rtcore::block_stop::{block_stop, step_fits, stop_record, StopStart};
 use nurbs_rtcore::handover::{self, Handover};
 use nurbs_rtcore::interpolator::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::{CurveView, StopRun};
@@ -109,7 +110,7 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
     enable: bool, In, "enable", "",
         "run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine)";
     hold: bool, In, "hold", "",
-        "feed hold: at the end of the current group of records, the planner's stop to rest on the path; released, the plan from the stop point runs";
+        "feed hold: the planner's next checked stop to rest on the path (inside the record, every 5 ms where one passes, else at the end of the group); released, the plan from the stop point runs";
     abort: bool, In, "abort", "",
         "stop as for hold, then discard the queue; the motion is over until a planner begins a new stream";
     resume: bool, In, "resume", "",
@@ -378,6 +379,8 @@ pub struct Instance {
     start_shown: bool,
     /// Between motion's joints and the drives.
     handover: Handover,
+    /// Samples of segment records output in this motion (the index hold stops refer to).
+    samples: u64,
 }
 
 /// Where the rest of a stop chain is read ([`SegmentSlot::chain_offset`]).
@@ -884,6 +887,7 @@ impl Instance {
         self.stopped = false;
         self.aborted = false;
         self.start_shown = false;
+        self.samples = 0;
     }
 
     /// The stopped (or aborted) motion is over: nothing of it resumes.
@@ -961,7 +965,21 @@ impl Instance {
                     self.resuming = false;
                     self.held = None;
                 }
-                self.output(&s)
+                if !self.output(&s) {
+                    return false;
+                }
+                let n = self.samples;
+                self.samples = self.samples.wrapping_add(1);
+                if (hold || abort) && !self.stopping {
+                    // A checked stop inside the record at this very sample: take it now rather
+                    // than at the group's end.
+                    match hold_stop_at(&self.slot, self.geometry.values(), n) {
+                        Ok(Some((accel, jerk))) => self.stop_here(&s, accel, jerk, hold, abort),
+                        Ok(None) => {}
+                        Err(code) => self.fault = code,
+                    }
+                }
+                true
             }
             (Step::Finished, _) => false,
             (Step::BadRecord, _) => {
@@ -1015,6 +1033,31 @@ impl Instance {
                 }
             }
         }
+    }
+
+    /// Stops from sample `s` (just output) with the checked deceleration and jerk of a hold stop
+    /// inside the current record ([`SegmentSlot::hold_stops_offset`]): the record the planner
+    /// simulated, started from that sample; nothing is taken from the ring any more.
+    fn stop_here(&mut self, s: &Sample, accel: f64, jerk: f64, hold: bool, abort: bool) {
+        let from = StopStart {
+            seq: self.slot.record.seq.wrapping_add(1),
+            flags: 0,
+            curve: u32::try_from(s.curve).unwrap_or(u32::MAX),
+            u: s.u,
+            s: s.s,
+            feed: s.feed,
+            accel: s.accel,
+        };
+        let (stop, a0) = stop_record(&from, accel, jerk);
+        if !self
+            .interp
+            .start_profile(&self.geometry, stop, stop.profile().table_from(a0))
+        {
+            self.fault = FaultCode::BadRecord;
+            return;
+        }
+        self.begin_stop(hold, abort);
+        self.chain = ChainCursor::default();
     }
 
     /// The stop is over: at rest on the path at `held`.
@@ -1377,6 +1420,38 @@ impl Instance {
     }
 }
 
+/// The deceleration and jerk of the checked hold stop of `slot` at motion sample `n`, if it has
+/// one there; `Err` if its hold stops are not valid arena data. At most
+/// [`crate::slot::MAX_HOLD_STOPS`] triples are read (checked when the slot was taken).
+fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
+    if slot.hold_stops_len == 0 {
+        return Ok(None);
+    }
+    let start = slot.hold_stops_offset as usize;
+    let end = (slot.hold_stops_len as usize)
+        .checked_mul(3)
+        .and_then(|len| start.checked_add(len))
+        .ok_or(FaultCode::Record)?;
+    let triples = values.get(start..end).ok_or(FaultCode::Record)?;
+    for t in triples.chunks_exact(3) {
+        if let [at, accel, jerk] = *t {
+            let valid = at >= 0.0
+                && libm::trunc(at) == at
+                && accel > 0.0
+                && jerk > 0.0
+                && accel.is_finite()
+                && jerk.is_finite();
+            if !valid {
+                return Err(FaultCode::Record);
+            }
+            if at == n as f64 {
+                return Ok(Some((accel, jerk)));
+            }
+        }
+    }
+    Ok(None)
+}
+
 /// True if `r` ends at rest (to rounding): the last record of a stop.
 fn ends_at_rest(r: &SegmentRecord) -> bool {
     r.profile().table().end().v <= FEED_ROUNDING
@@ -1500,6 +1575,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).position_known).write(false);
     addr_of_mut!((*inst).start_shown).write(false);
     addr_of_mut!((*inst).handover).write(Handover::new());
+    addr_of_mut!((*inst).samples).write(0);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),

@@ -51,8 +51,17 @@ pub struct SegmentSlot {
     /// pushed.
     pub chain_offset: u32,
     pub chain_len: u32,
+    /// Checked stops inside this record, for a hold or abort that should not wait for the
+    /// group's end: `hold_stops_len` triples (motion sample index, deceleration, jerk) in the
+    /// arena from value `hold_stops_offset`. At that sample the module may switch to the stop
+    /// [`nurbs_rtcore::block_stop::stop_record`] builds from it; the planner checked exactly that.
+    pub hold_stops_offset: u32,
+    pub hold_stops_len: u32,
     pub reserved: u32,
 }
+
+/// Most checked hold stops one record may carry.
+pub const MAX_HOLD_STOPS: u32 = 1 << 16;
 
 impl SegmentSlot {
     /// The stop after this record, if it has one.
@@ -68,6 +77,7 @@ impl SegmentSlot {
             && self.has_stop <= 1
             && (self.has_stop == 1) == (ends_group && !self.record.is_last())
             && (self.has_stop == 1 || self.chain_len == 0)
+            && self.hold_stops_len <= MAX_HOLD_STOPS
             && self.curve_needed >= self.record.curve
     }
 }
@@ -172,7 +182,7 @@ impl From<&PathBlock> for Slot {
 // The shared-memory layout is an ABI between two separately built programs: pin it.
 const _: () = assert!(core::mem::size_of::<SegmentRecord>() == 168);
 const _: () = assert!(core::mem::align_of::<SegmentRecord>() == 8);
-const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 360);
+const _: () = assert!(core::mem::size_of::<SegmentSlot>() == 368);
 const _: () = assert!(core::mem::size_of::<PathBlock>() == 328);
-const _: () = assert!(core::mem::size_of::<Slot>() == 368);
+const _: () = assert!(core::mem::size_of::<Slot>() == 376);
 const _: () = assert!(core::mem::align_of::<Slot>() == 8);

@@ -3,7 +3,8 @@
 //! The streamed Erwinski plan hands out its first group of records (the first records the
 //! module may take, with the stop after them) long before the plan ends: criterion's median of
 //! the time to that first group, on G1 programs of 200 and 2,000 lines (lab set 1), beside the
-//! whole plan of the 200-line program in the same process.
+//! whole streamed plan (records, stops, hold stops) of the 200-line program, the trident and
+//! the butterfly in the same process.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::planner::presets::named;
@@ -37,6 +38,17 @@ fn bench_start(c: &mut Criterion) {
     g.bench_function("whole plan (200 lines)", |b| {
         b.iter(|| plan_groups(&toolpath, &limits, None).unwrap().len())
     });
+    let toolpath = test_paths::dense_arc(2000);
+    g.bench_function("whole plan (dense G1, 2000 lines)", |b| {
+        b.iter(|| plan_groups(&toolpath, &limits, None).unwrap().len())
+    });
+    let examples = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+    for name in ["trident.json", "butterfly.json"] {
+        let toolpath = nurbs_motion::readers::read_toolpath(&examples.join(name)).unwrap();
+        g.bench_function(format!("whole plan ({name})"), |b| {
+            b.iter(|| plan_groups(&toolpath, &limits, None).unwrap().len())
+        });
+    }
     g.finish();
 }
 

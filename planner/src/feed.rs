@@ -16,6 +16,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Instant;
 
+use crate::hold_stops::HoldStops;
 use crate::writer::{GeometryWriter, Release, WriteError};
 use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
 use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
@@ -65,6 +66,10 @@ pub struct SegmentGroup {
     /// `first_curve`: they go into the geometry stream before the group into the ring.
     pub curves: Vec<Nurbs>,
     pub first_curve: u32,
+    /// Per slot, the checked stops inside its record ([`crate::hold_stops`]), as arena values:
+    /// they go into the arena before the group into the ring
+    /// ([`SegmentSlot::hold_stops_offset`]).
+    pub hold_stops: Vec<Vec<f64>>,
 }
 
 impl SegmentGroup {
@@ -78,17 +83,21 @@ impl SegmentGroup {
 #[derive(Default)]
 pub struct Grouper {
     run: Vec<FinalRecord>,
+    hold_stops: Vec<Vec<f64>>,
 }
 
 impl Grouper {
-    /// Takes the next final record; returns the group it completes, if it does.
-    pub fn push(&mut self, r: FinalRecord) -> Option<SegmentGroup> {
+    /// Takes the next final record, with the stops checked inside it; returns the group it
+    /// completes, if it does.
+    pub fn push(&mut self, r: FinalRecord, hold_stops: Vec<f64>) -> Option<SegmentGroup> {
         let ends = !r.stop.is_empty() || r.record.is_last();
         self.run.push(r);
+        self.hold_stops.push(hold_stops);
         if !ends {
             return None;
         }
         let run = std::mem::take(&mut self.run);
+        let hold_stops = std::mem::take(&mut self.hold_stops);
         let n = run.len();
         let stop = run.last().map_or(&[][..], |r| r.stop.as_slice());
         let mut needed = stop.iter().map(|s| s.curve).max().unwrap_or(0);
@@ -108,6 +117,8 @@ impl Grouper {
                 curve_needed: needed,
                 chain_offset: 0,
                 chain_len: r.stop.len().saturating_sub(1) as u32,
+                hold_stops_offset: 0,
+                hold_stops_len: (hold_stops[k].len() / 3) as u32,
                 reserved: 0,
             };
         }
@@ -118,6 +129,7 @@ impl Grouper {
             time,
             curves: Vec::new(),
             first_curve: 0,
+            hold_stops,
         })
     }
 }
@@ -168,6 +180,7 @@ pub fn stream_plan(
         }
     };
     let mut grouper = Grouper::default();
+    let mut hold_stops = HoldStops::new(limits);
     let (mut groups, mut longest) = (0usize, 0.0f64);
     // The curves of the group being collected, from `first_curve` on.
     let (mut first_curve, mut new_curves) = (next_curve as u32, Vec::new());
@@ -183,7 +196,8 @@ pub fn stream_plan(
                     new_curves.push(planner.curves().element(next_curve).curve.clone());
                     next_curve += 1;
                 }
-                if let Some(mut group) = grouper.push(record) {
+                let inside = hold_stops.after(&record.record, planner.curves());
+                if let Some(mut group) = grouper.push(record, inside) {
                     groups += 1;
                     longest = longest.max(group.time);
                     group.first_curve = first_curve;
@@ -824,19 +838,7 @@ fn stop_ratio(limits: &Limits, fd: FiniteDifferences, bound: f64, step: &mut dyn
 /// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the
 /// limit over the axis' share of the unit tangent.
 fn tangential_limits(curves: &PathCurves, limits: &Limits, b: &PathBlock) -> (f64, f64) {
-    let tip = limits.velocity.len();
-    let u = b.u[b.len().saturating_sub(1)];
-    let d = curves.view(b.curve()).derivatives(u, 1)[1];
-    let norm = d[..tip].iter().map(|x| x * x).sum::<f64>().sqrt();
-    let (mut a, mut j) = (f64::INFINITY, f64::INFINITY);
-    for ((di, ai), ji) in d.iter().zip(&limits.acceleration).zip(&limits.jerk).take(tip) {
-        let share = if norm > 0.0 { (di / norm).abs() } else { 1.0 };
-        if share > 0.0 {
-            a = a.min(ai / share);
-            j = j.min(ji / share);
-        }
-    }
-    (a.max(limits.min_accel()), j.max(limits.min_jerk()))
+    crate::hold_stops::tangential_limits(curves, limits, b.curve(), b.u[b.len().saturating_sub(1)])
 }
 
 /// Per curve, the points the module's stop after a path block must respect: where the VPOp plan
@@ -1041,6 +1043,10 @@ pub struct Group {
     written: usize,
     /// Segment records: the stop chain of the last slot, still to be written to the arena.
     chain: Option<Vec<f64>>,
+    /// Segment records: per slot, the checked stops inside it, and how many slots have theirs
+    /// written to the arena.
+    hold_stops: Vec<Vec<f64>>,
+    hold_stops_written: usize,
 }
 
 impl Source {
@@ -1296,6 +1302,8 @@ impl<'a> Streamer<'a> {
                     blocks: Vec::new(),
                     written: 0,
                     chain: (!g.chain.is_empty()).then_some(g.chain),
+                    hold_stops: g.hold_stops,
+                    hold_stops_written: 0,
                 }))
             }
             Source::Blocks { plan, next, .. } => {
@@ -1322,6 +1330,8 @@ impl<'a> Streamer<'a> {
                     blocks: range.collect(),
                     written: 0,
                     chain: None,
+                    hold_stops: Vec::new(),
+                    hold_stops_written: 0,
                 }))
             }
         }
@@ -1371,6 +1381,30 @@ impl<'a> Streamer<'a> {
             group.slots[last] = Slot::segment(&s);
         }
         group.chain = None;
+        Ok(true)
+    }
+
+    /// Writes the checked stops inside each record of a segment group into the arena and their
+    /// offsets into the slots; false if there is no room yet (what is written stays written).
+    fn write_hold_stops(&mut self, group: &mut Group) -> Result<bool, String> {
+        while group.hold_stops_written < group.hold_stops.len() {
+            let k = group.hold_stops_written;
+            if !group.hold_stops[k].is_empty() {
+                // Needed while the module runs this record.
+                let release = Release::Slot(self.pushed + k as u64);
+                let offset = match self.writer.put(&group.hold_stops[k], release) {
+                    Ok(offset) => offset,
+                    Err(WriteError::Full) => return Ok(false),
+                    Err(WriteError::Refused(e)) => return Err(e),
+                };
+                if let Some(Record::Segment(mut s)) = group.slots[k].decode() {
+                    s.hold_stops_offset = offset;
+                    group.slots[k] = Slot::segment(&s);
+                }
+                group.hold_stops[k] = Vec::new();
+            }
+            group.hold_stops_written += 1;
+        }
         Ok(true)
     }
 
@@ -1443,7 +1477,8 @@ impl<'a> Streamer<'a> {
             }
             let ready = self.publish_curves(group.curve_needed)?
                 && self.write_block_data(&mut group)?
-                && self.write_chain(&mut group)?;
+                && self.write_chain(&mut group)?
+                && self.write_hold_stops(&mut group)?;
             if !ready && self.writer.held_values() == 0 && self.channel.segments.is_empty() {
                 return Err("a group's curves and stops do not fit the channel's arena".into());
             }

@@ -9,4 +9,5 @@
 
 pub mod feed;
 pub mod hal_user;
+pub mod hold_stops;
 pub mod writer;

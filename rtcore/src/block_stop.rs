@@ -83,17 +83,48 @@ pub fn block_stop(points: &[f64], block: &PathBlock, dt: f64) -> (SegmentRecord,
             }
         }
     }
-    let p = profile(k);
     let last = block.len().saturating_sub(1);
     let u = block.u.get(last).copied().unwrap_or(0.0);
-    let record = SegmentRecord {
+    let from = StopStart {
         seq: block.seq,
         flags: block.flags & !FLAG_LAST,
         curve: block.curve,
+        u,
+        s: s0,
+        feed: v0,
+        accel: a0,
+    };
+    stop_record(&from, accel * k, jerk * k * k)
+}
+
+/// Where a stop starts: a sample of a running motion (its element, parameter, arc length, feed
+/// and tangential acceleration), and the sequence number and flags its record carries.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StopStart {
+    pub seq: u32,
+    pub flags: u32,
+    pub curve: u32,
+    pub u: f64,
+    pub s: f64,
+    pub feed: f64,
+    pub accel: f64,
+}
+
+/// The stop from `from` to rest along its element with deceleration `accel` and jerk `jerk`
+/// ([`stop_from`]), as a record and its start acceleration (for
+/// [`SCurve::table_from`](crate::SCurve::table_from)): what the module runs from a block end or,
+/// on a hold, from a checked point inside a segment, and what the planner checks.
+pub fn stop_record(from: &StopStart, accel: f64, jerk: f64) -> (SegmentRecord, f64) {
+    let a0 = from.accel;
+    let p = stop_from(from.feed, a0, accel, jerk);
+    let record = SegmentRecord {
+        seq: from.seq,
+        flags: from.flags,
+        curve: from.curve,
         reserved: 0,
-        u_start: u,
-        u_end: u,
-        s_start: s0,
+        u_start: from.u,
+        u_end: from.u,
+        s_start: from.s,
         length: p.table_from(a0).length().max(0.0),
         feed_start: p.feed_start,
         durations: p.durations,

@@ -1,0 +1,216 @@
+//! Checked stops inside segment records, so that a hold or abort need not wait for the end of
+//! the group.
+//!
+//! A group's stop is the only stop a record of the Erwinski plan carries, and a group may last
+//! up to a second (a single long line is one record). So the planner also checks stops inside
+//! the records, every [`HOLD_STOP_SPACING`] samples of the motion: it runs the module's own
+//! interpolator over the records in the order the module runs them (a replica, sample for
+//! sample the machine's), and at each such sample the stop that
+//! [`nurbs_rtcore::block_stop::stop_record`] builds from it (an S-curve to rest along the element
+//! from the sample's feed and tangential acceleration) is simulated through the same
+//! interpolator and checked by finite differences against the axis limits, continuing the
+//! motion's samples and holding at rest after it, as every stop of the plan is. The deceleration
+//! and jerk start just inside what the axes allow along the tangent there and are lowered
+//! until the stop passes, at most [`TRIES`] times (on a curve the centripetal terms leave less). A stop that would leave the
+//! element, or that does not pass, is not offered: the hold waits for the next one (or the
+//! group's end). The module, holding, switches to the first offered stop at or after the
+//! hold's edge, at exactly that sample.
+
+use nurbs_motion::geometry::ArcLengthTable;
+use nurbs_motion::planner::axial::FiniteDifferences;
+use nurbs_motion::planner::verify::SLACK;
+use nurbs_motion::planner::{Limits, PathCurves};
+use nurbs_rtcore::block_stop::{stop_record, StopStart};
+use nurbs_rtcore::interpolator::{Interpolator, Sample, Step};
+use nurbs_rtcore::SegmentRecord;
+
+/// Samples of motion between two checked hold stops: the longest a hold waits (5 ms at the
+/// 0.25 ms servo period), if the stop there passes.
+pub const HOLD_STOP_SPACING: u64 = 20;
+
+/// Stops tried at a sample: from the tangential limits, each next one with the deceleration
+/// times [`SOFTER`] and the jerk times its square.
+const TRIES: usize = 6;
+const SOFTER: f64 = 0.6;
+
+/// The first try aims this far inside the tangential limits: at the limits themselves the
+/// rounding of a third difference of positions far from the origin (1e-6 relative at 1 m and
+/// 0.25 ms) decides the check.
+const INSIDE: f64 = 1.0 - 1e-3;
+
+/// Below this feed (mm/s) the motion is as good as at rest: no stop is offered there.
+const MOVING: f64 = 1e-6;
+
+/// The replica of the module's motion and the stops checked along it.
+pub struct HoldStops {
+    replica: Interpolator,
+    /// Finite differences of the motion so far (the history a stop continues).
+    fd: FiniteDifferences,
+    /// Index of the motion's next sample.
+    samples: u64,
+    limits: Limits,
+    /// Arc length of the element the last stop was checked on (element, length).
+    element_length: Option<(usize, f64)>,
+}
+
+impl HoldStops {
+    pub fn new(limits: &Limits) -> HoldStops {
+        HoldStops {
+            replica: Interpolator::new(),
+            fd: FiniteDifferences::new(limits.velocity.len(), limits.period),
+            samples: 0,
+            limits: limits.clone(),
+            element_length: None,
+        }
+    }
+
+    /// Runs `record` (the motion's next) on the replica and returns the stops checked inside it,
+    /// as arena values: triples (motion sample index, deceleration, jerk).
+    pub fn after(&mut self, record: &SegmentRecord, curves: &PathCurves) -> Vec<f64> {
+        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
+        let mut pending = Some(*record);
+        let mut out = Vec::new();
+        loop {
+            match self.replica.step(curves, dt, &mut || pending.take()) {
+                Step::Sample(s) => {
+                    let n = self.samples;
+                    self.samples += 1;
+                    self.fd.push(&s.point[..tip], &self.limits);
+                    if n.is_multiple_of(HOLD_STOP_SPACING) && s.feed > MOVING {
+                        if let Some((accel, jerk)) = self.check(&s, record, curves) {
+                            out.extend([n as f64, accel, jerk]);
+                        }
+                    }
+                }
+                Step::Starved | Step::Finished | Step::BadRecord => return out,
+            }
+        }
+    }
+
+    /// The deceleration and jerk of a stop from sample `s` that stays on its element and within
+    /// the axis limits, if one of [`TRIES`] does.
+    fn check(&mut self, s: &Sample, record: &SegmentRecord, curves: &PathCurves) -> Option<(f64, f64)> {
+        let dt = self.limits.period;
+        let length = self.element_length(s.curve, curves)?;
+        let (accel, jerk) = tangential_limits(curves, &self.limits, s.curve, s.u);
+        let (mut accel, mut jerk) = (accel * INSIDE, jerk * INSIDE);
+        let from = StopStart {
+            seq: record.seq.wrapping_add(1),
+            flags: 0,
+            curve: s.curve as u32,
+            u: s.u,
+            s: s.s,
+            feed: s.feed,
+            accel: s.accel,
+        };
+        for _ in 0..TRIES {
+            if let Some(landed) = landing_jerk(&from, accel, jerk, dt) {
+                if self.passes(&from, accel, landed, length, curves) {
+                    return Some((accel, landed));
+                }
+            }
+            accel *= SOFTER;
+            jerk *= SOFTER * SOFTER;
+        }
+        None
+    }
+
+    /// Whether the stop from `from` with `accel` and `jerk` stays on its element (of arc length
+    /// `length`) and, continuing the motion's samples and held at rest after it, within the axis
+    /// limits.
+    fn passes(&self, from: &StopStart, accel: f64, jerk: f64, length: f64, curves: &PathCurves) -> bool {
+        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
+        let (stop, a0) = stop_record(from, accel, jerk);
+        // Room for rounding of the arc length at the element's end.
+        if stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9 {
+            return false;
+        }
+        let mut sim = self.replica;
+        if !sim.start_profile(curves, stop, stop.profile().table_from(a0)) {
+            return false;
+        }
+        // A stop that starts while the plan still accelerates speeds up first: never beyond the
+        // feed the plan may run there.
+        let cap = curves
+            .programmed_feed(stop.curve())
+            .map_or(self.limits.feed, |f| f.min(self.limits.feed));
+        let mut f = self.fd;
+        f.reset_peaks();
+        while let Step::Sample(x) = sim.step(curves, dt, &mut || None) {
+            f.push(&x.point[..tip], &self.limits);
+            let too_fast = x.feed > cap && x.feed > from.feed;
+            if too_fast || x.curve != stop.curve() || f.worst_ratio(&self.limits) > 1.0 + SLACK {
+                return false;
+            }
+        }
+        f.finish(&self.limits);
+        f.worst_ratio(&self.limits) <= 1.0 + SLACK
+    }
+
+    /// Arc length of element `e` (kept for the element the last check was on).
+    fn element_length(&mut self, e: usize, curves: &PathCurves) -> Option<f64> {
+        if let Some((k, l)) = self.element_length {
+            if k == e {
+                return Some(l);
+            }
+        }
+        let l = ArcLengthTable::new(&curves.get(e)?.curve).total();
+        self.element_length = Some((e, l));
+        Some(l)
+    }
+}
+
+/// The jerk at most `jerk` with which the stop from `from` (deceleration `accel`) ends just after
+/// a sample, [`LANDING`] after it: the last sample of the stop is then at rest to within
+/// nanometres, and holding there adds nothing to the finite differences (a stop ending between
+/// two samples leaves the last one moving, and holding after it jerks). `None` if the search
+/// does not land.
+fn landing_jerk(from: &StopStart, accel: f64, jerk: f64, dt: f64) -> Option<f64> {
+    let total = |j: f64| {
+        let (stop, a0) = stop_record(from, accel, j);
+        stop.profile().table_from(a0).total_time()
+    };
+    let t0 = total(jerk);
+    let target = (t0 / dt).ceil() * dt + LANDING;
+    if t0 > target - LANDING && t0 <= target {
+        return Some(jerk);
+    }
+    // A lower jerk stops later; the search stays within a factor 4 of `jerk`.
+    let (mut lo, mut hi) = (0.25 * jerk, jerk);
+    if total(lo) < target {
+        return None;
+    }
+    for _ in 0..60 {
+        let mid = 0.5 * (lo + hi);
+        let t = total(mid);
+        if t >= target && t <= target + LANDING {
+            return Some(mid);
+        }
+        if t >= target {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    None
+}
+
+/// How long after its last sample a hold stop reaches rest (s).
+const LANDING: f64 = 1e-9;
+
+/// Tangential deceleration and jerk the axes allow at parameter `u` of element `e`: min over the
+/// axes of the limit over the axis' share of the unit tangent.
+pub fn tangential_limits(curves: &PathCurves, limits: &Limits, e: usize, u: f64) -> (f64, f64) {
+    let tip = limits.velocity.len();
+    let d = curves.view(e).derivatives(u, 1)[1];
+    let norm = d[..tip].iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (mut a, mut j) = (f64::INFINITY, f64::INFINITY);
+    for ((di, ai), ji) in d.iter().zip(&limits.acceleration).zip(&limits.jerk).take(tip) {
+        let share = if norm > 0.0 { (di / norm).abs() } else { 1.0 };
+        if share > 0.0 {
+            a = a.min(ai / share);
+            j = j.min(ji / share);
+        }
+    }
+    (a.max(limits.min_accel()), j.max(limits.min_jerk()))
+}

@@ -1,0 +1,134 @@
+//! A hold that acts at once: raised at random samples of the bundled curves, a G1 program and a
+//! long straight line, the module leaves the plan at the next checked stop inside the record
+//! (`nurbs_planner::hold_stops`, every 20 samples where one passes) or, failing one, at the
+//! group's end. Every stop stays within the axis limits (the project's check over the whole
+//! sampled run, at rest after it); the latency from the edge to the first sample that leaves
+//! the plan is collected and its distribution printed. `HOLD_INSTANTS` (default 12 per path)
+//! selects a longer run; docs/testing.md records one of 1,000.
+
+mod common;
+
+use common::test_paths::g1_zigzag;
+use common::*;
+use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
+use nurbs_planner::hold_stops::HOLD_STOP_SPACING;
+
+/// A straight line of `length` mm along X (one element, one segment at lab set 1: the case a
+/// group-end hold ignored for its whole length).
+fn line(length: f64) -> Toolpath {
+    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![length, 0.0]], None).unwrap();
+    Toolpath::single(ElementKind::Polyline, curve)
+}
+
+/// Holds at sample `at`: the samples up to rest (with the machine holding after), and the
+/// latency in samples from the edge to the first sample that is not the plan's (`None` if
+/// the motion ended at C(1) first: a hold in the last group without a stop inside it).
+fn hold_at(job: &Job, at: usize) -> (Vec<Out>, Option<usize>) {
+    let l = load();
+    let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+    let mut got: Vec<Out> = Vec::new();
+    for _ in 0..job.samples.len() + 20_000 {
+        s.fill().unwrap();
+        if got.len() >= at {
+            set_bit("nurbs_interp.hold", true);
+        }
+        assert!(!period(), "the update path allocated");
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+        if bit("nurbs_interp.held") || bit("nurbs_interp.done") || bit("nurbs_interp.fault") {
+            break;
+        }
+    }
+    assert!(
+        !bit("nurbs_interp.fault"),
+        "fault {}",
+        u32_pin("nurbs_interp.fault-code")
+    );
+    let left = got
+        .iter()
+        .zip(&job.samples)
+        .position(|(o, e)| o.q[0] != e.point[0] || o.q[1] != e.point[1]);
+    let latency = if bit("nurbs_interp.done") {
+        assert!(left.is_none());
+        None
+    } else {
+        Some(left.unwrap_or(got.len()).saturating_sub(at))
+    };
+    set_bit("nurbs_interp.hold", false);
+    drop(l);
+    hold_position(&mut got);
+    (got, latency)
+}
+
+#[test]
+fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
+    let _guard = lock_module();
+    let per_path: usize = std::env::var("HOLD_INSTANTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(12);
+    let jobs = [
+        ("trident", job("trident.json")),
+        ("butterfly", job("butterfly.json")),
+        ("star_g1", job("star_g1.ngc")),
+        ("G1 zigzag", job_of(g1_zigzag(150))),
+        ("2000 mm line", job_of(line(2000.0))),
+    ];
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut all = Vec::new();
+    for (name, job) in &jobs {
+        let n = job.samples.len();
+        let mut latencies = Vec::new();
+        let mut ended = 0;
+        for _ in 0..per_path {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let at = 1 + (seed % (n as u64 - 2)) as usize;
+            let (got, latency) = hold_at(job, at);
+            assert_eq!(
+                violations(job, &got, false),
+                Vec::<String>::new(),
+                "{name}: hold at sample {at}"
+            );
+            match latency {
+                Some(l) => latencies.push(l),
+                None => ended += 1,
+            }
+        }
+        latencies.sort_unstable();
+        let q = |p: f64| {
+            latencies
+                .get(((latencies.len() as f64 - 1.0) * p) as usize)
+                .copied()
+                .unwrap_or(0)
+        };
+        println!(
+            "{name}: {} holds: latency (samples of {:.2} ms) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them; {ended} in the last group ended at C(1)",
+            per_path,
+            PERIOD * 1e3,
+            q(0.5),
+            q(0.9),
+            q(0.99),
+            latencies.last().copied().unwrap_or(0),
+            HOLD_STOP_SPACING + 1,
+            latencies.iter().filter(|&&l| l <= HOLD_STOP_SPACING as usize + 1).count()
+        );
+        all.extend(latencies);
+    }
+    // On the long line every hold takes a stop inside its single record.
+    let line_job = &jobs[4].1;
+    let (_, latency) = hold_at(line_job, line_job.samples.len() / 3);
+    assert!(
+        latency.is_some_and(|l| l <= HOLD_STOP_SPACING as usize + 1),
+        "the long line's hold waited {latency:?} samples"
+    );
+    all.sort_unstable();
+    println!(
+        "all paths: {} holds, median {} samples, worst {}",
+        all.len(),
+        all.get(all.len() / 2).copied().unwrap_or(0),
+        all.last().copied().unwrap_or(0)
+    );
+}
