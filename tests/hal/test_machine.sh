@@ -10,6 +10,9 @@
 #   and nurbs_interp by a mux2 on `engaged`): the same checks must fail.
 #   MACHINE_ACTION=abort|estop: the operator's abort (or an E-stop) 0.3 s into the first
 #   toolpath instead of running the program to its end (check_machine.py --action);
+#   MACHINE_ACTION=pause: the operator's pause 0.3 s into the first toolpath (halui holds our
+#   path at its next checked stop), resumed: the rest is re-planned from there and the program
+#   runs to its end;
 #   MACHINE_ACTION=travel: the INI's Y travel ends at 20 mm, inside the trident (Y to 27): M101
 #   must refuse it before any motion and abort the program.
 here=$(cd "$(dirname "$0")" && pwd)
@@ -63,7 +66,7 @@ grep "^nurbs" "$work/linuxcnc.log" "$work/nurbs-planner.log" || true
 python3 "$here/machine/check_machine.py" --samples "$work/samples.txt" --result "$work/result.json" \
     --ini "$config/nurbs-sim.ini" "${plans[@]}" ${action:+--action $action} \
     || { echo "--- LinuxCNC log:"; tail -n 40 "$work/linuxcnc.log"; exit 1; }
-if [ -z "$action" ] || [ "$action" = travel ]; then
+if [ -z "$action" ] || [ "$action" = travel ] || [ "$action" = pause ]; then
     [ "$action" = travel ] && exit 0
     for k in 0 1; do
         nurbs-plan verify "$work/recorded-$k.csv" "${toolpaths[$k]}" --ini "$config/nurbs-sim.ini"

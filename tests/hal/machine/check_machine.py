@@ -70,8 +70,8 @@ def main():
                     help="largest following error while engaged (mm): the drives' resolution")
     ap.add_argument("--ferror-max", type=float,
                     help="largest following error anywhere (mm); default: one period at the largest velocity")
-    ap.add_argument("--action", choices=("abort", "estop", "travel"),
-                    help="the run was aborted or E-stopped mid-path, or its first toolpath leaves the travel")
+    ap.add_argument("--action", choices=("abort", "estop", "travel", "pause"),
+                    help="the run was aborted, E-stopped or paused and resumed mid-path, or its first toolpath leaves the travel")
     a = ap.parse_args()
     vmax, amax, jmax, T = ini_limits(a.ini, a.joints)
     with open(a.result) as f:
@@ -89,8 +89,10 @@ def main():
     said = [e for e in result["errors"] if a.action == "travel" and "leaves the machine's travel: Y" in e]
     if a.action == "travel" and not said:
         fail(f"no refusal naming the travel in LinuxCNC's errors: {result['errors']}")
-    elif a.action in ("abort", "estop") and not result.get("action_moving"):
+    elif a.action in ("abort", "estop", "pause") and not result.get("action_moving"):
         fail(f"the {a.action} did not come while our path moved")
+    if a.action == "pause" and not result.get("paused_at_rest"):
+        fail("paused, our path was not held at rest")
     if not all(result.get("homed", [])):
         fail(f"joints not homed at the end: {result.get('homed')}")
     offset = result["motor_offset"]
@@ -117,7 +119,7 @@ def main():
             windows[-1][1] = k
         else:
             windows.append([k, k])
-    expected = {None: len(a.offline), "travel": 0}.get(a.action, 1)
+    expected = {None: len(a.offline), "pause": len(a.offline), "travel": 0}.get(a.action, 1)
     if len(windows) != expected:
         fail(f"engaged {len(windows)} times, {expected} expected")
     if errors:
@@ -131,9 +133,10 @@ def main():
         return
     worst_ratio = [0.0, 0.0, 0.0]
     summary = []
-    for (e0, e1), offline, recorded in zip(windows, a.offline, a.recorded_csv):
+    for k, ((e0, e1), offline, recorded) in enumerate(zip(windows, a.offline, a.recorded_csv)):
+        # An action acts on the first toolpath.
         summary.append(check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail,
-                                    a.action))
+                                    a.action if k == 0 else None))
     if errors:
         report(errors)
     if not a.action and max(moved for _, _, moved in summary) < 1.0:
@@ -178,7 +181,10 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
             break
         same += 1
     worst = 0.0 if same else float("inf")
-    if action:
+    if action == "pause":
+        if same < int(0.25 / T) or same == len(ours):
+            fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all: not a hold after 0.25 s")
+    elif action:
         if same < int(0.25 / T) or len(ours) >= len(plan):
             fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all (plan {len(plan)}): "
                  f"not a stop after 0.25 s or more of the plan")
@@ -220,7 +226,7 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
                 if abs(x) > lim * (1 + 1e-6):
                     fail(f"period {k}, joint {i}: drive {['velocity', 'acceleration', 'jerk'][n]} "
                          f"{x:.6g} exceeds {lim:g}")
-    if action:
+    if action and action != "pause":
         return (f"{len(ours)} setpoints, the first {same} as planned, then the {action}", 0, 0.0)
     # The catch-up move: from the path's last setpoint to the release, the drive stands still
     # while motion's command goes to the path's end.
@@ -233,7 +239,9 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
         fail(f"{offline}: the drive moved by {still:.3e} mm during the catch-up move")
     if arrived > 1e-6:
         fail(f"{offline}: released with motion {arrived:.3e} mm from the path's end")
-    return (f"{len(ours)} setpoints = offline plan, catch-up {moved:.3f} mm in {len(catch_up)} periods "
+    what = (f"the first {same} as planned, held, resumed to the end" if action == "pause"
+            else "= offline plan")
+    return (f"{len(ours)} setpoints {what}, catch-up {moved:.3f} mm in {len(catch_up)} periods "
             "with the drive still", len(catch_up), moved)
 
 

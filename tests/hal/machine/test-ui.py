@@ -3,8 +3,8 @@
 on, home, run the program named by $NURBS_TEST_PROGRAM to its end with the sampler recording,
 then write what the machine says of itself to $NURBS_TEST_RESULT (JSON) and switch off, which
 ends LinuxCNC. $NURBS_TEST_ACTION: `abort` (the operator's abort 0.3 s into the first toolpath,
-then machine off and on, as the hand-over asks after an abort) or `estop` (E-stop there, then
-reset and on)."""
+then machine off and on, as the hand-over asks after an abort), `estop` (E-stop there, then
+reset and on) or `pause` (the operator's pause there, resumed 0.3 s after our path is held)."""
 import json
 import os
 import sys
@@ -75,29 +75,36 @@ c.wait_complete()
 c.auto(linuxcnc.AUTO_RUN, 0)
 wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")
 action = os.environ.get("NURBS_TEST_ACTION", "")
-if action in ("abort", "estop"):
+if action in ("abort", "estop", "pause"):
     wait(lambda: hal.get_value("nurbs_interp.engaged"), 60, "the hand-over")
     time.sleep(0.3)
     result["action_moving"] = hal.get_value("nurbs_interp.active")
-    if action == "abort":
+    if action == "pause":
+        c.auto(linuxcnc.AUTO_PAUSE)
+        wait(lambda: hal.get_value("nurbs_interp.held"), 5, "our path held")
+        result["paused_at_rest"] = hal.get_value("nurbs_interp.held")
+        time.sleep(0.3)
+        c.auto(linuxcnc.AUTO_RESUME)
+    elif action == "abort":
         c.abort()
         c.wait_complete()
-        # The path stops on the path (at the end of its group of records), then the machine is
-        # switched off and on: motion takes the drives' position.
+        # The path stops on the path (at its next checked stop), then the machine is switched
+        # off and on: motion takes the drives' position.
         wait(lambda: hal.get_value("nurbs_interp.held") or hal.get_value("nurbs_interp.done"), 5, "the stop")
         time.sleep(0.1)
         c.state(linuxcnc.STATE_OFF)
         # (LinuxCNC reports a machine switched off as ESTOP_RESET.)
         wait(lambda: s.task_state in (linuxcnc.STATE_OFF, linuxcnc.STATE_ESTOP_RESET), 5, "machine off")
-    else:
+    elif action == "estop":
         c.state(linuxcnc.STATE_ESTOP)
         wait(lambda: s.task_state == linuxcnc.STATE_ESTOP, 5, "E-stop")
         time.sleep(0.1)
         c.state(linuxcnc.STATE_ESTOP_RESET)
-    time.sleep(0.1)
-    c.state(linuxcnc.STATE_ON)
-    wait(lambda: s.task_state == linuxcnc.STATE_ON, 5, "machine on again")
-    time.sleep(0.1)
+    if action != "pause":
+        time.sleep(0.1)
+        c.state(linuxcnc.STATE_ON)
+        wait(lambda: s.task_state == linuxcnc.STATE_ON, 5, "machine on again")
+        time.sleep(0.1)
 wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE and s.exec_state == linuxcnc.EXEC_DONE, 600, "the program's end")
 time.sleep(0.1)
 hal.set_p("sampler.0.enable", "0")
