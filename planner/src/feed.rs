@@ -1365,23 +1365,16 @@ impl<'a> Streamer<'a> {
     /// Writes a segment group's stop chain into the arena and its offset into the last slot;
     /// false if there is no room yet.
     fn write_chain(&mut self, group: &mut Group) -> Result<bool, String> {
-        let Some(values) = &group.chain else {
+        let Some(values) = group.chain.take() else {
             return Ok(true);
         };
-        let last = group.slots.len() - 1;
         // Needed until the module runs past the group's end.
-        let release = Release::Slot(self.pushed + last as u64);
-        let offset = match self.writer.put(values, release) {
-            Ok(offset) => offset,
-            Err(WriteError::Full) => return Ok(false),
-            Err(WriteError::Refused(e)) => return Err(e),
-        };
-        if let Some(Record::Segment(mut s)) = group.slots[last].decode() {
-            s.chain_offset = offset;
-            group.slots[last] = Slot::segment(&s);
+        let last = group.slots.len() - 1;
+        let written = self.put_for_slot(&values, group, last, |s, offset| s.chain_offset = offset)?;
+        if !written {
+            group.chain = Some(values);
         }
-        group.chain = None;
-        Ok(true)
+        Ok(written)
     }
 
     /// Writes the checked stops inside each record of a segment group into the arena and their
@@ -1389,21 +1382,34 @@ impl<'a> Streamer<'a> {
     fn write_hold_stops(&mut self, group: &mut Group) -> Result<bool, String> {
         while group.hold_stops_written < group.hold_stops.len() {
             let k = group.hold_stops_written;
-            if !group.hold_stops[k].is_empty() {
-                // Needed while the module runs this record.
-                let release = Release::Slot(self.pushed + k as u64);
-                let offset = match self.writer.put(&group.hold_stops[k], release) {
-                    Ok(offset) => offset,
-                    Err(WriteError::Full) => return Ok(false),
-                    Err(WriteError::Refused(e)) => return Err(e),
-                };
-                if let Some(Record::Segment(mut s)) = group.slots[k].decode() {
-                    s.hold_stops_offset = offset;
-                    group.slots[k] = Slot::segment(&s);
-                }
-                group.hold_stops[k] = Vec::new();
+            let values = std::mem::take(&mut group.hold_stops[k]);
+            // Needed while the module runs this record.
+            if !values.is_empty() && !self.put_for_slot(&values, group, k, |s, offset| s.hold_stops_offset = offset)? {
+                group.hold_stops[k] = values;
+                return Ok(false);
             }
             group.hold_stops_written += 1;
+        }
+        Ok(true)
+    }
+
+    /// Puts `values` into the arena, kept until the module has run slot `k` of `group`, and
+    /// writes their offset into that slot with `set`; false if there is no room yet.
+    fn put_for_slot(
+        &mut self,
+        values: &[f64],
+        group: &mut Group,
+        k: usize,
+        set: impl FnOnce(&mut SegmentSlot, u32),
+    ) -> Result<bool, String> {
+        let offset = match self.writer.put(values, Release::Slot(self.pushed + k as u64)) {
+            Ok(offset) => offset,
+            Err(WriteError::Full) => return Ok(false),
+            Err(WriteError::Refused(e)) => return Err(e),
+        };
+        if let Some(Record::Segment(mut s)) = group.slots[k].decode() {
+            set(&mut s, offset);
+            group.slots[k] = Slot::segment(&s);
         }
         Ok(true)
     }
