@@ -27,6 +27,19 @@ struct Machine {
     on: bool,
 }
 
+impl Machine {
+    /// Machine on, motion at 0, the drive at the motor offset; the module loaded with `enable`
+    /// low (it follows `engaged` from here on, as wired).
+    fn at_home() -> Machine {
+        set_bit("nurbs_interp.enable", false);
+        Machine {
+            pos_cmd: [0.0; 3],
+            drive: MOTOR_OFFSET,
+            on: true,
+        }
+    }
+}
+
 /// One period as the servo thread runs it: the drive's feedback, `nurbs_interp.feedback`,
 /// motion's outputs, `nurbs_interp.update` (enable = engaged, as wired), the drive takes its
 /// command. Returns (module sample or not, drive command, motion's feedback, offsets).
@@ -73,12 +86,7 @@ fn the_drive_runs_our_path_with_no_step_at_either_edge_and_the_catch_up_leaves_i
     let _guard = lock_module();
     let job = job("open_pocket.json");
     let l = load();
-    set_bit("nurbs_interp.enable", false);
-    let mut m = Machine {
-        pos_cmd: [0.0; 3],
-        drive: MOTOR_OFFSET,
-        on: true,
-    };
+    let mut m = Machine::at_home();
     // Released, before any path: both outputs pass straight through, from the first period.
     let (_, cmd, fb, _) = machine_period(&mut m);
     assert_eq!((cmd, fb), (MOTOR_OFFSET, MOTOR_OFFSET));
@@ -173,12 +181,11 @@ fn the_drive_runs_our_path_with_no_step_at_either_edge_and_the_catch_up_leaves_i
         drive_cmds.push(cmd);
     }
     m.pos_cmd = end;
-    let (_, cmd, fb, offset) = machine_period(&mut m);
+    let (_, cmd, _, offset) = machine_period(&mut m);
     drive_cmds.push(cmd);
     assert!(!bit("nurbs_interp.engaged"));
     assert_eq!(offset, [0.0; 3]);
     assert_eq!(cmd, [0, 1, 2].map(|j| end[j] + MOTOR_OFFSET[j]));
-    let _ = fb;
     // Across both edges the drive command never stepped: its largest change in a period is the
     // path's own (feed × period) and its second difference within the acceleration.
     let (d1, d2) = steps(&drive_cmds);
@@ -191,12 +198,7 @@ fn machine_off_mid_path_releases_to_the_drive_and_ends_the_motion() {
     let _guard = lock_module();
     let job = job("trident.json");
     let l = load();
-    set_bit("nurbs_interp.enable", false);
-    let mut m = Machine {
-        pos_cmd: [0.0; 3],
-        drive: MOTOR_OFFSET,
-        on: true,
-    };
+    let mut m = Machine::at_home();
     let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
     for _ in 0..20 {
         s.fill().unwrap();
