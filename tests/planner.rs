@@ -218,7 +218,7 @@ fn bad_limits_are_refused() {
 /// refusal (`PlanError`) is allowed for at most 1 % of the cases and each one is listed.
 ///
 /// `PROPTEST_CASES` (default 256) and `PROPTEST_RNG_SEED` (default 20261122) select the run;
-/// the README records a 10,000-case run. `PROPTEST_FIRST_CASE` draws the cases before it
+/// docs/testing.md records a 10,000-case run. `PROPTEST_FIRST_CASE` draws the cases before it
 /// without planning them (to reproduce one case of a long run quickly), and
 /// `PROPTEST_VERBOSE=1` names each case before planning it (to find one that takes long);
 /// `PROPTEST_MAX_PERIODS` (default 200,000; `inf` for none) skips cases whose motion at full
