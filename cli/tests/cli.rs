@@ -965,11 +965,21 @@ fn a_path_outside_the_machines_travel_is_refused() {
         err.contains("leaves the machine's travel: Y -1 .. 20 mm") && err.contains("MIN_LIMIT/MAX_LIMIT"),
         "{err}"
     );
-    assert!(plan(&example("trident.json"), &ini(30.0)).status.success());
+    let inside = ini(30.0);
+    assert!(plan(&example("trident.json"), &inside).status.success());
+    let checked = bin()
+        .arg("verify")
+        .arg(dir.join("out.csv"))
+        .arg(example("trident.json"))
+        .arg("--ini")
+        .arg(&inside)
+        .output()
+        .unwrap();
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stdout));
     // A G-code program that leaves it on its fourth line: refused, naming the file and axis.
     let ngc = dir.join("leaves.ngc");
     std::fs::write(&ngc, "G21 G90\nG0 X0 Y0\nG1 X10 Y0 F6000\nG1 X10 Y50\nG1 X0 Y0\nM2\n").unwrap();
-    let o = plan(&ngc, &ini(30.0));
+    let o = plan(&ngc, &inside);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("leaves.ngc") && err.contains("travel: Y"), "{err}");

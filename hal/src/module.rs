@@ -1421,8 +1421,10 @@ impl Instance {
 }
 
 /// The deceleration and jerk of the checked hold stop of `slot` at motion sample `n`, if it has
-/// one there; `Err` if its hold stops are not valid arena data. At most
-/// [`crate::slot::MAX_HOLD_STOPS`] triples are read (checked when the slot was taken).
+/// one there; `Err` if its hold stops do not lie in the arena or the one found is not valid.
+/// The triples are in increasing sample order: a binary search, at most 17 probes (their count
+/// is at most [`crate::slot::MAX_HOLD_STOPS`], checked when the slot was taken), so a period
+/// under hold costs the same whatever the record's length.
 fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
     if slot.hold_stops_len == 0 {
         return Ok(None);
@@ -1433,20 +1435,22 @@ fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f6
         .and_then(|len| start.checked_add(len))
         .ok_or(FaultCode::Record)?;
     let triples = values.get(start..end).ok_or(FaultCode::Record)?;
-    for t in triples.chunks_exact(3) {
-        if let [at, accel, jerk] = *t {
-            let valid = at >= 0.0
-                && libm::trunc(at) == at
-                && accel > 0.0
-                && jerk > 0.0
-                && accel.is_finite()
-                && jerk.is_finite();
-            if !valid {
-                return Err(FaultCode::Record);
-            }
-            if at == n as f64 {
-                return Ok(Some((accel, jerk)));
-            }
+    let target = n as f64;
+    let (mut lo, mut hi) = (0usize, triples.len() / 3);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        let Some(&[at, accel, jerk]) = triples.get(3 * mid..3 * mid + 3) else {
+            return Err(FaultCode::Record);
+        };
+        if at < target {
+            lo = mid + 1;
+        } else if at > target {
+            hi = mid;
+        } else if at == target && accel > 0.0 && jerk > 0.0 && accel.is_finite() && jerk.is_finite() {
+            return Ok(Some((accel, jerk)));
+        } else {
+            // Not a number, or not a valid stop: the planner never writes one.
+            return Err(FaultCode::Record);
         }
     }
     Ok(None)

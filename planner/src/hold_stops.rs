@@ -16,6 +16,7 @@
 //! group's end). The module, holding, switches to the first offered stop at or after the
 //! hold's edge, at exactly that sample.
 
+use nurbs_hal::slot::MAX_HOLD_STOPS;
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::verify::SLACK;
@@ -76,7 +77,10 @@ impl HoldStops {
                     let n = self.samples;
                     self.samples += 1;
                     self.fd.push(&s.point[..tip], &self.limits);
-                    if n.is_multiple_of(HOLD_STOP_SPACING) && s.feed > MOVING {
+                    // A record takes at most MAX_HOLD_STOPS (minutes of motion): a hold in the
+                    // rest of such a record waits for its group's end.
+                    let room = out.len() < 3 * MAX_HOLD_STOPS as usize;
+                    if room && n.is_multiple_of(HOLD_STOP_SPACING) && s.feed > MOVING {
                         if let Some((accel, jerk)) = self.check(&s, record, curves) {
                             out.extend([n as f64, accel, jerk]);
                         }

@@ -99,10 +99,6 @@ impl Handover {
         }
     }
 
-    pub fn is_engaged(&self) -> bool {
-        self.engaged
-    }
-
     /// Motion's `joint.N.motor-pos-fb` from the drive's feedback: less the offset the drive's
     /// last command was made with (run before motion, each period).
     pub fn motor_pos_fb(&self, drive_fb: &[f64; JOINTS]) -> [f64; JOINTS] {
@@ -253,7 +249,7 @@ mod tests {
         let mut i = inputs(true, [f64::NAN, 1.0, 1.0], here);
         i.ours_at_rest = true;
         assert_eq!(h.step(&i).refused, Refusal::StartMismatch);
-        assert!(!h.is_engaged());
+        assert!(!h.step(&inputs(false, here, here)).engaged);
     }
 
     #[test]

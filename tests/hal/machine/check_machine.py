@@ -25,7 +25,11 @@ import argparse
 import configparser
 import csv
 import json
+import os
 import sys
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+from samples import write_recorded_csv  # noqa: E402  (tests/hal/samples.py)
 
 
 def ini_limits(path, joints):
@@ -190,11 +194,8 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
                  f"not a stop after 0.25 s or more of the plan")
     elif same != len(plan) or len(ours) != len(plan):
         fail(f"{offline}: {len(ours)} setpoints, the first {same} of them as the offline plan's {len(plan)}")
-    with open(recorded, "w") as f:
-        f.write("t,u," + ",".join(axes) + ",feed,element\n")
-        for k, r in enumerate(ours):
-            f.write(f"{k * T!r},{r['u']!r}," + ",".join(repr(r["ours"][i]) for i in range(len(axes)))
-                    + f",{r['feed']!r},{r['curve']}\n")
+    write_recorded_csv(recorded, [dict(zip("xyz", r["ours"]), u=r["u"], feed=r["feed"], curve=r["curve"])
+                                  for r in ours], axes, T)
 
     # The drive follows our position while engaged (on the axes the path drives).
     follow = max(abs(rows[k]["drive"][i] - offset[i] - rows[k]["ours"][i])
