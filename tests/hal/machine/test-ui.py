@@ -76,7 +76,10 @@ c.auto(linuxcnc.AUTO_RUN, 0)
 wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")
 action = os.environ.get("NURBS_TEST_ACTION", "")
 if action in ("abort", "estop", "pause"):
-    wait(lambda: hal.get_value("nurbs_interp.engaged"), 60, "the hand-over")
+    # 0.3 s after our path starts moving (not after the hand-over: on a slow machine the
+    # planner's start can take a good part of that), so the check's 0.25 s of planned
+    # setpoints before the action holds whatever the start took.
+    wait(lambda: hal.get_value("nurbs_interp.active"), 60, "our path to move")
     time.sleep(0.3)
     result["action_moving"] = hal.get_value("nurbs_interp.active")
     if action == "pause":
