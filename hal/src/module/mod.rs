@@ -64,6 +64,15 @@ use crate::pins::Pin;
 use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
 use crate::sys;
 
+mod blocks;
+mod geometry;
+mod segments;
+
+use blocks::BlockPlayer;
+use geometry::Followed;
+pub use geometry::RtGeometry;
+use segments::SegmentPlayer;
+
 /// Component name: must equal the module's file name (`loadrt` dlopens `NAME.so`).
 pub const NAME: &CStr = c"nurbs_interp";
 
@@ -172,129 +181,6 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
     j2_offset: f64, Out, "joint.2.offset", "mm", "hand-over: our position less motion's `pos-cmd` while engaged, else 0";
 }
 
-/// The geometry stream the motion runs on: its header, how far its curves are checked, and the
-/// channel's descriptors and arena. A curve's view is made when it is needed, in O(1): it was
-/// checked once, in path order, a slice of values per period (`RtGeometry::follow`).
-pub struct RtGeometry {
-    /// Generation of the channel's stream (0: none).
-    generation: u32,
-    header: GeometryHeader,
-    tip: usize,
-    stream: Option<&'static GeometryStream>,
-    /// Curves from `header.first_curve` up to (not including) this one are checked ...
-    checked: u32,
-    /// ... and this one up to this value.
-    cursor: ValueCursor,
-    /// The last curve asked for.
-    cache: Cell<Option<(usize, CurveView<'static>)>>,
-}
-
-/// What [`RtGeometry::follow`] saw.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Followed {
-    /// The same stream (perhaps more curves checked).
-    Same,
-    /// A new stream began: a new motion.
-    New,
-}
-
-impl RtGeometry {
-    fn empty() -> RtGeometry {
-        RtGeometry {
-            generation: 0,
-            header: GeometryHeader::default(),
-            tip: 2,
-            stream: None,
-            checked: 0,
-            cursor: 0,
-            cache: Cell::new(None),
-        }
-    }
-
-    /// The arena (empty before a stream).
-    fn values(&self) -> &'static [f64] {
-        self.stream.map_or(&[], |s| s.values())
-    }
-
-    /// Curve `index`, if the stream has it checked. O(1).
-    fn valid(&self, index: usize) -> Option<CurveView<'static>> {
-        if let Some((i, c)) = self.cache.get() {
-            if i == index {
-                return Some(c);
-            }
-        }
-        let stream = self.stream?;
-        let index32 = u32::try_from(index).ok()?;
-        if index32 < self.header.first_curve || index32 >= self.checked {
-            return None;
-        }
-        let desc = stream.descriptor(index32)?;
-        let c = trusted_curve(&desc, stream.values(), self.tip).ok()?;
-        self.cache.set(Some((index, c)));
-        Some(c)
-    }
-
-    fn is_valid(&self) -> bool {
-        self.generation != 0
-    }
-
-    /// Takes a new stream of `stream` (only while no motion runs: `Err(GeometryChanged)`
-    /// otherwise), and checks up to [`VALIDATION_VALUES_PER_PERIOD`] more values of the
-    /// published curves, in path order. Bounded work, allocation-free, panic-free.
-    fn follow(&mut self, stream: &'static GeometryStream, in_motion: bool) -> Result<Followed, FaultCode> {
-        let generation = stream.generation();
-        let mut followed = Followed::Same;
-        if generation != self.generation && generation != 0 && generation & 1 == 0 {
-            if in_motion {
-                return Err(FaultCode::GeometryChanged);
-            }
-            let header = stream.header();
-            if !stream.unchanged(generation) {
-                return Ok(Followed::Same); // begun again meanwhile: next period
-            }
-            validate_header(&header).map_err(|_| FaultCode::Geometry)?;
-            *self = RtGeometry {
-                generation,
-                header,
-                tip: header.tip_axes as usize,
-                stream: Some(stream),
-                checked: header.first_curve,
-                cursor: 0,
-                cache: Cell::new(None),
-            };
-            followed = Followed::New;
-        }
-        if self.generation == 0 {
-            return Ok(followed);
-        }
-        let (published, values) = (stream.published(), stream.values());
-        let mut budget = VALIDATION_VALUES_PER_PERIOD;
-        while budget > 0 && self.checked < published {
-            let desc = stream.descriptor(self.checked).ok_or(FaultCode::Geometry)?;
-            let (used, next) =
-                check_curve(&desc, values, self.tip, self.cursor, budget).map_err(|_| FaultCode::Geometry)?;
-            budget = budget.saturating_sub(used);
-            match next {
-                Some(cursor) => self.cursor = cursor,
-                None => (self.checked, self.cursor) = (self.checked.saturating_add(1), 0),
-            }
-        }
-        Ok(followed)
-    }
-}
-
-impl CurveSet for RtGeometry {
-    fn curve(&self, index: usize) -> Option<CurveView<'_>> {
-        self.valid(index)
-    }
-    fn tip_axes(&self) -> usize {
-        self.tip
-    }
-    fn generation(&self) -> u64 {
-        u64::from(self.generation)
-    }
-}
-
 /// Where the machine stands after a hold or underrun stop (what a resumed plan must start from).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Held {
@@ -335,13 +221,8 @@ pub struct Instance {
     interp: Interpolator,
     /// Sequence number the next record must carry.
     next_seq: u32,
-    /// The last segment record taken, with its stop and group (checked when taken).
-    slot: SegmentSlot,
-    /// During a segment stop: the rest of its stop chain in the arena.
-    chain: ChainCursor,
-    /// The stop points of the last block taken, validated (with the arena offset and length
-    /// they came as: blocks on one curve share them, checked once).
-    points: StopPoints,
+    /// A segment-record motion: the record it runs, its stop chain.
+    segment_player: SegmentPlayer,
     records: u32,
     underruns: u32,
     /// Motion time of the records taken so far (s).
@@ -370,8 +251,8 @@ pub struct Instance {
     mode: Mode,
     /// Servo period of the current update (s).
     period: f64,
-    /// Path-block motion: the block being output.
-    player: BlockPlayer,
+    /// A path-block motion: the block being output, its stop points.
+    block_player: BlockPlayer,
     /// The position pins hold a position of the path (its start, shown before the motion, or
     /// the last sample).
     position_known: bool,
@@ -379,148 +260,6 @@ pub struct Instance {
     start_shown: bool,
     /// Between motion's joints and the drives.
     handover: Handover,
-    /// Samples of segment records output in this motion (the index hold stops refer to).
-    samples: u64,
-}
-
-/// Where the rest of a stop chain is read ([`SegmentSlot::chain_offset`]).
-#[derive(Clone, Copy, Debug, Default)]
-struct ChainCursor {
-    /// Arena index of the next record's first word.
-    next: usize,
-    /// Records left.
-    left: u32,
-    /// Sequence number the next one must carry.
-    seq: u32,
-}
-
-impl ChainCursor {
-    /// The next record of the chain, checked (sequence and structure); `Err` if it is
-    /// malformed or outside the arena, `Ok(None)` after the last.
-    fn next(&mut self, values: &[f64]) -> Result<Option<SegmentRecord>, FaultCode> {
-        if self.left == 0 {
-            return Ok(None);
-        }
-        let end = self.next.checked_add(SegmentRecord::WORDS).ok_or(FaultCode::Record)?;
-        let words = values.get(self.next..end).ok_or(FaultCode::Record)?;
-        let mut bits = [0u64; SegmentRecord::WORDS];
-        for (b, v) in bits.iter_mut().zip(words) {
-            *b = v.to_bits();
-        }
-        let r = SegmentRecord::from_words(&bits).ok_or(FaultCode::Record)?;
-        let last = self.left == 1;
-        if r.seq != self.seq || check_record(&r).is_err() || (last && !ends_at_rest(&r)) {
-            return Err(FaultCode::Record);
-        }
-        self.next = end;
-        self.left -= 1;
-        self.seq = r.seq.wrapping_add(1);
-        Ok(Some(r))
-    }
-}
-
-/// Where the interpolator takes segment records from: the ring, a group at a time.
-struct SegmentSource<'a> {
-    ring: &'a crate::channel::SpscRing<crate::slot::Slot, { crate::channel::SEGMENT_SLOTS }>,
-    geometry: &'a RtGeometry,
-    /// Take nothing more at a group's end.
-    no_more: bool,
-    /// The first record must start here (a resumed motion).
-    resume_from: Option<Held>,
-    next_seq: &'a mut u32,
-    /// The last slot taken.
-    slot: &'a mut SegmentSlot,
-    records: &'a mut u32,
-    taken_time: &'a mut f64,
-    seq_pin: &'a Pin<u32>,
-    pull: &'a mut Pull,
-}
-
-impl SegmentSource<'_> {
-    /// The next record for the interpolator, or `None` (and why in `pull`). Within a group the
-    /// next record is always queued (the group was complete when its first record was taken);
-    /// at a group's end the next group is taken only if it is complete, on checked curves, and
-    /// neither hold nor abort is on.
-    fn next(&mut self) -> Option<SegmentRecord> {
-        if *self.pull != Pull::Fine {
-            return None;
-        }
-        // Before the first record the last slot is the default one, of no group.
-        let at_group_end = self.slot.group_left <= 1;
-        if at_group_end && self.no_more {
-            return None;
-        }
-        let slot = match self.ring.peek() {
-            Ok(Some(slot)) => slot,
-            Ok(None) => {
-                *self.pull = if at_group_end {
-                    Pull::Empty
-                } else {
-                    Pull::Fault(FaultCode::Channel) // a queued group lost a record
-                };
-                return None;
-            }
-            Err(_) => {
-                *self.pull = Pull::Fault(FaultCode::Channel);
-                return None;
-            }
-        };
-        let Some(Record::Segment(next)) = slot.decode() else {
-            *self.pull = Pull::Fault(FaultCode::RecordKind);
-            return None;
-        };
-        if at_group_end {
-            // A new group: only whole, and on curves the module has checked.
-            let queued = self.ring.len();
-            if (queued as u64) < u64::from(next.group_left) || next.curve_needed >= self.geometry.checked {
-                *self.pull = Pull::Empty;
-                return None;
-            }
-        } else if next.group_left.wrapping_add(1) != self.slot.group_left {
-            *self.pull = Pull::Fault(FaultCode::Record);
-            return None;
-        }
-        if let Err(code) = self.check(&next) {
-            *self.pull = Pull::Fault(code);
-            return None;
-        }
-        if !matches!(self.ring.pop(), Ok(Some(_))) {
-            *self.pull = Pull::Fault(FaultCode::Channel);
-            return None;
-        }
-        let r = next.record;
-        *self.next_seq = r.seq.wrapping_add(1);
-        *self.slot = next;
-        *self.records = self.records.wrapping_add(1);
-        *self.taken_time += r.profile().total_time();
-        self.seq_pin.set(r.seq);
-        Some(r)
-    }
-
-    /// A slot's checks before its record runs: sequence, the resume point, structure of the
-    /// record, its stop (a record ending at rest, next in sequence) and its group fields.
-    fn check(&self, next: &SegmentSlot) -> Result<(), FaultCode> {
-        let r = &next.record;
-        if r.seq != *self.next_seq {
-            return Err(FaultCode::Sequence);
-        }
-        if self.resume_from.is_some_and(|h| !starts_at(r, &h)) {
-            return Err(FaultCode::ResumePoint);
-        }
-        check_record(r).map_err(|_| FaultCode::Record)?;
-        if !next.is_consistent() {
-            return Err(FaultCode::Record);
-        }
-        if let Some(stop) = next.stop() {
-            // A one-record stop ends at rest; a chain's last record does (checked as it comes).
-            let at_rest = next.chain_len > 0 || ends_at_rest(stop);
-            let ok = stop.seq == r.seq.wrapping_add(1) && stop.curve <= next.curve_needed && at_rest;
-            if !ok || check_record(stop).is_err() {
-                return Err(FaultCode::Record);
-            }
-        }
-        Ok(())
-    }
 }
 
 /// The record kind of a motion.
@@ -530,116 +269,6 @@ enum Mode {
     Undecided = 0,
     Segments = 1,
     Blocks = 2,
-}
-
-/// Playback state of a path-block motion, and of a stored stop sequence (after a block or a
-/// segment record; plain data).
-#[derive(Clone, Copy, Debug)]
-struct BlockPlayer {
-    block: PathBlock,
-    /// A block has been taken (the motion started).
-    loaded: bool,
-    /// Samples of `block` output so far.
-    index: usize,
-    /// The last sample of the last block has been output: at rest at the path end.
-    finished: bool,
-    /// A sample of this motion has been output (the fields below describe it).
-    has_sample: bool,
-    /// The last output sample: curve, parameter, arc length, the one before's arc length, point.
-    curve: usize,
-    u: f64,
-    s: f64,
-    s_before: f64,
-    point: [f64; 3],
-    /// Running a stored stop sequence: where it is read.
-    stored: Option<StoredCursor>,
-}
-
-impl BlockPlayer {
-    const IDLE: BlockPlayer = BlockPlayer {
-        block: PathBlock {
-            seq: 0,
-            flags: 0,
-            count: 0,
-            stop_len: 0,
-            stop_offset: 0,
-            points_offset: 0,
-            points_len: 0,
-            curve: 0,
-            curve_needed: 0,
-            group_left: 0,
-            stop_accel: 0.0,
-            stop_jerk: 0.0,
-            s_before: [0.0; 2],
-            u: [0.0; nurbs_rtcore::BLOCK_SAMPLES],
-            s: [0.0; nurbs_rtcore::BLOCK_SAMPLES],
-        },
-        loaded: false,
-        index: 0,
-        finished: false,
-        has_sample: false,
-        curve: 0,
-        u: 0.0,
-        s: 0.0,
-        s_before: 0.0,
-        point: [0.0; 3],
-        stored: None,
-    };
-
-    fn remaining(&self) -> usize {
-        self.block.len().saturating_sub(self.index)
-    }
-}
-
-/// Where a stored stop sequence ([`StopRun`]s in the arena) is being read.
-#[derive(Clone, Copy, Debug)]
-struct StoredCursor {
-    /// The record or block it follows.
-    seq: u32,
-    /// Arena index of the next value to read (a run header when `run_left` is 0).
-    next: usize,
-    /// Positions of the sequence still to output.
-    left: usize,
-    /// Positions of the current run still to read.
-    run_left: usize,
-    /// The arc length before the run's first position, until that position is read.
-    run_s_before: Option<f64>,
-}
-
-impl StoredCursor {
-    fn new(seq: u32, offset: u32, len: u32) -> Self {
-        StoredCursor {
-            seq,
-            next: offset as usize,
-            left: len as usize,
-            run_left: 0,
-            run_s_before: None,
-        }
-    }
-}
-
-/// Validated stop points (`(s, feed cap)` pairs in the arena) and where they came from.
-#[derive(Clone, Copy, Debug)]
-struct StopPoints {
-    key: Option<(u32, u32)>,
-    pairs: &'static [f64],
-}
-
-impl StopPoints {
-    const NONE: StopPoints = StopPoints { key: None, pairs: &[] };
-
-    /// The `len` pairs at `offset` of `values`, checked unless they are the ones held already;
-    /// `None` if they are not valid stop points ([`stop_points`]).
-    fn take(&mut self, values: &'static [f64], offset: u32, len: u32) -> Option<()> {
-        if self.key != Some((offset, len)) {
-            let pairs = stop_points(values, offset, len)?;
-            *self = StopPoints {
-                key: Some((offset, len)),
-                pairs,
-            };
-        }
-        Some(())
-    }
 }
 
 /// Why the module stops (or stopped) on the path.
@@ -653,14 +282,6 @@ pub enum StopCause {
     Hold = 2,
     /// `abort`: the motion is over once at rest.
     Abort = 3,
-}
-
-/// What the record source saw while the interpolator pulled records.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Pull {
-    Fine,
-    Empty,
-    Fault(FaultCode),
 }
 
 impl Instance {
@@ -733,7 +354,7 @@ impl Instance {
             0.0
         } else {
             let left = if self.mode == Mode::Blocks {
-                self.player.remaining() as f64 * period_ns as f64 / 1e9
+                self.block_player.remaining() as f64 * period_ns as f64 / 1e9
             } else {
                 self.interp.time_left_in_segment()
             };
@@ -829,7 +450,7 @@ impl Instance {
     fn current_curve(&self) -> usize {
         let first = self.geometry.header.first_curve as usize;
         match self.mode {
-            Mode::Blocks if self.player.loaded => self.player.curve,
+            Mode::Blocks if self.block_player.loaded => self.block_player.curve,
             Mode::Segments if self.interp.record().is_some() => self.interp.curve_index(),
             _ => first,
         }
@@ -842,13 +463,13 @@ impl Instance {
 
     /// The motion has taken its first record (of either kind).
     fn started(&self) -> bool {
-        self.interp.record().is_some() || self.player.loaded
+        self.interp.record().is_some() || self.block_player.loaded
     }
 
     /// The motion has reached the path end.
     fn finished(&self) -> bool {
         match self.mode {
-            Mode::Blocks => self.player.finished,
+            Mode::Blocks => self.block_player.finished,
             _ => self.interp.is_finished(),
         }
     }
@@ -877,17 +498,14 @@ impl Instance {
         self.resuming = false;
         self.interp = Interpolator::new();
         self.mode = Mode::Undecided;
-        self.player = BlockPlayer::IDLE;
+        self.block_player = BlockPlayer::IDLE;
         self.next_seq = 0;
-        self.slot = SegmentSlot::default();
-        self.chain = ChainCursor::default();
-        self.points = StopPoints::NONE;
+        self.segment_player = SegmentPlayer::default();
         self.taken_time = 0.0;
         self.stopping = false;
         self.stopped = false;
         self.aborted = false;
         self.start_shown = false;
-        self.samples = 0;
     }
 
     /// The stopped (or aborted) motion is over: nothing of it resumes.
@@ -915,149 +533,13 @@ impl Instance {
                 }
             }
         }
-        if let (true, Some(cursor)) = (self.stopping, self.player.stored) {
+        if let (true, Some(cursor)) = (self.stopping, self.block_player.stored) {
             return self.advance_stored_stop(channel, cursor);
         }
         if self.mode == Mode::Blocks {
             return self.advance_blocks(channel, dt, hold, abort);
         }
-        let mut pull = Pull::Fine;
-        let step = if self.stopping {
-            // A stop chain goes on from the arena; a one-record stop has nothing more.
-            let (values, chain, pull) = (self.geometry.values(), &mut self.chain, &mut pull);
-            self.interp.step(&self.geometry, dt, &mut || match chain.next(values) {
-                Ok(r) => r,
-                Err(code) => {
-                    *pull = Pull::Fault(code);
-                    None
-                }
-            })
-        } else {
-            let source = SegmentSource {
-                ring: &channel.segments,
-                geometry: &self.geometry,
-                // Hold and abort wait for the end of the group; nothing is taken during a stop.
-                no_more: self.stopping || hold || abort,
-                resume_from: if self.resuming { self.held } else { None },
-                next_seq: &mut self.next_seq,
-                slot: &mut self.slot,
-                records: &mut self.records,
-                taken_time: &mut self.taken_time,
-                seq_pin: &self.pins.seq,
-                pull: &mut pull,
-            };
-            let mut source = source;
-            self.interp.step(&self.geometry, dt, &mut || source.next())
-        };
-        match (step, pull) {
-            (_, Pull::Fault(code)) => {
-                self.fault = code;
-                false
-            }
-            (Step::Sample(s), _) => {
-                if self.resuming {
-                    // The resumed motion's first sample: it must be where the machine stands.
-                    let here = self.held.map(|h| h.point);
-                    if here.is_none_or(|p| distance(&p, &self.point_of(&s)) > RESUME_TOLERANCE) {
-                        self.fault = FaultCode::ResumePoint;
-                        return false;
-                    }
-                    self.resuming = false;
-                    self.held = None;
-                }
-                if !self.output(&s) {
-                    return false;
-                }
-                let n = self.samples;
-                self.samples = self.samples.wrapping_add(1);
-                if (hold || abort) && !self.stopping {
-                    // A checked stop inside the record at this very sample: take it now rather
-                    // than at the group's end.
-                    match hold_stop_at(&self.slot, self.geometry.values(), n) {
-                        Ok(Some((accel, jerk))) => self.stop_here(&s, accel, jerk, hold, abort),
-                        Ok(None) => {}
-                        Err(code) => self.fault = code,
-                    }
-                }
-                true
-            }
-            (Step::Finished, _) => false,
-            (Step::BadRecord, _) => {
-                self.fault = FaultCode::BadRecord;
-                false
-            }
-            (Step::Starved, _) => {
-                let Some(last) = self.interp.record().copied() else {
-                    return false; // not started yet: waiting for the first group
-                };
-                if self.stopping {
-                    let held = self.held_by_interp();
-                    self.stop_over(channel, last.seq, held);
-                    return false;
-                }
-                // At a group's end (hold, abort, or the next group is not there): its stop, the
-                // next segment re-planned to rest, checked when the record was taken.
-                self.begin_stop(hold, abort);
-                let Some(stop) = self.slot.stop().copied() else {
-                    self.fault = FaultCode::Record;
-                    return false;
-                };
-                self.next_seq = stop.seq.wrapping_add(1);
-                self.chain = ChainCursor {
-                    next: self.slot.chain_offset as usize,
-                    left: self.slot.chain_len,
-                    seq: self.next_seq,
-                };
-                // The stop record, then (within the same period if it is that short) its chain.
-                let mut stop = Some(stop);
-                let (values, chain, mut failed) = (self.geometry.values(), &mut self.chain, None);
-                let step = self.interp.step(&self.geometry, dt, &mut || {
-                    stop.take().or_else(|| {
-                        chain.next(values).unwrap_or_else(|code| {
-                            failed = Some(code);
-                            None
-                        })
-                    })
-                });
-                if let Some(code) = failed {
-                    self.fault = code;
-                    return false;
-                }
-                match step {
-                    Step::Sample(s) => self.output(&s),
-                    Step::BadRecord => {
-                        self.fault = FaultCode::BadRecord;
-                        false
-                    }
-                    Step::Starved | Step::Finished => false,
-                }
-            }
-        }
-    }
-
-    /// Stops from sample `s` (just output) with the checked deceleration and jerk of a hold stop
-    /// inside the current record ([`SegmentSlot::hold_stops_offset`]): the record the planner
-    /// simulated, started from that sample; nothing is taken from the ring any more.
-    fn stop_here(&mut self, s: &Sample, accel: f64, jerk: f64, hold: bool, abort: bool) {
-        let from = StopStart {
-            seq: self.slot.record.seq.wrapping_add(1),
-            flags: 0,
-            curve: u32::try_from(s.curve).unwrap_or(u32::MAX),
-            u: s.u,
-            s: s.s,
-            feed: s.feed,
-            accel: s.accel,
-        };
-        let (stop, a0) = stop_record(&from, accel, jerk);
-        if !self
-            .interp
-            .start_profile(&self.geometry, stop, stop.profile().table_from(a0))
-        {
-            self.fault = FaultCode::BadRecord;
-            return;
-        }
-        self.begin_stop(hold, abort);
-        self.chain = ChainCursor::default();
+        self.advance_segments(channel, dt, hold, abort)
     }
 
     /// The stop is over: at rest on the path at `held`.
@@ -1108,276 +590,6 @@ impl Instance {
         };
     }
 
-    /// One period of a path-block motion: the next planned position, exactly; at a block end
-    /// without a next block (underrun) or under hold/abort, the stop from the block's end state
-    /// along the curve, run by the interpolator.
-    fn advance_blocks(&mut self, channel: &Channel, dt: f64, hold: bool, abort: bool) -> bool {
-        if self.stopping {
-            return match self.interp.step(&self.geometry, dt, &mut || None) {
-                Step::Sample(s) => self.output(&s),
-                Step::BadRecord => {
-                    self.fault = FaultCode::BadRecord;
-                    false
-                }
-                Step::Starved | Step::Finished => {
-                    let held = self.held_by_interp();
-                    self.stop_over(channel, self.player.block.seq, held);
-                    false
-                }
-            };
-        }
-        if self.player.finished {
-            return false;
-        }
-        if self.player.remaining() == 0 {
-            // Within a group the next block is queued (the group was whole when its first block
-            // was taken) and runs whatever the commands; at a group's end the next group runs
-            // only if it is whole, on checked curves, and neither hold nor abort is on.
-            let in_group = self.player.loaded && self.player.block.group_left > 1;
-            let block = if (hold || abort) && !in_group {
-                None
-            } else {
-                match channel.segments.peek() {
-                    Ok(Some(slot)) => match slot.decode() {
-                        Some(Record::Block(b)) => {
-                            let whole = channel.segments.len() as u64 >= u64::from(b.group_left);
-                            let ready = in_group || (whole && b.curve_needed < self.geometry.checked);
-                            if in_group && b.group_left.wrapping_add(1) != self.player.block.group_left {
-                                self.fault = FaultCode::Record;
-                                return false;
-                            }
-                            if ready {
-                                let _ = channel.segments.pop();
-                            }
-                            ready.then_some(b)
-                        }
-                        _ => {
-                            self.fault = FaultCode::RecordKind;
-                            return false;
-                        }
-                    },
-                    Ok(None) if in_group => {
-                        self.fault = FaultCode::Channel; // a queued group lost a block
-                        return false;
-                    }
-                    Ok(None) => None,
-                    Err(_) => {
-                        self.fault = FaultCode::Channel;
-                        return false;
-                    }
-                }
-            };
-            let Some(block) = block else {
-                if !self.player.loaded {
-                    return false; // waiting for the first block
-                }
-                // Underrun, hold or abort at the block end: the checked stop from here.
-                self.begin_stop(hold, abort);
-                let last = self.player.block;
-                if last.stop_len > 0 {
-                    // The planner's own deceleration sequence, stored with the geometry.
-                    let cursor = StoredCursor::new(last.seq, last.stop_offset, last.stop_len);
-                    self.player.stored = Some(cursor);
-                    return self.advance_stored_stop(channel, cursor);
-                }
-                let (stop, a0) = block_stop(self.points.pairs, &last, dt);
-                let table = stop.profile().table_from(a0);
-                if !self.interp.start_profile(&self.geometry, stop, table) {
-                    self.fault = FaultCode::BadRecord;
-                    return false;
-                }
-                return self.advance_blocks(channel, dt, hold, abort);
-            };
-            if let Err(code) = self.take_block(&block) {
-                self.fault = code;
-                return false;
-            }
-        }
-        self.output_block_sample()
-    }
-
-    /// One period of a stored stop sequence: the next position (checked as a block sample);
-    /// after the last one, at rest there.
-    fn advance_stored_stop(&mut self, channel: &Channel, mut c: StoredCursor) -> bool {
-        let p = self.player;
-        if c.left == 0 {
-            let held = self.held_at(p.curve, p.u, p.s, p.point);
-            self.stop_over(channel, c.seq, held);
-            return false;
-        }
-        let values = self.geometry.values();
-        let mut curve = p.curve;
-        if c.run_left == 0 {
-            let Some(run) = values.get(c.next..).and_then(StopRun::from_values) else {
-                self.fault = FaultCode::BlockPath;
-                return false;
-            };
-            c.next = c.next.saturating_add(StopRun::VALUES);
-            c.run_left = run.count;
-            c.run_s_before = Some(run.s_before);
-            curve = run.curve;
-        }
-        let (Some(&u), Some(&s), Some(view)) = (
-            values.get(c.next),
-            values.get(c.next.saturating_add(1)),
-            self.geometry.curve(curve),
-        ) else {
-            self.fault = FaultCode::BlockPath;
-            return false;
-        };
-        let Some(point) = self.interp.point_at(&self.geometry, curve, u) else {
-            self.fault = FaultCode::BlockPath;
-            return false;
-        };
-        // On the same curve onwards from the last position, or at the start of a run on the
-        // next curve (across the join), where the run gives the step's start in its measure.
-        let s_before = c.run_s_before.take().unwrap_or(p.s);
-        let follows = if curve == p.curve {
-            u >= p.u && s_before == p.s
-        } else {
-            curve == p.curve.wrapping_add(1) && u >= view.u_min()
-        };
-        let sample = Sample {
-            curve,
-            u,
-            s,
-            point,
-            feed: 0.0,
-            accel: 0.0,
-        };
-        let here = self.point_of(&sample);
-        let chord = distance(&p.point, &here);
-        let finite = u.is_finite() && s.is_finite();
-        if !(finite && follows && u <= view.u_max() && step_fits(chord, s - s_before)) {
-            self.fault = FaultCode::BlockPath;
-            return false;
-        }
-        if !self.output(&Sample {
-            feed: chord / self.period,
-            ..sample
-        }) {
-            return false;
-        }
-        c.next = c.next.saturating_add(2);
-        c.run_left = c.run_left.saturating_sub(1);
-        c.left = c.left.saturating_sub(1);
-        let player = &mut self.player;
-        player.stored = Some(c);
-        player.curve = curve;
-        player.s_before = s_before;
-        player.u = u;
-        player.s = s;
-        player.point = here;
-        true
-    }
-
-    /// Validates `block` against the sequence, the curve, the previous block and (on a
-    /// resume) the stop point, then makes it the current block.
-    fn take_block(&mut self, b: &PathBlock) -> Result<(), FaultCode> {
-        if b.seq != self.next_seq {
-            return Err(FaultCode::Sequence);
-        }
-        b.check().map_err(|_| FaultCode::Record)?;
-        self.points
-            .take(self.geometry.values(), b.points_offset, b.points_len)
-            .ok_or(FaultCode::Record)?;
-        let n = b.len();
-        let view = self.geometry.curve(b.curve()).ok_or(FaultCode::BadRecord)?;
-        let (lo, hi) = (view.u_min(), view.u_max());
-        if b.u.iter().take(n).any(|u| *u < lo || *u > hi) {
-            return Err(FaultCode::BlockPath);
-        }
-        let p = &self.player;
-        let continues = if self.resuming {
-            // The plan from the stop point starts there, at rest.
-            self.held
-                .is_some_and(|h| h.is_at(b.curve(), b.u[0], b.s[0]) && b.s_before == [b.s[0], b.s[0]])
-        } else if !p.loaded {
-            b.s_before == [b.s[0], b.s[0]] // the motion starts at rest
-        } else if b.curve() == p.curve {
-            b.u[0] >= p.u && b.s_before == [p.s_before, p.s]
-        } else {
-            b.curve() > p.curve // the next element; its own arc-length measure
-        };
-        if !continues {
-            return Err(if self.resuming {
-                FaultCode::ResumePoint
-            } else {
-                FaultCode::BlockPath
-            });
-        }
-        self.next_seq = b.seq.wrapping_add(1);
-        self.records = self.records.wrapping_add(1);
-        self.taken_time += n as f64 * self.period;
-        self.pins.seq.set(b.seq);
-        let player = &mut self.player;
-        player.block = *b;
-        player.index = 0;
-        player.loaded = true;
-        Ok(())
-    }
-
-    /// Outputs the current block's next sample: the curve point at its parameter, after
-    /// checking it against the arc lengths (and, on a resume, the held position).
-    fn output_block_sample(&mut self) -> bool {
-        let p = self.player;
-        let b = &p.block;
-        let k = p.index;
-        let (Some(&u), Some(&s)) = (b.u.get(k), b.s.get(k)) else {
-            self.fault = FaultCode::BlockPath;
-            return false;
-        };
-        let Some(point) = self.interp.point_at(&self.geometry, b.curve(), u) else {
-            self.fault = FaultCode::BlockPath;
-            return false;
-        };
-        let mut sample = Sample {
-            curve: b.curve(),
-            u,
-            s,
-            point,
-            feed: 0.0,
-            accel: 0.0,
-        };
-        let here = self.point_of(&sample);
-        // The feed pin: the setpoints' speed over the last period (as VPOp reports it).
-        let chord = distance(&p.point, &here);
-        if p.has_sample {
-            sample.feed = chord / self.period;
-        }
-        if self.resuming {
-            let held = self.held.map(|h| h.point);
-            if held.is_none_or(|h| distance(&h, &here) > RESUME_TOLERANCE) {
-                self.fault = FaultCode::ResumePoint;
-                return false;
-            }
-            self.resuming = false;
-            self.held = None;
-        } else if p.has_sample {
-            // Not the motion's first sample: the step's chord must fit its arc length.
-            let ds = s - b.s_history(k + 1);
-            if !step_fits(chord, ds) {
-                self.fault = FaultCode::BlockPath;
-                return false;
-            }
-        }
-        if !self.output(&sample) {
-            return false;
-        }
-        let player = &mut self.player;
-        player.index = k + 1;
-        player.curve = b.curve();
-        player.s_before = b.s_history(k + 1);
-        player.u = u;
-        player.s = s;
-        player.point = here;
-        player.has_sample = true;
-        if b.is_last() && player.index >= b.len() {
-            player.finished = true;
-        }
-        true
-    }
-
     /// The axis positions the module outputs for `s`.
     fn point_of(&self, s: &Sample) -> [f64; 3] {
         let [x, y, z, ..] = s.point;
@@ -1420,70 +632,9 @@ impl Instance {
     }
 }
 
-/// The deceleration and jerk of the checked hold stop of `slot` at motion sample `n`, if it has
-/// one there; `Err` if its hold stops do not lie in the arena or the one found is not valid.
-/// The triples are in increasing sample order: a binary search, at most 17 probes (their count
-/// is at most [`crate::slot::MAX_HOLD_STOPS`], checked when the slot was taken), so a period
-/// under hold costs the same whatever the record's length.
-fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
-    if slot.hold_stops_len == 0 {
-        return Ok(None);
-    }
-    let start = slot.hold_stops_offset as usize;
-    let end = (slot.hold_stops_len as usize)
-        .checked_mul(3)
-        .and_then(|len| start.checked_add(len))
-        .ok_or(FaultCode::Record)?;
-    let triples = values.get(start..end).ok_or(FaultCode::Record)?;
-    let target = n as f64;
-    let (mut lo, mut hi) = (0usize, triples.len() / 3);
-    while lo < hi {
-        let mid = lo + (hi - lo) / 2;
-        let Some(&[at, accel, jerk]) = triples.get(3 * mid..3 * mid + 3) else {
-            return Err(FaultCode::Record);
-        };
-        if at < target {
-            lo = mid + 1;
-        } else if at > target {
-            hi = mid;
-        } else if at == target && accel > 0.0 && jerk > 0.0 && accel.is_finite() && jerk.is_finite() {
-            return Ok(Some((accel, jerk)));
-        } else {
-            // Not a number, or not a valid stop: the planner never writes one.
-            return Err(FaultCode::Record);
-        }
-    }
-    Ok(None)
-}
-
-/// True if `r` ends at rest (to rounding): the last record of a stop.
-fn ends_at_rest(r: &SegmentRecord) -> bool {
-    r.profile().table().end().v <= FEED_ROUNDING
-}
-
-/// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
-fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
-    held.is_at(r.curve(), r.u_start, r.s_start) && r.feed_start == 0.0
-}
-
 fn distance(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     let (dx, dy, dz) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
     libm::sqrt(dx * dx + dy * dy + dz * dz)
-}
-
-/// Rounding slack for a start feed: the planner hands on a segment's computed end feed, which
-/// can come out a few ulps below zero where the path stops (seen: -2.8e-14 mm/s).
-const FEED_ROUNDING: f64 = 1e-9;
-
-/// `SegmentRecord::check`, except that a start feed within [`FEED_ROUNDING`] below zero counts
-/// as zero. Only the check sees the adjusted copy: the record runs as sent, so the motion stays
-/// the one the planner simulated.
-fn check_record(r: &SegmentRecord) -> Result<(), nurbs_rtcore::RecordError> {
-    let mut checked = *r;
-    if (-FEED_ROUNDING..0.0).contains(&checked.feed_start) {
-        checked.feed_start = 0.0;
-    }
-    checked.check()
 }
 
 /// Drop every queued record of the motion of geometry `generation` (aborted, stopped on an
@@ -1556,9 +707,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).geometry).write(RtGeometry::empty());
     addr_of_mut!((*inst).interp).write(Interpolator::new());
     addr_of_mut!((*inst).next_seq).write(0);
-    addr_of_mut!((*inst).slot).write(SegmentSlot::default());
-    addr_of_mut!((*inst).chain).write(ChainCursor::default());
-    addr_of_mut!((*inst).points).write(StopPoints::NONE);
+    addr_of_mut!((*inst).segment_player).write(SegmentPlayer::default());
     addr_of_mut!((*inst).records).write(0);
     addr_of_mut!((*inst).underruns).write(0);
     addr_of_mut!((*inst).taken_time).write(0.0);
@@ -1574,12 +723,11 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).resuming).write(false);
     addr_of_mut!((*inst).resume_pin).write(false);
     addr_of_mut!((*inst).mode).write(Mode::Undecided);
-    addr_of_mut!((*inst).player).write(BlockPlayer::IDLE);
+    addr_of_mut!((*inst).block_player).write(BlockPlayer::IDLE);
     addr_of_mut!((*inst).period).write(0.0);
     addr_of_mut!((*inst).position_known).write(false);
     addr_of_mut!((*inst).start_shown).write(false);
     addr_of_mut!((*inst).handover).write(Handover::new());
-    addr_of_mut!((*inst).samples).write(0);
 
     let rc = sys::hal_export_funct(
         c"nurbs_interp.update".as_ptr(),
