@@ -102,8 +102,18 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
         N
     }
 
+    /// The writing end (the planner's).
+    pub fn producer(&self) -> Producer<'_, T, N> {
+        Producer(self)
+    }
+
+    /// The reading end (the module's).
+    pub fn consumer(&self) -> Consumer<'_, T, N> {
+        Consumer(self)
+    }
+
     /// Producer side: append one record, or `Full`.
-    pub fn push(&self, record: &T) -> Result<(), ChannelError> {
+    fn push(&self, record: &T) -> Result<(), ChannelError> {
         let head = self.head.0.load(Ordering::Relaxed);
         let tail = self.tail.0.load(Ordering::Acquire);
         let used = head.wrapping_sub(tail) as usize;
@@ -124,7 +134,7 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
     }
 
     /// Consumer side: a copy of the oldest record without taking it.
-    pub fn peek(&self) -> Result<Option<T>, ChannelError> {
+    fn peek(&self) -> Result<Option<T>, ChannelError> {
         let tail = self.tail.0.load(Ordering::Relaxed);
         let head = self.head.0.load(Ordering::Acquire);
         let used = head.wrapping_sub(tail) as usize;
@@ -143,7 +153,7 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
     }
 
     /// Consumer side: take the oldest record. Never allocates, locks or panics.
-    pub fn pop(&self) -> Result<Option<T>, ChannelError> {
+    fn pop(&self) -> Result<Option<T>, ChannelError> {
         let record = self.peek()?;
         if record.is_some() {
             // Only the consumer stores `tail`: the value `peek` read is still current.
@@ -151,6 +161,56 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
             self.tail.0.store(tail.wrapping_add(1), Ordering::Release);
         }
         Ok(record)
+    }
+}
+
+/// The writing end of a ring: what the planner holds. Only one producer may exist per ring (the
+/// planner that published the current geometry); the type keeps the two roles apart at every use.
+#[derive(Clone, Copy)]
+pub struct Producer<'a, T, const N: usize>(&'a SpscRing<T, N>);
+
+impl<T: Copy, const N: usize> Producer<'_, T, N> {
+    /// Append one record, or `Full`.
+    pub fn push(&self, record: &T) -> Result<(), ChannelError> {
+        self.0.push(record)
+    }
+
+    /// Records the consumer has not taken yet.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+}
+
+/// The reading end of a ring: what the module holds (one consumer per ring).
+#[derive(Clone, Copy)]
+pub struct Consumer<'a, T, const N: usize>(&'a SpscRing<T, N>);
+
+impl<T: Copy, const N: usize> Consumer<'_, T, N> {
+    /// A copy of the oldest record without taking it.
+    pub fn peek(&self) -> Result<Option<T>, ChannelError> {
+        self.0.peek()
+    }
+
+    /// Take the oldest record. Never allocates, locks or panics.
+    pub fn pop(&self) -> Result<Option<T>, ChannelError> {
+        self.0.pop()
+    }
+
+    /// Records waiting to be read.
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub const fn capacity(&self) -> usize {
+        N
     }
 }
 
@@ -724,22 +784,22 @@ mod tests {
         let mut next_out = 0u32;
         // Several laps around the ring with varying fill levels.
         for lap in 0..5u32 {
-            while ring.push(&record(next_in)).is_ok() {
+            while ring.producer().push(&record(next_in)).is_ok() {
                 next_in += 1;
             }
             assert_eq!(ring.len(), SEGMENT_SLOTS);
-            assert_eq!(ring.push(&record(next_in)), Err(ChannelError::Full));
+            assert_eq!(ring.producer().push(&record(next_in)), Err(ChannelError::Full));
             for _ in 0..(SEGMENT_SLOTS as u32 - 3 * lap - 1) {
-                assert_eq!(ring.pop(), Ok(Some(record(next_out))));
+                assert_eq!(ring.consumer().pop(), Ok(Some(record(next_out))));
                 next_out += 1;
             }
         }
-        while let Ok(Some(r)) = ring.pop() {
+        while let Ok(Some(r)) = ring.consumer().pop() {
             assert_eq!(r, record(next_out));
             next_out += 1;
         }
         assert_eq!(next_in, next_out);
-        assert_eq!(ring.pop(), Ok(None));
+        assert_eq!(ring.consumer().pop(), Ok(None));
     }
 
     #[test]
@@ -750,10 +810,10 @@ mod tests {
         ring.head.0.store(u32::MAX - 2, Ordering::Relaxed);
         ring.tail.0.store(u32::MAX - 2, Ordering::Relaxed);
         for i in 0..6 {
-            ring.push(&record(i)).unwrap();
+            ring.producer().push(&record(i)).unwrap();
         }
         for i in 0..6 {
-            assert_eq!(ring.pop(), Ok(Some(record(i))));
+            assert_eq!(ring.consumer().pop(), Ok(Some(record(i))));
         }
     }
 
@@ -762,8 +822,8 @@ mod tests {
         let mut b = block();
         let c = unsafe { Channel::init(aligned(&mut b)) };
         c.segments.head.0.store(SEGMENT_SLOTS as u32 + 1, Ordering::Relaxed);
-        assert_eq!(c.segments.pop(), Err(ChannelError::Corrupt));
-        assert_eq!(c.segments.push(&record(0)), Err(ChannelError::Corrupt));
+        assert_eq!(c.segments.consumer().pop(), Err(ChannelError::Corrupt));
+        assert_eq!(c.segments.producer().push(&record(0)), Err(ChannelError::Corrupt));
     }
 
     /// A clamped cubic: the trident's control polygon, as (knots, points, weights).
@@ -954,14 +1014,14 @@ mod tests {
             s.spawn(|| {
                 let mut i = 0;
                 while i < COUNT {
-                    if c.segments.push(&record(i)).is_ok() {
+                    if c.segments.producer().push(&record(i)).is_ok() {
                         i += 1;
                     }
                 }
             });
             let mut expect = 0;
             while expect < COUNT {
-                if let Some(r) = c.segments.pop().unwrap() {
+                if let Some(r) = c.segments.consumer().pop().unwrap() {
                     assert_eq!(r, record(expect));
                     expect += 1;
                 }

@@ -1496,6 +1496,7 @@ impl<'a> Streamer<'a> {
             for (slot, time) in group.slots.iter().zip(&group.times) {
                 self.channel
                     .segments
+                    .producer()
                     .push(slot)
                     .map_err(|e| format!("channel: {e:?}"))?;
                 self.in_ring.push_back(*time);

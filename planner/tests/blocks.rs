@@ -232,12 +232,12 @@ fn bad_blocks_are_refused_with_the_position_held() {
     let mut s = block_streamer(&l, &bj, blocks_of(&bj.job.toolpath, &bj.plan, None), 0);
     run(&mut s, 50, &mut |_| {}, &mut |_| false);
     let mut queue: Vec<Slot> = Vec::new();
-    while let Ok(Some(slot)) = l.channel.segments.pop() {
+    while let Ok(Some(slot)) = l.channel.segments.consumer().pop() {
         queue.push(slot);
     }
     queue[0].kind = nurbs_hal::slot::KIND_SEGMENT;
     for q in &queue {
-        l.channel.segments.push(q).unwrap();
+        l.channel.segments.producer().push(q).unwrap();
     }
     for _ in 0..bj.plan.points.len() {
         period();

@@ -36,7 +36,11 @@ fn curves_are_checked_a_slice_per_period() {
         }
         let slots: Vec<_> = job.groups.iter().flat_map(|g| g.slots.clone()).collect();
         for s in &slots {
-            l.channel.segments.push(&nurbs_hal::channel::Slot::segment(s)).unwrap();
+            l.channel
+                .segments
+                .producer()
+                .push(&nurbs_hal::channel::Slot::segment(s))
+                .unwrap();
         }
         let needed = slots[0].curve_needed as usize;
         let first_values: usize = job.toolpath.elements[..=needed]
@@ -103,7 +107,11 @@ fn bad_curves_and_streams_are_refused() {
     };
     l.channel.geometry.publish_unchecked(&desc);
     for s in &job.groups[0].slots {
-        l.channel.segments.push(&nurbs_hal::channel::Slot::segment(s)).unwrap();
+        l.channel
+            .segments
+            .producer()
+            .push(&nurbs_hal::channel::Slot::segment(s))
+            .unwrap();
     }
     for _ in 0..10 {
         period();

@@ -431,7 +431,7 @@ fn a_group_is_taken_only_whole() {
     let _w = raw_stream(&l, &job);
     let push = |range: std::ops::Range<usize>| {
         for s in &slots[range] {
-            l.channel.segments.push(&Slot::segment(s)).unwrap();
+            l.channel.segments.producer().push(&Slot::segment(s)).unwrap();
         }
     };
     if long == 0 {
@@ -490,7 +490,7 @@ fn malformed_slots_fault_and_hold() {
         let mut bad = slots.clone();
         tamper(&mut bad[with_stop]);
         for s in &bad[..=with_stop] {
-            l.channel.segments.push(&Slot::segment(s)).unwrap();
+            l.channel.segments.producer().push(&Slot::segment(s)).unwrap();
         }
         for _ in 0..job.samples.len() {
             period();
@@ -501,7 +501,7 @@ fn malformed_slots_fault_and_hold() {
         assert_eq!(u32_pin("nurbs_interp.fault-code"), code as u32, "{name}");
         let held = out().q;
         for s in &slots[with_stop + 1..] {
-            let _ = l.channel.segments.push(&Slot::segment(s));
+            let _ = l.channel.segments.producer().push(&Slot::segment(s));
         }
         for _ in 0..100 {
             period();
@@ -512,10 +512,10 @@ fn malformed_slots_fault_and_hold() {
     // A path block in a segment motion.
     let l = load();
     let _w = raw_stream(&l, &job);
-    l.channel.segments.push(&Slot::segment(&slots[0])).unwrap();
+    l.channel.segments.producer().push(&Slot::segment(&slots[0])).unwrap();
     let mut block = Slot::segment(&slots[1]);
     block.kind = KIND_BLOCK;
-    l.channel.segments.push(&block).unwrap();
+    l.channel.segments.producer().push(&block).unwrap();
     for _ in 0..job.samples.len() {
         period();
         if bit("nurbs_interp.fault") {

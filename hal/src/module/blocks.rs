@@ -147,7 +147,7 @@ impl Instance {
             let block = if (hold || abort) && !in_group {
                 None
             } else {
-                match channel.segments.peek() {
+                match channel.segments.consumer().peek() {
                     Ok(Some(slot)) => match slot.decode() {
                         Some(Record::Block(b)) => {
                             let whole = channel.segments.len() as u64 >= u64::from(b.group_left);
@@ -157,7 +157,7 @@ impl Instance {
                                 return false;
                             }
                             if ready {
-                                let _ = channel.segments.pop();
+                                let _ = channel.segments.consumer().pop();
                             }
                             ready.then_some(b)
                         }

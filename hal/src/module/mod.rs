@@ -523,7 +523,7 @@ impl Instance {
         if self.mode == Mode::Undecided {
             // The first record of the motion decides its kind (an unknown kind is refused by
             // the segment path).
-            match channel.segments.peek() {
+            match channel.segments.consumer().peek() {
                 Ok(Some(slot)) if slot.kind == KIND_BLOCK => self.mode = Mode::Blocks,
                 Ok(Some(_)) => self.mode = Mode::Segments,
                 Ok(None) => return false,
@@ -647,7 +647,7 @@ fn discard(channel: &Channel, generation: u32) {
         if channel.segments.is_empty() || channel.geometry.generation() != generation {
             break;
         }
-        if !matches!(channel.segments.pop(), Ok(Some(_))) {
+        if !matches!(channel.segments.consumer().pop(), Ok(Some(_))) {
             break;
         }
     }

@@ -3,6 +3,8 @@
 //! inside a record ([`hold_stop_at`]).
 
 use super::*;
+use crate::channel::{Consumer, SEGMENT_SLOTS};
+use crate::slot::Slot;
 
 /// Where a segment-record motion stands: the slot of the record it runs and what is left of a
 /// stop chain (plain data).
@@ -54,7 +56,7 @@ impl ChainCursor {
 
 /// Where the interpolator takes segment records from: the ring, a group at a time.
 struct SegmentSource<'a> {
-    ring: &'a crate::channel::SpscRing<crate::slot::Slot, { crate::channel::SEGMENT_SLOTS }>,
+    ring: Consumer<'a, Slot, SEGMENT_SLOTS>,
     geometry: &'a RtGeometry,
     /// Take nothing more at a group's end.
     no_more: bool,
@@ -182,7 +184,7 @@ impl Instance {
             })
         } else {
             let source = SegmentSource {
-                ring: &channel.segments,
+                ring: channel.segments.consumer(),
                 geometry: &self.geometry,
                 // Hold and abort wait for the end of the group; nothing is taken during a stop.
                 no_more: self.stopping || hold || abort,

@@ -80,7 +80,7 @@ pub fn play(data: &[u8]) {
     streamer.fill().unwrap();
     // The edits, 5 bytes each: where (slot, descriptor or arena value) and what to xor in.
     let mut queued: Vec<Slot> = Vec::new();
-    while let Ok(Some(s)) = channel.segments.pop() {
+    while let Ok(Some(s)) = channel.segments.consumer().pop() {
         queued.push(s);
     }
     for e in edits.chunks_exact(5) {
@@ -105,7 +105,7 @@ pub fn play(data: &[u8]) {
         }
     }
     for s in queued.iter().take(SEGMENT_SLOTS) {
-        channel.segments.push(s).unwrap();
+        channel.segments.producer().push(s).unwrap();
     }
     let update = mock::funct("nurbs_interp.update").unwrap();
     let mut faulted_at: Option<[f64; 3]> = None;
