@@ -125,161 +125,7 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Toolpath, ReadError> {
     let s = scale_of(file, drawing.header.default_drawing_units)?;
     let mut raws: Vec<(String, Raw)> = Vec::new();
     for (index, e) in drawing.entities().enumerate() {
-        let what = describe(e, index);
-        match &e.specific {
-            EntityType::Spline(sp) => raws.push((what.clone(), spline(file, &what, sp, s)?)),
-            EntityType::Line(l) => {
-                check_normal(file, &what, &l.extrusion_direction)?;
-                let a = [l.p1.x * s, l.p1.y * s, l.p1.z * s];
-                let b = [l.p2.x * s, l.p2.y * s, l.p2.z * s];
-                finite(file, &what, &[a[0], a[1], a[2], b[0], b[1], b[2]])?;
-                if a == b {
-                    continue;
-                }
-                if let Some((_, Raw::Poly { points })) = raws.last_mut().filter(|(w, _)| w.starts_with("LINE")) {
-                    let last = *points.last().expect("polylines have points");
-                    if dist(&last, &a) <= CHAIN_TOL_MM {
-                        points.push(b);
-                        continue;
-                    }
-                }
-                raws.push((what, Raw::Poly { points: vec![a, b] }));
-            }
-            EntityType::LwPolyline(p) => {
-                check_normal(file, &what, &p.extrusion_direction)?;
-                let z = e.common.elevation * s;
-                let mut verts: Vec<([f64; 2], f64)> =
-                    p.vertices.iter().map(|v| ([v.x * s, v.y * s], v.bulge)).collect();
-                for (v, b) in &verts {
-                    finite(file, &what, &[v[0], v[1], *b, z])?;
-                }
-                if p.is_closed() && verts.len() > 1 {
-                    let first = verts[0];
-                    verts.push((first.0, 0.0));
-                }
-                if verts.len() < 2 {
-                    return Err(ReadError::new(file, format!("{what}: fewer than two vertices")));
-                }
-                let mut run: Vec<[f64; 3]> = Vec::new();
-                for w in verts.windows(2) {
-                    let ((a, bulge), (b, _)) = (w[0], w[1]);
-                    if a == b {
-                        continue;
-                    }
-                    if bulge == 0.0 {
-                        if run.is_empty() {
-                            run.push([a[0], a[1], z]);
-                        }
-                        run.push([b[0], b[1], z]);
-                        continue;
-                    }
-                    if run.len() > 1 {
-                        raws.push((
-                            what.clone(),
-                            Raw::Poly {
-                                points: std::mem::take(&mut run),
-                            },
-                        ));
-                    }
-                    run.clear();
-                    let theta = 4.0 * bulge.atan();
-                    let c = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
-                    let n = [-(b[1] - a[1]) / c, (b[0] - a[0]) / c];
-                    let d = (c / 2.0) / (theta / 2.0).tan();
-                    let center = [(a[0] + b[0]) / 2.0 + n[0] * d, (a[1] + b[1]) / 2.0 + n[1] * d];
-                    raws.push((
-                        what.clone(),
-                        Raw::Arc {
-                            start: a,
-                            end: b,
-                            center,
-                            ccw: bulge > 0.0,
-                            full: false,
-                            z,
-                        },
-                    ));
-                }
-                if run.len() > 1 {
-                    raws.push((what, Raw::Poly { points: run }));
-                }
-            }
-            EntityType::Arc(a) => {
-                check_normal(file, &what, &a.normal)?;
-                let (c, r) = ([a.center.x * s, a.center.y * s], a.radius * s);
-                finite(file, &what, &[c[0], c[1], r, a.start_angle, a.end_angle, a.center.z])?;
-                if r <= 0.0 {
-                    return Err(ReadError::new(file, format!("{what}: radius {r} must be > 0")));
-                }
-                let (t0, t1) = (a.start_angle.to_radians(), a.end_angle.to_radians());
-                let full = (t1 - t0).rem_euclid(TAU) == 0.0;
-                let p = |t: f64| [c[0] + r * t.cos(), c[1] + r * t.sin()];
-                raws.push((
-                    what,
-                    Raw::Arc {
-                        start: p(t0),
-                        end: p(t1),
-                        center: c,
-                        ccw: true,
-                        full,
-                        z: a.center.z * s,
-                    },
-                ));
-            }
-            EntityType::Circle(a) => {
-                check_normal(file, &what, &a.normal)?;
-                let (c, r) = ([a.center.x * s, a.center.y * s], a.radius * s);
-                finite(file, &what, &[c[0], c[1], r, a.center.z])?;
-                if r <= 0.0 {
-                    return Err(ReadError::new(file, format!("{what}: radius {r} must be > 0")));
-                }
-                let p = [c[0] + r, c[1]];
-                raws.push((
-                    what,
-                    Raw::Arc {
-                        start: p,
-                        end: p,
-                        center: c,
-                        ccw: true,
-                        full: true,
-                        z: a.center.z * s,
-                    },
-                ));
-            }
-            EntityType::Text(_)
-            | EntityType::MText(_)
-            | EntityType::RotatedDimension(_)
-            | EntityType::RadialDimension(_)
-            | EntityType::DiameterDimension(_)
-            | EntityType::AngularThreePointDimension(_)
-            | EntityType::OrdinateDimension(_)
-            | EntityType::ModelPoint(_)
-            | EntityType::Leader(_)
-            | EntityType::ArcAlignedText(_)
-            | EntityType::RText(_)
-            | EntityType::Tolerance(_)
-            | EntityType::Attribute(_)
-            | EntityType::AttributeDefinition(_)
-            | EntityType::Light(_)
-            | EntityType::OleFrame(_)
-            | EntityType::Ole2Frame(_)
-            | EntityType::DgnUnderlay(_)
-            | EntityType::DwfUnderlay(_)
-            | EntityType::PdfUnderlay(_)
-            | EntityType::Image(_)
-            | EntityType::Wipeout(_) => {}
-            other => {
-                let name = format!("{other:?}");
-                let name = name.split(['(', ' ', '{']).next().unwrap_or("entity").to_string();
-                return Err(ReadError::new(
-                    file,
-                    format!(
-                        "entity #{} (handle {:X}) of type {name} is not supported (SPLINE, LINE, LWPOLYLINE, ARC, CIRCLE are)",
-                        index + 1,
-                        e.common.handle.0
-                    ),
-                ));
-            }
-        }
+        read_entity(file, e, index, s, &mut raws)?;
     }
     if raws.is_empty() {
         return Err(ReadError::new(
@@ -287,6 +133,195 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Toolpath, ReadError> {
             "the drawing contains no SPLINE, LINE, LWPOLYLINE, ARC or CIRCLE entities",
         ));
     }
+    Ok(Toolpath {
+        elements: to_elements(file, raws)?,
+    })
+}
+
+/// Appends the path pieces of entity `e` (number `index`, coordinates scaled by `s` to mm) to
+/// `raws`; entities that carry no path (text, dimensions, images, ...) add nothing.
+fn read_entity(file: &str, e: &Entity, index: usize, s: f64, raws: &mut Vec<(String, Raw)>) -> Result<(), ReadError> {
+    let what = describe(e, index);
+    match &e.specific {
+        EntityType::Spline(sp) => raws.push((what.clone(), spline(file, &what, sp, s)?)),
+        EntityType::Line(l) => line(file, what, l, s, raws)?,
+        EntityType::LwPolyline(p) => lw_polyline(file, what, p, e.common.elevation * s, s, raws)?,
+        EntityType::Arc(a) => raws.push((what.clone(), arc(file, &what, a, s)?)),
+        EntityType::Circle(c) => raws.push((what.clone(), circle(file, &what, c, s)?)),
+        EntityType::Text(_)
+        | EntityType::MText(_)
+        | EntityType::RotatedDimension(_)
+        | EntityType::RadialDimension(_)
+        | EntityType::DiameterDimension(_)
+        | EntityType::AngularThreePointDimension(_)
+        | EntityType::OrdinateDimension(_)
+        | EntityType::ModelPoint(_)
+        | EntityType::Leader(_)
+        | EntityType::ArcAlignedText(_)
+        | EntityType::RText(_)
+        | EntityType::Tolerance(_)
+        | EntityType::Attribute(_)
+        | EntityType::AttributeDefinition(_)
+        | EntityType::Light(_)
+        | EntityType::OleFrame(_)
+        | EntityType::Ole2Frame(_)
+        | EntityType::DgnUnderlay(_)
+        | EntityType::DwfUnderlay(_)
+        | EntityType::PdfUnderlay(_)
+        | EntityType::Image(_)
+        | EntityType::Wipeout(_) => {}
+        other => {
+            let name = format!("{other:?}");
+            let name = name.split(['(', ' ', '{']).next().unwrap_or("entity").to_string();
+            return Err(ReadError::new(
+                file,
+                format!(
+                    "entity #{} (handle {:X}) of type {name} is not supported (SPLINE, LINE, LWPOLYLINE, ARC, CIRCLE are)",
+                    index + 1,
+                    e.common.handle.0
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// A LINE: joined to the previous LINE's polyline when it starts where that one ends.
+fn line(
+    file: &str,
+    what: String,
+    l: &dxf::entities::Line,
+    s: f64,
+    raws: &mut Vec<(String, Raw)>,
+) -> Result<(), ReadError> {
+    check_normal(file, &what, &l.extrusion_direction)?;
+    let a = [l.p1.x * s, l.p1.y * s, l.p1.z * s];
+    let b = [l.p2.x * s, l.p2.y * s, l.p2.z * s];
+    finite(file, &what, &[a[0], a[1], a[2], b[0], b[1], b[2]])?;
+    if a == b {
+        return Ok(());
+    }
+    if let Some((_, Raw::Poly { points })) = raws.last_mut().filter(|(w, _)| w.starts_with("LINE")) {
+        let last = *points.last().expect("polylines have points");
+        if dist(&last, &a) <= CHAIN_TOL_MM {
+            points.push(b);
+            return Ok(());
+        }
+    }
+    raws.push((what, Raw::Poly { points: vec![a, b] }));
+    Ok(())
+}
+
+/// An LWPOLYLINE at height `z`: its straight runs as polylines, its bulged vertices as arcs.
+fn lw_polyline(
+    file: &str,
+    what: String,
+    p: &dxf::entities::LwPolyline,
+    z: f64,
+    s: f64,
+    raws: &mut Vec<(String, Raw)>,
+) -> Result<(), ReadError> {
+    check_normal(file, &what, &p.extrusion_direction)?;
+    let mut verts: Vec<([f64; 2], f64)> = p.vertices.iter().map(|v| ([v.x * s, v.y * s], v.bulge)).collect();
+    for (v, b) in &verts {
+        finite(file, &what, &[v[0], v[1], *b, z])?;
+    }
+    if p.is_closed() && verts.len() > 1 {
+        let first = verts[0];
+        verts.push((first.0, 0.0));
+    }
+    if verts.len() < 2 {
+        return Err(ReadError::new(file, format!("{what}: fewer than two vertices")));
+    }
+    let mut run: Vec<[f64; 3]> = Vec::new();
+    for w in verts.windows(2) {
+        let ((a, bulge), (b, _)) = (w[0], w[1]);
+        if a == b {
+            continue;
+        }
+        if bulge == 0.0 {
+            if run.is_empty() {
+                run.push([a[0], a[1], z]);
+            }
+            run.push([b[0], b[1], z]);
+            continue;
+        }
+        if run.len() > 1 {
+            raws.push((
+                what.clone(),
+                Raw::Poly {
+                    points: std::mem::take(&mut run),
+                },
+            ));
+        }
+        run.clear();
+        raws.push((what.clone(), bulge_arc(a, b, bulge, z)));
+    }
+    if run.len() > 1 {
+        raws.push((what, Raw::Poly { points: run }));
+    }
+    Ok(())
+}
+
+/// The arc from `a` to `b` of a polyline vertex with `bulge` (tan of a quarter of its sweep).
+fn bulge_arc(a: [f64; 2], b: [f64; 2], bulge: f64, z: f64) -> Raw {
+    let theta = 4.0 * bulge.atan();
+    let c = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
+    let n = [-(b[1] - a[1]) / c, (b[0] - a[0]) / c];
+    let d = (c / 2.0) / (theta / 2.0).tan();
+    let center = [(a[0] + b[0]) / 2.0 + n[0] * d, (a[1] + b[1]) / 2.0 + n[1] * d];
+    Raw::Arc {
+        start: a,
+        end: b,
+        center,
+        ccw: bulge > 0.0,
+        full: false,
+        z,
+    }
+}
+
+/// An ARC entity (counter-clockwise from its start angle to its end angle, in degrees).
+fn arc(file: &str, what: &str, a: &dxf::entities::Arc, s: f64) -> Result<Raw, ReadError> {
+    check_normal(file, what, &a.normal)?;
+    let (c, r) = ([a.center.x * s, a.center.y * s], a.radius * s);
+    finite(file, what, &[c[0], c[1], r, a.start_angle, a.end_angle, a.center.z])?;
+    if r <= 0.0 {
+        return Err(ReadError::new(file, format!("{what}: radius {r} must be > 0")));
+    }
+    let (t0, t1) = (a.start_angle.to_radians(), a.end_angle.to_radians());
+    let full = (t1 - t0).rem_euclid(TAU) == 0.0;
+    let p = |t: f64| [c[0] + r * t.cos(), c[1] + r * t.sin()];
+    Ok(Raw::Arc {
+        start: p(t0),
+        end: p(t1),
+        center: c,
+        ccw: true,
+        full,
+        z: a.center.z * s,
+    })
+}
+
+/// A CIRCLE: a full counter-clockwise arc from its rightmost point.
+fn circle(file: &str, what: &str, a: &dxf::entities::Circle, s: f64) -> Result<Raw, ReadError> {
+    check_normal(file, what, &a.normal)?;
+    let (c, r) = ([a.center.x * s, a.center.y * s], a.radius * s);
+    finite(file, what, &[c[0], c[1], r, a.center.z])?;
+    if r <= 0.0 {
+        return Err(ReadError::new(file, format!("{what}: radius {r} must be > 0")));
+    }
+    let p = [c[0] + r, c[1]];
+    Ok(Raw::Arc {
+        start: p,
+        end: p,
+        center: c,
+        ccw: true,
+        full: true,
+        z: a.center.z * s,
+    })
+}
+
+/// The path elements of the pieces read, in order; 2-D unless a piece leaves Z = 0.
+fn to_elements(file: &str, raws: Vec<(String, Raw)>) -> Result<Vec<PathElement>, ReadError> {
     let three_d = raws.iter().any(|(_, r)| match r {
         Raw::Poly { points } | Raw::Spline { points, .. } => points.iter().any(|p| p[2] != 0.0),
         Raw::Arc { z, .. } => *z != 0.0,
@@ -342,7 +377,7 @@ pub fn parse(file: &str, bytes: &[u8]) -> Result<Toolpath, ReadError> {
             source_line: None,
         });
     }
-    Ok(Toolpath { elements })
+    Ok(elements)
 }
 
 fn dist(a: &[f64; 3], b: &[f64; 3]) -> f64 {
