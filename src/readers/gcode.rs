@@ -504,11 +504,62 @@ impl Interp {
     }
 
     fn line(&mut self, lineno: usize, words: &[Word]) -> Result<bool, ReadError> {
-        let file_name = Arc::clone(&self.file);
-        let file: &str = &file_name;
         let b = self.parse_block(lineno, words)?;
         let in_nurbs = self.nurbs.is_some();
+        self.check_inside_nurbs(lineno, &b)?;
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
+        for &(code, col) in &b.g {
+            if let Some(why) = unsupported_g(code) {
+                return Err(err(file, lineno, col, format!("{}: {why}", fmt_code('G', code))));
+            }
+        }
 
+        // Order of execution (LinuxCNC manual, "Order of Execution"; execute_block).
+        self.modal_settings(lineno, &b)?;
+        // Motion (enhance_block).
+        let (motion, axis_word) = self.motion_of(lineno, &b)?;
+        let mcode = motion.map(|m| m.0);
+        check_word_users(file, lineno, &b, mcode)?;
+        match motion {
+            None => {}
+            Some((800, _)) => self.motion = None,
+            Some((code @ (0 | 10), col)) => self.straight_move(lineno, code, col, axis_word, &b)?,
+            Some((code @ (20 | 30), col)) => {
+                self.motion = Some(if code == 20 { Motion::ArcCw } else { Motion::ArcCcw });
+                self.arc(lineno, col, code == 20, &b)?;
+            }
+            Some((52, col)) => self.nurbs_point(lineno, col, &b)?,
+            Some((53, _)) => self.end_nurbs_block(lineno, axis_word, &b)?,
+            Some((other, col)) => {
+                return Err(err(
+                    file,
+                    lineno,
+                    col,
+                    format!("{} is not supported", fmt_code('G', other)),
+                ))
+            }
+        }
+        if mcode != Some(52) && mcode != Some(53) && in_nurbs {
+            // A line inside the block without control point: only F, comments and N are allowed.
+            for letter in ['P', 'L'] {
+                if let Some((_, col)) = b.get(letter) {
+                    return Err(err(
+                        file,
+                        lineno,
+                        col,
+                        format!("{letter} word without X Y control point"),
+                    ));
+                }
+            }
+        }
+        // Stop codes run last.
+        Ok(b.m.iter().any(|m| m.0 == 20 || m.0 == 300))
+    }
+
+    /// Inside a G5.2 block only control points, F, comments and N may come.
+    fn check_inside_nurbs(&self, lineno: usize, b: &Block) -> Result<(), ReadError> {
+        let file: &str = &self.file;
         if let Some(open) = &self.nurbs {
             let opened = open.line;
             if let Some(&(code, col)) = b.g.iter().find(|g| g.0 != 52 && g.0 != 53) {
@@ -554,14 +605,14 @@ impl Interp {
             }
         }
 
-        for &(code, col) in &b.g {
-            if let Some(why) = unsupported_g(code) {
-                return Err(err(file, lineno, col, format!("{}: {why}", fmt_code('G', code))));
-            }
-        }
+        Ok(())
+    }
 
-        // Order of execution (LinuxCNC manual, "Order of Execution"; execute_block).
-        // F: feed rate, in the units active before this line's G20/G21.
+    /// The words that set modes, in LinuxCNC's order: F (in the units active before this
+    /// line's G20/G21), S, T, G20/G21, the coordinate system, G90/G91, G90.1/G91.1.
+    fn modal_settings(&mut self, lineno: usize, b: &Block) -> Result<(), ReadError> {
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
         if let Some((f, col)) = b.get('F') {
             if f < 0.0 {
                 return Err(err(file, lineno, col, "negative F word found"));
@@ -611,7 +662,14 @@ impl Interp {
             self.ij_absolute = false;
         }
 
-        // Motion (enhance_block).
+        Ok(())
+    }
+
+    /// The line's motion code and its column (programmed, or the modal one if an axis word
+    /// comes alone), and its first axis word.
+    #[allow(clippy::type_complexity)]
+    fn motion_of(&self, lineno: usize, b: &Block) -> Result<(Option<(i32, usize)>, Option<(char, usize)>), ReadError> {
+        let file: &str = &self.file;
         let motion_code = b.g.iter().find(|g| g_group(g.0) == Some(1)).copied();
         let axis_word = ['X', 'Y', 'Z'].iter().find_map(|&l| b.get(l).map(|w| (l, w.1)));
         let motion: Option<(i32, usize)> = match motion_code {
@@ -640,141 +698,99 @@ impl Interp {
                 None => None,
             },
         };
-        let mcode = motion.map(|m| m.0);
-        // Words that need a code to use them (check_other_codes).
-        let arc = matches!(mcode, Some(20) | Some(30));
-        for (letter, ok, users) in [
-            ('I', arc, "G2 or G3"),
-            ('J', arc, "G2 or G3"),
-            ('R', arc, "G2 or G3"),
-            ('K', false, "an arc in the XY plane (K belongs to other planes)"),
-            ('P', arc || mcode == Some(52) || b.has_g(640), "G2, G3, G5.2 or G64"),
-            ('Q', b.has_g(640), "G64"),
-            ('L', mcode == Some(52), "G5.2"),
-            ('H', b.has_g(430), "G43"),
-            ('D', false, "G41 or G42 (cutter compensation is not supported)"),
-        ] {
-            if let (Some((_, col)), false) = (b.get(letter), ok) {
-                return Err(err(
-                    file,
-                    lineno,
-                    col,
-                    format!("{letter} word with no {users} to use it"),
-                ));
-            }
-        }
+        Ok((motion, axis_word))
+    }
 
-        match mcode {
-            None => {}
-            Some(800) => self.motion = None,
-            Some(0) | Some(10) => {
-                let m = if mcode == Some(0) { Motion::Rapid } else { Motion::Line };
-                self.motion = Some(m);
-                let to = self.find_end(lineno, &b)?;
-                if m == Motion::Line {
-                    if self.feed == 0.0 {
-                        return Err(err(file, lineno, motion.unwrap().1, "cannot do G1 with zero feed rate"));
-                    }
-                    if to != self.pos {
-                        // A feed move needs a known XY start point.
-                        let col = axis_word.map_or(motion.unwrap().1, |a| a.1);
-                        self.need(lineno, col, 0)?;
-                        self.need(lineno, col, 1)?;
-                    }
-                    self.moves.push(Move::Line {
-                        line: lineno,
-                        from: self.pos,
-                        to,
-                        feed: self.feed,
-                        z_word: b.has('Z'),
-                    });
-                } else {
-                    let col = axis_word.map_or(motion.unwrap().1, |a| a.1);
-                    self.moves.push(Move::Rapid {
-                        line: lineno,
-                        col,
-                        from: self.pos,
-                        to,
-                    });
-                }
-                self.pos = to;
+    /// G0 or G1 to the line's end point.
+    fn straight_move(
+        &mut self,
+        lineno: usize,
+        code: i32,
+        code_col: usize,
+        axis_word: Option<(char, usize)>,
+        b: &Block,
+    ) -> Result<(), ReadError> {
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
+        let m = if code == 0 { Motion::Rapid } else { Motion::Line };
+        self.motion = Some(m);
+        let to = self.find_end(lineno, b)?;
+        if m == Motion::Line {
+            if self.feed == 0.0 {
+                return Err(err(file, lineno, code_col, "cannot do G1 with zero feed rate"));
             }
-            Some(20) | Some(30) => {
-                self.motion = Some(if mcode == Some(20) {
-                    Motion::ArcCw
-                } else {
-                    Motion::ArcCcw
-                });
-                self.arc(lineno, motion.unwrap().1, mcode == Some(20), &b)?;
+            if to != self.pos {
+                // A feed move needs a known XY start point.
+                let col = axis_word.map_or(code_col, |a| a.1);
+                self.need(lineno, col, 0)?;
+                self.need(lineno, col, 1)?;
             }
-            Some(52) => self.nurbs_point(lineno, motion.unwrap().1, &b)?,
-            Some(53) => {
-                let col = b.col_g(53);
-                let Some(block) = self.nurbs.take() else {
-                    return Err(err(file, lineno, col, "cannot use G5.3 without G5.2 first"));
-                };
-                if let Some((l, c)) = axis_word {
-                    return Err(err(
-                        file,
-                        lineno,
-                        c,
-                        format!("{l} word on the G5.3 line: LinuxCNC ignores it; put the last control point on its own line"),
-                    ));
-                }
-                for letter in ['P', 'L'] {
-                    if let Some((_, c)) = b.get(letter) {
-                        return Err(err(file, lineno, c, format!("{letter} word with no G5.2 to use it")));
-                    }
-                }
-                let n = block.points.len();
-                if n < block.order {
-                    return Err(err(
-                        file,
-                        lineno,
-                        col,
-                        format!(
-                            "you must specify a number of control points at least equal to the order L = {} (the block opened at line {} has {n})",
-                            block.order, block.line
-                        ),
-                    ));
-                }
-                let last = block.points[n - 1];
-                self.pos[0] = Some(last[0]);
-                self.pos[1] = Some(last[1]);
-                self.moves.push(Move::Nurbs {
-                    line: block.line,
-                    order: block.order,
-                    points: block.points,
-                    weights: block.weights,
-                    z: block.z,
-                    feed: self.feed,
-                });
-                self.motion = None;
-            }
-            Some(other) => {
-                return Err(err(
-                    file,
-                    lineno,
-                    motion.unwrap().1,
-                    format!("{} is not supported", fmt_code('G', other)),
-                ))
+            self.moves.push(Move::Line {
+                line: lineno,
+                from: self.pos,
+                to,
+                feed: self.feed,
+                z_word: b.has('Z'),
+            });
+        } else {
+            let col = axis_word.map_or(code_col, |a| a.1);
+            self.moves.push(Move::Rapid {
+                line: lineno,
+                col,
+                from: self.pos,
+                to,
+            });
+        }
+        self.pos = to;
+        Ok(())
+    }
+
+    /// G5.3: the end of a G5.2 block, which becomes one NURBS move.
+    fn end_nurbs_block(&mut self, lineno: usize, axis_word: Option<(char, usize)>, b: &Block) -> Result<(), ReadError> {
+        let file_name = Arc::clone(&self.file);
+        let file: &str = &file_name;
+        let col = b.col_g(53);
+        let Some(block) = self.nurbs.take() else {
+            return Err(err(file, lineno, col, "cannot use G5.3 without G5.2 first"));
+        };
+        if let Some((l, c)) = axis_word {
+            return Err(err(
+                file,
+                lineno,
+                c,
+                format!("{l} word on the G5.3 line: LinuxCNC ignores it; put the last control point on its own line"),
+            ));
+        }
+        for letter in ['P', 'L'] {
+            if let Some((_, c)) = b.get(letter) {
+                return Err(err(file, lineno, c, format!("{letter} word with no G5.2 to use it")));
             }
         }
-        if mcode != Some(52) && mcode != Some(53) && in_nurbs {
-            // A line inside the block without control point: only F, comments and N are allowed.
-            for letter in ['P', 'L'] {
-                if let Some((_, col)) = b.get(letter) {
-                    return Err(err(
-                        file,
-                        lineno,
-                        col,
-                        format!("{letter} word without X Y control point"),
-                    ));
-                }
-            }
+        let n = block.points.len();
+        if n < block.order {
+            return Err(err(
+                file,
+                lineno,
+                col,
+                format!(
+                    "you must specify a number of control points at least equal to the order L = {} (the block opened at line {} has {n})",
+                    block.order, block.line
+                ),
+            ));
         }
-        // Stop codes run last.
-        Ok(b.m.iter().any(|m| m.0 == 20 || m.0 == 300))
+        let last = block.points[n - 1];
+        self.pos[0] = Some(last[0]);
+        self.pos[1] = Some(last[1]);
+        self.moves.push(Move::Nurbs {
+            line: block.line,
+            order: block.order,
+            points: block.points,
+            weights: block.weights,
+            z: block.z,
+            feed: self.feed,
+        });
+        self.motion = None;
+        Ok(())
     }
 
     /// One line of a G5.2 block (`Interp::convert_nurbs`).
@@ -1513,4 +1529,31 @@ impl Builder {
         }
         Ok(())
     }
+}
+
+/// Words that need a code on the line to use them (LinuxCNC's check_other_codes).
+fn check_word_users(file: &str, lineno: usize, b: &Block, mcode: Option<i32>) -> Result<(), ReadError> {
+    let arc = matches!(mcode, Some(20) | Some(30));
+    for (letter, ok, users) in [
+        ('I', arc, "G2 or G3"),
+        ('J', arc, "G2 or G3"),
+        ('R', arc, "G2 or G3"),
+        ('K', false, "an arc in the XY plane (K belongs to other planes)"),
+        ('P', arc || mcode == Some(52) || b.has_g(640), "G2, G3, G5.2 or G64"),
+        ('Q', b.has_g(640), "G64"),
+        ('L', mcode == Some(52), "G5.2"),
+        ('H', b.has_g(430), "G43"),
+        ('D', false, "G41 or G42 (cutter compensation is not supported)"),
+    ] {
+        if let (Some((_, col)), false) = (b.get(letter), ok) {
+            return Err(err(
+                file,
+                lineno,
+                col,
+                format!("{letter} word with no {users} to use it"),
+            ));
+        }
+    }
+
+    Ok(())
 }
