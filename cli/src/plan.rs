@@ -1,11 +1,13 @@
-use super::corners::{describe, open, prepare, summary_fields, RoundCorners};
+use super::corners::{describe, open, prepare, summary_fields, RoundCorners, Rounding};
 use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
+use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::axial::{FiniteDifferences, MAX_AXES};
 use nurbs_motion::planner::corner::{Deviation, ProgramPolyline};
+use nurbs_motion::planner::flf::CriticalPoint;
 use nurbs_motion::planner::simulate::{run_segment, setpoints_with, Interpolation, SimState};
-use nurbs_motion::planner::{FinalRecord, PathCurves, PlanOptions, Planner};
+use nurbs_motion::planner::{FinalRecord, PathCurves, PlanOptions, PlanReport, Planner};
 use nurbs_rtcore::interpolator::Sample;
 use std::io::Write;
 use std::path::Path;
@@ -97,6 +99,22 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             "the erwinski planner plans the tool tip of a 5-axis toolpath; joint planning on a machine is --planner vpop",
         )?;
     }
+    run_erwinski(&args)
+}
+
+/// What an Erwinski plan came to, for the report, the summary and the plot.
+struct ErwinskiRun {
+    report: PlanReport,
+    out: Written,
+    motion_time: f64,
+    elements: usize,
+    groups: Groups,
+    rounding: Option<Rounding>,
+    critical_points: Vec<(usize, CriticalPoint)>,
+    tip: usize,
+}
+
+fn run_erwinski(args: &PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let options = PlanOptions {
         stream: args.stream,
         ..PlanOptions::default()
@@ -117,15 +135,12 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     };
     let tip = curves.tip_dim();
     let limits = args.limits.limits(tip)?;
-    let names = ["x", "y", "z"];
-    let mut sink = SetpointSink::create(args.out, &names[..tip], &limits, Some(&mut program), !keep)?;
+    let mut sink = SetpointSink::create(args.out, &AXIS_NAMES[..tip], &limits, Some(&mut program), !keep)?;
     let mut planner = Planner::with_curves(curves, &limits, &options)?;
     let mut state = SimState::start(tip, limits.period);
     let (mut records, mut critical_points, mut groups) = (Vec::new(), Vec::new(), Groups::default());
     let (mut handed_out, mut handed_out_time) = (0usize, 0.0f64);
-    // A long plan says how far it has got, every PROGRESS_EVERY.
-    let began = std::time::Instant::now();
-    let mut next_report = PROGRESS_EVERY;
+    let mut progress = Progress::new();
     while let Some(next) = planner.next_final() {
         let f = next.map_err(|e| match args.stream {
             // A streamed plan hands records out before it ends: on the machine they would be running.
@@ -138,15 +153,7 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         handed_out += 1;
         handed_out_time += f.record.profile().total_time();
         groups.push(&f);
-        if began.elapsed() >= next_report {
-            next_report += PROGRESS_EVERY;
-            eprintln!(
-                "planning: {handed_out_time:.1} s of motion in {handed_out} records after {:.0} s, at path element {} of {} read",
-                began.elapsed().as_secs_f64(),
-                f.record.curve + 1,
-                planner.curves().len()
-            );
-        }
+        progress.report(handed_out_time, handed_out, f.record.curve + 1, planner.curves().len());
         let found = planner.take_critical_points();
         if args.plot.is_some() {
             critical_points.extend(found);
@@ -177,66 +184,98 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     let out = sink.finish()?;
-    let motion_time = out.rows.saturating_sub(1) as f64 * report.limits.period;
-    eprintln!(
-        "planned {} segments, {} critical points: motion {:.6} s ({} setpoints), planning {:.3} ms{}",
-        report.records,
-        groups.critical_points,
-        motion_time,
-        out.rows,
-        report.plan_time * 1e3,
-        if args.stream {
-            format!(
-                " (first segment final after {:.3} ms; {} groups, the longest {:.3} s of motion)",
-                report.first_record_time * 1e3,
-                groups.count,
-                groups.longest
-            )
-        } else {
-            String::new()
-        }
-    );
-    let rounding = whole.as_ref().map_or_else(|| stream.rounding(), |w| w.rounding);
-    if let Some(line) = describe(rounding, out.deviation, report.limits.chord_tolerance) {
-        eprintln!("{line}");
-    }
-    for (curve, u) in &report.stops_made {
-        eprintln!("the streamed plan comes to rest at curve {curve} u = {u}: back-tracking reached records already handed out");
-    }
+    let run = ErwinskiRun {
+        motion_time: out.rows.saturating_sub(1) as f64 * report.limits.period,
+        report,
+        out,
+        elements,
+        groups,
+        rounding: whole.as_ref().map_or_else(|| stream.rounding(), |w| w.rounding),
+        critical_points,
+        tip,
+    };
+    run.print(args);
     if let Some(e) = read_error {
         return Err(format!(
             "{e}\nthe plan ends at rest at the end of path element {} before it ({} setpoints written to {})",
-            elements.saturating_sub(1),
-            out.rows,
+            run.elements.saturating_sub(1),
+            run.out.rows,
             args.out.display()
         )
         .into());
     }
     if let Some(path) = args.summary {
+        run.write_summary(args, path)?;
+    }
+    if let (Some(path), Some(w)) = (args.plot, &whole) {
+        run.write_plot(args, path, &w.toolpath)?;
+    }
+    Ok(())
+}
+
+impl ErwinskiRun {
+    /// The plan's figures on stderr.
+    fn print(&self, args: &PlanArgs) {
+        let (report, groups) = (&self.report, &self.groups);
+        eprintln!(
+            "planned {} segments, {} critical points: motion {:.6} s ({} setpoints), planning {:.3} ms{}",
+            report.records,
+            groups.critical_points,
+            self.motion_time,
+            self.out.rows,
+            report.plan_time * 1e3,
+            if args.stream {
+                format!(
+                    " (first segment final after {:.3} ms; {} groups, the longest {:.3} s of motion)",
+                    report.first_record_time * 1e3,
+                    groups.count,
+                    groups.longest
+                )
+            } else {
+                String::new()
+            }
+        );
+        if let Some(line) = describe(self.rounding, self.out.deviation, report.limits.chord_tolerance) {
+            eprintln!("{line}");
+        }
+        for (curve, u) in &report.stops_made {
+            eprintln!(
+                "the streamed plan comes to rest at curve {curve} u = {u}: back-tracking reached records already handed out"
+            );
+        }
+    }
+
+    /// `--summary`: the plan's figures as JSON.
+    fn write_summary(&self, args: &PlanArgs, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+        let (report, groups) = (&self.report, &self.groups);
         let summary = with_fields(
-            summary_common(&args, "erwinski", &report.limits, &out.check, tip),
+            summary_common(args, "erwinski", &report.limits, &self.out.check, self.tip),
             serde_json::json!({
-                "motion_time_s": motion_time,
+                "motion_time_s": self.motion_time,
                 "profile_time_s": report.motion_time,
                 "plan_time_s": report.plan_time,
                 "first_segment_time_s": report.first_record_time,
                 "interpolation": format!("{:?}", args.interp).to_lowercase(),
                 "streamed": args.stream,
                 "segments": report.records,
-                "elements": elements,
+                "elements": self.elements,
                 "critical_points": groups.critical_points,
-                "setpoints": out.rows,
+                "setpoints": self.out.rows,
                 "groups": groups.count,
                 "longest_group_s": groups.longest,
                 "stops_made": report.stops_made.len(),
             }),
         );
-        let summary = with_fields(summary, summary_fields(rounding, out.deviation));
+        let summary = with_fields(summary, summary_fields(self.rounding, self.out.deviation));
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
+        Ok(())
     }
-    if let (Some(path), Some(w)) = (args.plot, &whole) {
-        let toolpath = &w.toolpath;
-        let points: Vec<PlotSample> = out
+
+    /// `--plot`: the profile as a PNG.
+    fn write_plot(&self, args: &PlanArgs, path: &Path, toolpath: &Toolpath) -> Result<(), Box<dyn std::error::Error>> {
+        let tip = self.tip;
+        let points: Vec<PlotSample> = self
+            .out
             .samples
             .iter()
             .map(|s| {
@@ -250,20 +289,49 @@ pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 }
             })
             .collect();
+        let limits = &self.report.limits;
         let profile = Profile {
             toolpath,
-            limits: &report.limits,
-            axes: &names[..tip],
+            limits,
+            axes: &AXIS_NAMES[..tip],
             rotary_from: tip,
             samples: &points,
             flf: true,
-            critical_points: &critical_points,
-            title: plot_title(&args, "erwinski planner", &report.limits, motion_time),
+            critical_points: &self.critical_points,
+            title: plot_title(args, "erwinski planner", limits, self.motion_time),
         };
         write_png(path, &profile)?;
         eprintln!("plot written to {}", path.display());
+        Ok(())
     }
-    Ok(())
+}
+
+/// The names of the tool tip's axes, in order.
+const AXIS_NAMES: [&str; 3] = ["x", "y", "z"];
+
+/// A long plan says how far it has got, every [`PROGRESS_EVERY`].
+struct Progress {
+    began: std::time::Instant,
+    next_report: std::time::Duration,
+}
+
+impl Progress {
+    fn new() -> Self {
+        Progress {
+            began: std::time::Instant::now(),
+            next_report: PROGRESS_EVERY,
+        }
+    }
+
+    fn report(&mut self, motion: f64, records: usize, element: u32, elements_read: usize) {
+        if self.began.elapsed() >= self.next_report {
+            self.next_report += PROGRESS_EVERY;
+            eprintln!(
+                "planning: {motion:.1} s of motion in {records} records after {:.0} s, at path element {element} of {elements_read} read",
+                self.began.elapsed().as_secs_f64(),
+            );
+        }
+    }
 }
 
 /// How often a long plan reports its progress on stderr.
@@ -452,7 +520,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     if let Some(path) = args.plot {
         let joints = args.machine.kinematics().joint_names();
-        let names: &[&str] = if five { &joints } else { &["x", "y", "z"][..tip] };
+        let names: &[&str] = if five { &joints } else { &AXIS_NAMES[..tip] };
         let profile = Profile {
             toolpath,
             limits: &plan.limits,

@@ -339,14 +339,38 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
         .map_err(draw_err)?;
     let panels = root.split_evenly((3, 1));
     let param = Parameter::new(p.toolpath);
-    let (x0, x1) = param.range();
     let xs: Vec<f64> = p.samples.iter().map(|s| param.at(s.curve, s.u)).collect();
+    feed_panel(&panels[0], p, &param, &xs)?;
+    // (b) and (c): axial accelerations and jerks with their limits.
     let axes = p.axes.len().min(MAX_AXES);
     let q: Vec<[f64; MAX_AXES]> = p.samples.iter().map(|s| s.q).collect();
     let diffs = axial_differences(&q, axes, p.limits.period);
-    // The three rest samples after the last setpoint sit at the end of the path.
-    let x_of = |j: usize| xs.get(j).copied().or(xs.last().copied()).unwrap_or(x0);
+    let accel = Axial {
+        order: 1,
+        caption: "(b) axial accelerations",
+        unit: "acceleration",
+        limits: &p.limits.acceleration,
+    };
+    axial_panel(&panels[1], p, &param, &xs, &diffs, &accel)?;
+    let jerk = Axial {
+        order: 2,
+        caption: "(c) axial jerks",
+        unit: "jerk",
+        limits: &p.limits.jerk,
+    };
+    axial_panel(&panels[2], p, &param, &xs, &diffs, &jerk)?;
+    Ok(())
+}
 
+/// Panel (a): the planned feedrate over the path parameter, with the feedrate limit function's
+/// caps and the critical points.
+fn feed_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    p: &Profile,
+    param: &Parameter,
+    xs: &[f64],
+) -> Result<(), PlotError> {
+    let (x0, x1) = param.range();
     // (a) Feedrate and FLF.
     // Scaled to the planned feed (the caps run far above it on gentle stretches), with headroom
     // for the legend; the programmed feed line shows when it is within reach.
@@ -368,7 +392,7 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
     } else {
         "(a) feedrate and feedrate limit function".to_string()
     };
-    let mut chart = ChartBuilder::on(&panels[0])
+    let mut chart = ChartBuilder::on(panel)
         .caption(caption, (FONT, 24))
         .margin(12)
         .x_label_area_size(50)
@@ -376,9 +400,9 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
         .build_cartesian_2d(x0..x1, 0.0..top)
         .map_err(draw_err)?;
     mesh(&mut chart, param.label(), "feedrate [mm/s]")?;
-    element_bounds(&mut chart, &param, 0.0, top)?;
+    element_bounds(&mut chart, param, 0.0, top)?;
     if p.flf {
-        let curve = flf_curve(p, &param);
+        let curve = flf_curve(p, param);
         let parts: [(&str, RGBColor, Component); 4] = [
             ("feed / axial velocity cap", CAP_FEED, |v| v.feed),
             ("chord error cap", CAP_CHORD, |v| v.chord),
@@ -432,79 +456,90 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
     }
     legend(&mut chart)?;
 
-    // (b) and (c): axial accelerations and jerks with their limits.
-    for (k, (panel, caption, unit, lim)) in [
-        (
-            &panels[1],
-            "(b) axial accelerations",
-            "acceleration",
-            &p.limits.acceleration,
-        ),
-        (&panels[2], "(c) axial jerks", "jerk", &p.limits.jerk),
-    ]
-    .into_iter()
-    .enumerate()
-    {
-        let d = k + 1;
-        let peak = diffs
-            .iter()
-            .flat_map(|s| s[d][..axes].iter().map(|v| v.abs()))
-            .fold(0.0, f64::max);
-        let lim_max = lim[..axes].iter().copied().fold(0.0, f64::max);
-        let y = lim_max.max(peak) * 1.3;
-        let units = if d == 1 { "mm/s²" } else { "mm/s³" };
-        let y_desc = if p.rotary_from < axes {
-            format!("{unit} [{units}; rotary: deg/s{}]", if d == 1 { "²" } else { "³" })
-        } else {
-            format!("{unit} [{units}]")
-        };
-        let mut chart = ChartBuilder::on(panel)
-            .caption(caption, (FONT, 24))
-            .margin(12)
-            .x_label_area_size(50)
-            .y_label_area_size(90)
-            .build_cartesian_2d(x0..x1, -y..y)
-            .map_err(draw_err)?;
-        mesh(&mut chart, param.label(), &y_desc)?;
-        element_bounds(&mut chart, &param, -y, y)?;
-        for i in 0..axes {
-            let color = axis_color(i);
-            chart
-                .draw_series(LineSeries::new(
-                    decimate(diffs.iter().enumerate().map(|(j, s)| (x_of(j), s[d][i])), x0, x1),
-                    color.stroke_width(if d == 1 { 2 } else { 1 }),
-                ))
-                .map_err(draw_err)?
-                .label(p.axes[i].to_string())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3)));
-        }
-        let same = lim[..axes].iter().all(|v| *v == lim[0]);
-        let sym = if d == 1 { "A" } else { "J" };
-        for i in 0..axes {
-            if same && i > 0 {
-                break;
-            }
-            let (color, name) = if same {
-                (LIMIT, format!("±{sym} limit ({})", tick(&lim[0])))
-            } else {
-                (
-                    axis_color(i),
-                    format!("±{sym} limit, {} ({})", p.axes[i], tick(&lim[i])),
-                )
-            };
-            let style = color.stroke_width(2);
-            for (n, v) in [lim[i], -lim[i]].into_iter().enumerate() {
-                let s = chart
-                    .draw_series(DashedLineSeries::new(vec![(x0, v), (x1, v)], 14, 6, style))
-                    .map_err(draw_err)?;
-                if n == 0 {
-                    s.label(name.clone())
-                        .legend(move |(x, y)| DashedPathElement::new(vec![(x, y), (x + 18, y)], 8, 4, style));
-                }
-            }
-        }
-        legend(&mut chart)?;
+    Ok(())
+}
+
+/// What panel (b) or (c) shows: the axial finite differences of `order` (1 acceleration,
+/// 2 jerk) and their limits.
+struct Axial<'a> {
+    order: usize,
+    caption: &'a str,
+    unit: &'a str,
+    limits: &'a [f64],
+}
+
+/// Panel (b) or (c): the axial finite differences with their limits.
+fn axial_panel(
+    panel: &DrawingArea<BitMapBackend, Shift>,
+    p: &Profile,
+    param: &Parameter,
+    xs: &[f64],
+    diffs: &[[[f64; MAX_AXES]; 3]],
+    what: &Axial,
+) -> Result<(), PlotError> {
+    let (d, caption, unit, lim) = (what.order, what.caption, what.unit, what.limits);
+    let (x0, x1) = param.range();
+    let axes = p.axes.len().min(MAX_AXES);
+    // The three rest samples after the last setpoint sit at the end of the path.
+    let x_of = |j: usize| xs.get(j).copied().or(xs.last().copied()).unwrap_or(x0);
+    let peak = diffs
+        .iter()
+        .flat_map(|s| s[d][..axes].iter().map(|v| v.abs()))
+        .fold(0.0, f64::max);
+    let lim_max = lim[..axes].iter().copied().fold(0.0, f64::max);
+    let y = lim_max.max(peak) * 1.3;
+    let units = if d == 1 { "mm/s²" } else { "mm/s³" };
+    let y_desc = if p.rotary_from < axes {
+        format!("{unit} [{units}; rotary: deg/s{}]", if d == 1 { "²" } else { "³" })
+    } else {
+        format!("{unit} [{units}]")
+    };
+    let mut chart = ChartBuilder::on(panel)
+        .caption(caption, (FONT, 24))
+        .margin(12)
+        .x_label_area_size(50)
+        .y_label_area_size(90)
+        .build_cartesian_2d(x0..x1, -y..y)
+        .map_err(draw_err)?;
+    mesh(&mut chart, param.label(), &y_desc)?;
+    element_bounds(&mut chart, param, -y, y)?;
+    for i in 0..axes {
+        let color = axis_color(i);
+        chart
+            .draw_series(LineSeries::new(
+                decimate(diffs.iter().enumerate().map(|(j, s)| (x_of(j), s[d][i])), x0, x1),
+                color.stroke_width(if d == 1 { 2 } else { 1 }),
+            ))
+            .map_err(draw_err)?
+            .label(p.axes[i].to_string())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3)));
     }
+    let same = lim[..axes].iter().all(|v| *v == lim[0]);
+    let sym = if d == 1 { "A" } else { "J" };
+    for i in 0..axes {
+        if same && i > 0 {
+            break;
+        }
+        let (color, name) = if same {
+            (LIMIT, format!("±{sym} limit ({})", tick(&lim[0])))
+        } else {
+            (
+                axis_color(i),
+                format!("±{sym} limit, {} ({})", p.axes[i], tick(&lim[i])),
+            )
+        };
+        let style = color.stroke_width(2);
+        for (n, v) in [lim[i], -lim[i]].into_iter().enumerate() {
+            let s = chart
+                .draw_series(DashedLineSeries::new(vec![(x0, v), (x1, v)], 14, 6, style))
+                .map_err(draw_err)?;
+            if n == 0 {
+                s.label(name.clone())
+                    .legend(move |(x, y)| DashedPathElement::new(vec![(x, y), (x + 18, y)], 8, 4, style));
+            }
+        }
+    }
+    legend(&mut chart)?;
     Ok(())
 }
 

@@ -17,6 +17,7 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Instant;
 
 use crate::hold_stops::HoldStops;
+use crate::say;
 use crate::writer::{GeometryWriter, Release, WriteError};
 use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
 use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
@@ -1257,7 +1258,7 @@ impl<'a> Streamer<'a> {
                     queue.push_back(g);
                 }
                 Ok(PlanEvent::Done { line, error: failed }) => {
-                    eprintln!("nurbs-planner: {line}");
+                    say!("nurbs-planner: {line}");
                     *total = Some(self.planned);
                     *events = None;
                     *error = failed;

@@ -10,4 +10,5 @@
 pub mod feed;
 pub mod hal_user;
 pub mod hold_stops;
+pub mod log;
 pub mod writer;

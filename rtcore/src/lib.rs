@@ -7,6 +7,11 @@
 #![cfg_attr(not(test), no_std)]
 // Safe Rust only: what the servo thread runs has no unsafe of its own (the HAL glue is in nurbs-hal).
 #![forbid(unsafe_code)]
+// No unwrap, expect or explicit panic on the servo thread's code (the tests may). Indexing is
+// not denied here as it is in the module's own code: the numerical loops index fixed-size
+// arrays and validated curves by the published algorithms' subscripts, bounded by MAX_ORDER
+// and the checks `CurveView::new` makes (tested, and fuzzed through the module's validation).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used, clippy::panic))]
 // The numerical loops mirror the indices of the published algorithms (P&T A2.3, A4.2).
 #![allow(clippy::needless_range_loop)]
 

@@ -920,28 +920,7 @@ impl Interp {
         if self.feed == 0.0 {
             return Err(err(file, lineno, col, "cannot make arc with zero feed rate"));
         }
-        let turns = match b.get('P') {
-            None => 1,
-            Some((p, pc)) => {
-                if p.fract() != 0.0 || p < 1.0 {
-                    return Err(err(
-                        file,
-                        lineno,
-                        pc,
-                        format!("P word on {name} (number of turns) must be an integer >= 1"),
-                    ));
-                }
-                if p > MAX_TURNS as f64 {
-                    return Err(err(
-                        file,
-                        lineno,
-                        pc,
-                        format!("P{p} on {name}: more than {MAX_TURNS} turns is not supported"),
-                    ));
-                }
-                p as u32
-            }
-        };
+        let turns = arc_turns(file, lineno, b, name)?;
         let end = self.find_end(lineno, b)?;
         let sx = self.need(lineno, col, 0)?;
         let sy = self.need(lineno, col, 1)?;
@@ -963,27 +942,8 @@ impl Interp {
             (SPIRAL_ABS_TOL_INCH * MM_PER_INCH, RADIUS_TOL_INCH * MM_PER_INCH)
         };
         let center = if let Some((rv, _)) = r {
-            // arc_data_r
-            let radius = rv * self.scale;
-            if ex == sx && ey == sy {
-                return Err(err(file, lineno, col, "current point same as end point of arc"));
-            }
-            let abs_r = radius.abs();
-            let (mx, my) = ((ex + sx) / 2.0, (ey + sy) / 2.0);
-            let mut half = (mx - ex).hypot(my - ey);
-            if half - abs_r > radius_tol {
-                return Err(err(file, lineno, col, "arc radius too small to reach end point"));
-            }
-            if half / abs_r > 1.0 - 1e-12 {
-                half = abs_r;
-            }
-            let theta = if (cw && radius > 0.0) || (!cw && radius < 0.0) {
-                (ey - sy).atan2(ex - sx) - FRAC_PI_2
-            } else {
-                (ey - sy).atan2(ex - sx) + FRAC_PI_2
-            };
-            let offset = abs_r * (half / abs_r).asin().cos();
-            [mx + offset * theta.cos(), my + offset * theta.sin()]
+            let at = |message: &str| err(file, lineno, col, message);
+            radius_center(rv * self.scale, cw, [sx, sy], [ex, ey], radius_tol).map_err(at)?
         } else {
             let i = b.get('I').map(|w| w.0 * self.scale);
             let j = b.get('J').map(|w| w.0 * self.scale);
@@ -1003,32 +963,7 @@ impl Interp {
                 [sx + i.unwrap_or(0.0), sy + j.unwrap_or(0.0)]
             }
         };
-        let r1 = (center[0] - sx).hypot(center[1] - sy);
-        let r2 = (center[0] - ex).hypot(center[1] - ey);
-        if r1 < radius_tol || r2 < radius_tol {
-            return Err(err(
-                file,
-                lineno,
-                col,
-                format!(
-                    "zero-radius arc: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4})",
-                    center[0], center[1]
-                ),
-            ));
-        }
-        let abs_err = (r1 - r2).abs();
-        let rel_err = abs_err / r1.max(r2);
-        if abs_err > spiral_abs || rel_err > SPIRAL_REL_TOL {
-            return Err(err(
-                file,
-                lineno,
-                col,
-                format!(
-                    "radius to end of arc differs from radius to start: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4}) r1={r1:.4} r2={r2:.4} (mm)",
-                    center[0], center[1]
-                ),
-            ));
-        }
+        let abs_err = check_radii(file, lineno, col, [sx, sy], [ex, ey], center, (spiral_abs, radius_tol))?;
         let geom = arc_geometry([sx, sy], [ex, ey], center, !cw, turns).map_err(|shift| {
             err(
                 file,
@@ -1556,4 +1491,98 @@ fn check_word_users(file: &str, lineno: usize, b: &Block, mcode: Option<i32>) ->
     }
 
     Ok(())
+}
+
+/// The number of turns of a G2/G3 (`name`): its P word, 1 without one.
+fn arc_turns(file: &str, lineno: usize, b: &Block, name: &str) -> Result<u32, ReadError> {
+    let Some((p, pc)) = b.get('P') else {
+        return Ok(1);
+    };
+    if p.fract() != 0.0 || p < 1.0 {
+        return Err(err(
+            file,
+            lineno,
+            pc,
+            format!("P word on {name} (number of turns) must be an integer >= 1"),
+        ));
+    }
+    if p > MAX_TURNS as f64 {
+        return Err(err(
+            file,
+            lineno,
+            pc,
+            format!("P{p} on {name}: more than {MAX_TURNS} turns is not supported"),
+        ));
+    }
+    Ok(p as u32)
+}
+
+/// The centre of an R-format arc from `[sx, sy]` to `[ex, ey]` (LinuxCNC's arc_data_r): a
+/// negative `radius` takes the long way round.
+fn radius_center(
+    radius: f64,
+    cw: bool,
+    [sx, sy]: [f64; 2],
+    [ex, ey]: [f64; 2],
+    radius_tol: f64,
+) -> Result<[f64; 2], &'static str> {
+    if ex == sx && ey == sy {
+        return Err("current point same as end point of arc");
+    }
+    let abs_r = radius.abs();
+    let (mx, my) = ((ex + sx) / 2.0, (ey + sy) / 2.0);
+    let mut half = (mx - ex).hypot(my - ey);
+    if half - abs_r > radius_tol {
+        return Err("arc radius too small to reach end point");
+    }
+    if half / abs_r > 1.0 - 1e-12 {
+        half = abs_r;
+    }
+    let theta = if (cw && radius > 0.0) || (!cw && radius < 0.0) {
+        (ey - sy).atan2(ex - sx) - FRAC_PI_2
+    } else {
+        (ey - sy).atan2(ex - sx) + FRAC_PI_2
+    };
+    let offset = abs_r * (half / abs_r).asin().cos();
+    Ok([mx + offset * theta.cos(), my + offset * theta.sin()])
+}
+
+/// The radii to the arc's start and end must be non-zero and agree (LinuxCNC's spiral
+/// tolerances, `(absolute, radius)` in mm); their difference.
+fn check_radii(
+    file: &str,
+    lineno: usize,
+    col: usize,
+    [sx, sy]: [f64; 2],
+    [ex, ey]: [f64; 2],
+    center: [f64; 2],
+    (spiral_abs, radius_tol): (f64, f64),
+) -> Result<f64, ReadError> {
+    let r1 = (center[0] - sx).hypot(center[1] - sy);
+    let r2 = (center[0] - ex).hypot(center[1] - ey);
+    if r1 < radius_tol || r2 < radius_tol {
+        return Err(err(
+            file,
+            lineno,
+            col,
+            format!(
+                "zero-radius arc: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4})",
+                center[0], center[1]
+            ),
+        ));
+    }
+    let abs_err = (r1 - r2).abs();
+    let rel_err = abs_err / r1.max(r2);
+    if abs_err > spiral_abs || rel_err > SPIRAL_REL_TOL {
+        return Err(err(
+            file,
+            lineno,
+            col,
+            format!(
+                "radius to end of arc differs from radius to start: start=({sx:.4},{sy:.4}) center=({:.4},{:.4}) end=({ex:.4},{ey:.4}) r1={r1:.4} r2={r2:.4} (mm)",
+                center[0], center[1]
+            ),
+        ));
+    }
+    Ok(abs_err)
 }

@@ -13,6 +13,7 @@ use std::process::ExitCode;
 use std::time::{Duration, Instant};
 
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component, StreamReader, StreamValue};
+use nurbs_planner::say;
 
 /// `SAMPLER_SHMEM_KEY` of LinuxCNC's streamer.h; channel n uses key + n.
 const SAMPLER_SHMEM_KEY: i32 = 0x4853_4130;
@@ -88,7 +89,7 @@ fn main() -> ExitCode {
     match run() {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("nurbs-hal-record: {e}");
+            say!("nurbs-hal-record: {e}");
             ExitCode::FAILURE
         }
     }

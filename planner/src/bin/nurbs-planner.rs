@@ -50,6 +50,7 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
+use nurbs_planner::say;
 
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
 /// the same tolerance (and `verify` checks), its first element read.
@@ -76,7 +77,7 @@ fn start_motion<'a>(
     from: Option<&StopPoint>,
 ) -> Result<Streamer<'a>, String> {
     if let Some(p) = from {
-        eprintln!(
+        say!(
             "nurbs-planner: the module stopped ({}) at curve {} u = {} (after record {}): planning the rest from there",
             match p.cause {
                 1 => "underrun",
@@ -123,7 +124,7 @@ fn start_motion<'a>(
                 }
             };
             let (ends, stored, worst) = blocks.stops();
-            eprintln!(
+            say!(
                 "nurbs-planner: VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
                 plan.points.len(),
                 blocks.blocks.len(),
@@ -165,7 +166,7 @@ fn start_motion<'a>(
         }
     }
     let queued = streamer.buffered();
-    eprintln!(
+    say!(
         "nurbs-planner: first {} records ({queued:.3} s of motion) queued after {:.3} s",
         streamer.pushed,
         began.elapsed().as_secs_f64()
@@ -243,13 +244,13 @@ fn run(args: &Args) -> Result<&'static str, String> {
             show(&mut streamer);
             if streamer.done() && !reported {
                 let (curves, values, wraps) = streamer.writer().usage();
-                eprintln!(
+                say!(
                     "nurbs-planner: all {} records sent ({:.3} s of motion; longest group {:.3} s); {curves} path elements and {values} arena values streamed, the arena reused from its start {wraps} times",
                     streamer.pushed, streamer.pushed_time, streamer.longest_group
                 );
                 if let Some(e) = streamer.plan_error() {
                     // The motion ends at rest where the file could not be read further.
-                    eprintln!("nurbs-planner: {e}");
+                    say!("nurbs-planner: {e}");
                     error.set(true);
                 }
                 reported = true;
@@ -283,11 +284,11 @@ fn main() -> ExitCode {
     });
     match result {
         Ok(why) => {
-            eprintln!("nurbs-planner: {why}, exiting cleanly");
+            say!("nurbs-planner: {why}, exiting cleanly");
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("nurbs-planner: {e}");
+            say!("nurbs-planner: {e}");
             ExitCode::FAILURE
         }
     }

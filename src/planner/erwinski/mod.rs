@@ -605,9 +605,7 @@ impl Planner {
     /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.
     fn step(&mut self) -> Result<(), PlanError> {
         let k = self.k;
-        let nseg = self.bounds.len() - 1;
         let c = self.bounds[k].start_curve;
-        let element = self.nodes.element(c);
         let budget = self.work_budget.0 + self.work_budget.1 * self.states[k].samples as u64;
         let (u_start, planned) = (self.bounds[k].start_u, self.states[k].samples);
         let out_of_work = |work: u64| {
@@ -650,118 +648,136 @@ impl Planner {
         let last = ctx.last;
         self.stops_made.extend(made);
         match outcome {
-            Err(SegmentFailure::OutOfWork) => return Err(out_of_work(self.work.get())),
+            Err(SegmentFailure::OutOfWork) => Err(out_of_work(self.work.get())),
             Ok((record, state)) => {
-                self.records.truncate(k);
-                self.records.push(record);
-                self.states.truncate(k + 1);
-                self.states.push(state);
-                self.start_feeds.truncate(k + 1);
-                // Rounding can leave -1e-14 at a stop; a record never starts below zero.
-                let end_v = record.profile().table().end().v.max(0.0);
-                self.start_feeds.push(end_v);
-                self.k += 1;
-                // A segment absorbs a cascade if it could brake to any lower end feed within its
-                // length (nominal limits) and can in fact stop at its end within the axis limits
-                // (one extra solve, checked once per candidate): a record handed out is then never
-                // the reason for a refusal.
-                let absorbs = |this: &Self, j: usize| {
-                    can_absorb(this.start_feeds[j], this.lengths[j], this.accel, this.jerk)
-                        .then(|| this.stop_at_end(j, budget))
-                        .flatten()
-                };
-                if last {
-                    self.settle(self.k, None);
-                } else if self.stream && self.settled == 0 {
-                    // The motion waits for the first record: settle one behind as below, else
-                    // at the accepted segment itself; right after the first segment, at the next
-                    // one if it can stop at its end from where the first leaves it, so that the
-                    // first record need not wait for the next segment's own solve (checked once
-                    // for the same first record).
-                    if let Some(stop) = (k > 1).then(|| absorbs(self, k - 1)).flatten() {
-                        self.settle(k - 1, Some(stop));
-                    } else if let Some(stop) = (k > 0
-                        && !(k == 1 && self.first_absorber_failed == Some((self.records[0], self.lengths[1]))))
-                    .then(|| absorbs(self, k))
-                    .flatten()
-                    {
-                        self.settle(k, Some(stop));
-                    } else if k == 0 && self.commit_nodes() {
-                        match absorbs(self, 1) {
-                            Some(stop) => self.settle(1, Some(stop)),
-                            None => self.first_absorber_failed = Some((self.records[0], self.lengths[1])),
-                        }
-                    }
-                } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
-                    if let Some(stop) = (j > self.settled).then(|| absorbs(self, j)).flatten() {
-                        self.settle(j, Some(stop));
-                    }
-                }
-                if self.stream && !last {
-                    self.settle_on_a_chain(budget);
-                }
+                self.accept(k, record, state, budget, last);
+                Ok(())
             }
             Err(SegmentFailure::Split { u, cap }) if self.splits < MAX_SPLITS => {
-                // Step 4 in reverse: a point inside the segment needs a lower feed than the
-                // profile gives it (a speed cap between FLF samples, or the fall towards a
-                // cusp outrunning its chord cap): it becomes a node of its own.
-                self.splits += 1;
-                if self.chain.as_ref().is_some_and(|(first, c)| k < first + c.len()) {
-                    self.chain = None; // its segments are not the plan's any more
-                }
-                let s = element.table.length_to(&self.curves.element(c).curve, u);
-                let end_s = self.bounds[k + 1].end_s;
-                self.bounds.insert(k + 1, Node::within(c, u, s, cap));
-                self.lengths[k] = s - self.bounds[k].start_s;
-                self.lengths.insert(k + 1, end_s - s);
-                self.feeds.insert(k + 1, cap);
-                self.peak_caps.insert(k + 1, self.peak_caps[k]);
-                let reachable = reachable_feed(cap, self.lengths[k], self.accel, self.jerk, self.start_feeds[k]);
-                if reachable < self.start_feeds[k] && k > self.settled {
-                    self.feeds[k] = reachable;
-                    self.k -= 1;
+                self.split(k, c, u, cap);
+                Ok(())
+            }
+            Err(failure) => self.back_track(k, c, failure),
+        }
+    }
+
+    /// Segment `k` planned: its record and the state after it; then the settling (which
+    /// records are final) as the stream and the absorbers allow.
+    fn accept(&mut self, k: usize, record: SegmentRecord, state: SimState, budget: u64, last: bool) {
+        self.records.truncate(k);
+        self.records.push(record);
+        self.states.truncate(k + 1);
+        self.states.push(state);
+        self.start_feeds.truncate(k + 1);
+        // Rounding can leave -1e-14 at a stop; a record never starts below zero.
+        let end_v = record.profile().table().end().v.max(0.0);
+        self.start_feeds.push(end_v);
+        self.k += 1;
+        // A segment absorbs a cascade if it could brake to any lower end feed within its
+        // length (nominal limits) and can in fact stop at its end within the axis limits
+        // (one extra solve, checked once per candidate): a record handed out is then never
+        // the reason for a refusal.
+        let absorbs = |this: &Self, j: usize| {
+            can_absorb(this.start_feeds[j], this.lengths[j], this.accel, this.jerk)
+                .then(|| this.stop_at_end(j, budget))
+                .flatten()
+        };
+        if last {
+            self.settle(self.k, None);
+        } else if self.stream && self.settled == 0 {
+            // The motion waits for the first record: settle one behind as below, else
+            // at the accepted segment itself; right after the first segment, at the next
+            // one if it can stop at its end from where the first leaves it, so that the
+            // first record need not wait for the next segment's own solve (checked once
+            // for the same first record).
+            if let Some(stop) = (k > 1).then(|| absorbs(self, k - 1)).flatten() {
+                self.settle(k - 1, Some(stop));
+            } else if let Some(stop) = (k > 0
+                && !(k == 1 && self.first_absorber_failed == Some((self.records[0], self.lengths[1]))))
+            .then(|| absorbs(self, k))
+            .flatten()
+            {
+                self.settle(k, Some(stop));
+            } else if k == 0 && self.commit_nodes() {
+                match absorbs(self, 1) {
+                    Some(stop) => self.settle(1, Some(stop)),
+                    None => self.first_absorber_failed = Some((self.records[0], self.lengths[1])),
                 }
             }
-            Err(failure) => {
-                let start_max = match failure {
-                    SegmentFailure::StartTooFast(v) => v,
-                    SegmentFailure::PeakTooHigh(peak) => {
-                        // Kept for the next attempts at this segment: otherwise each one rises to
-                        // the old peak again, and the start feed comes down a few millionths per
-                        // round until the back-tracking count runs out.
-                        self.peak_caps[k] = self.peak_caps[k].min(peak);
-                        peak
-                    }
-                    SegmentFailure::Split { .. } | SegmentFailure::OutOfWork => START_FEED_STEP * self.start_feeds[k],
-                };
-                // Below the feed one period of the nominal jerk gives from rest, passing the node
-                // gains about a period over stopping there, and each further step down would
-                // make the trials crawl for longer.
-                let floor = 0.5 * self.jerk * self.limits.period * self.limits.period;
-                let start_max = if start_max < floor { 0.0 } else { start_max };
-                self.backtracks += 1;
-                let from_rest = self.start_feeds[k] <= REST_FEED * self.feed_cap;
-                let reason = if k == 0 || self.backtracks > 50 * nseg + 100 {
-                    Some("segment violates the axis limits even from its lowest start feed")
-                } else if from_rest {
-                    Some("segment violates the axis limits even when started from rest")
-                } else if k <= self.settled {
-                    Some("segment violates the axis limits from the end feed of a segment already handed out")
-                } else {
-                    None
-                };
-                if let Some(reason) = reason {
-                    return Err(PlanError::Infeasible {
-                        curve: c,
-                        u: self.bounds[k].start_u,
-                        reason: reason.into(),
-                    });
-                }
-                // Step 9: the previous segment must end slower.
-                self.feeds[k] = start_max.min(self.feeds[k]);
-                self.k -= 1;
+        } else if let Some(j) = k.checked_sub(ABSORBER_LOOK_BEHIND).filter(|_| self.stream) {
+            if let Some(stop) = (j > self.settled).then(|| absorbs(self, j)).flatten() {
+                self.settle(j, Some(stop));
             }
         }
+        if self.stream && !last {
+            self.settle_on_a_chain(budget);
+        }
+    }
+
+    /// Step 4 in reverse: a point inside segment `k` (element `c`, parameter `u`) needs a lower
+    /// feed than the profile gives it (a speed cap between FLF samples, or the fall towards a
+    /// cusp outrunning its chord cap): it becomes a node of its own, passed at most at `cap`.
+    fn split(&mut self, k: usize, c: usize, u: f64, cap: f64) {
+        self.splits += 1;
+        if self.chain.as_ref().is_some_and(|(first, c)| k < first + c.len()) {
+            self.chain = None; // its segments are not the plan's any more
+        }
+        let s = self.nodes.element(c).table.length_to(&self.curves.element(c).curve, u);
+        let end_s = self.bounds[k + 1].end_s;
+        self.bounds.insert(k + 1, Node::within(c, u, s, cap));
+        self.lengths[k] = s - self.bounds[k].start_s;
+        self.lengths.insert(k + 1, end_s - s);
+        self.feeds.insert(k + 1, cap);
+        self.peak_caps.insert(k + 1, self.peak_caps[k]);
+        let reachable = reachable_feed(cap, self.lengths[k], self.accel, self.jerk, self.start_feeds[k]);
+        if reachable < self.start_feeds[k] && k > self.settled {
+            self.feeds[k] = reachable;
+            self.k -= 1;
+        }
+    }
+
+    /// Segment `k` (from element `c`) failed from its start feed: step 9, the previous segment
+    /// must end slower, or the plan is refused where no lower start feed is left.
+    fn back_track(&mut self, k: usize, c: usize, failure: SegmentFailure) -> Result<(), PlanError> {
+        let nseg = self.bounds.len() - 1;
+        let start_max = match failure {
+            SegmentFailure::StartTooFast(v) => v,
+            SegmentFailure::PeakTooHigh(peak) => {
+                // Kept for the next attempts at this segment: otherwise each one rises to
+                // the old peak again, and the start feed comes down a few millionths per
+                // round until the back-tracking count runs out.
+                self.peak_caps[k] = self.peak_caps[k].min(peak);
+                peak
+            }
+            SegmentFailure::Split { .. } | SegmentFailure::OutOfWork => START_FEED_STEP * self.start_feeds[k],
+        };
+        // Below the feed one period of the nominal jerk gives from rest, passing the node
+        // gains about a period over stopping there, and each further step down would
+        // make the trials crawl for longer.
+        let floor = 0.5 * self.jerk * self.limits.period * self.limits.period;
+        let start_max = if start_max < floor { 0.0 } else { start_max };
+        self.backtracks += 1;
+        let from_rest = self.start_feeds[k] <= REST_FEED * self.feed_cap;
+        let reason = if k == 0 || self.backtracks > 50 * nseg + 100 {
+            Some("segment violates the axis limits even from its lowest start feed")
+        } else if from_rest {
+            Some("segment violates the axis limits even when started from rest")
+        } else if k <= self.settled {
+            Some("segment violates the axis limits from the end feed of a segment already handed out")
+        } else {
+            None
+        };
+        if let Some(reason) = reason {
+            return Err(PlanError::Infeasible {
+                curve: c,
+                u: self.bounds[k].start_u,
+                reason: reason.into(),
+            });
+        }
+        // Step 9: the previous segment must end slower.
+        self.feeds[k] = start_max.min(self.feeds[k]);
+        self.k -= 1;
+
         Ok(())
     }
 }
@@ -1320,52 +1336,12 @@ fn solve_segment(
                 return Ok((t.record, t.state));
             }
             if t.speed_ratio > 1.0 {
-                // A speed cap (feed, axial velocity, chord error) is exceeded; lower jerk or
-                // acceleration would not help. Lower the feed where it happens: the start feed
-                // (previous segment), the end feed, a new node inside, or the peak.
-                let factor = (1.0 - 1e-6) / t.speed_ratio;
-                // At an end whose feed is well below the sampled speed, the profile rises or
-                // falls within a period or two there: the cure is a lower peak, not end feed.
-                let near = |v: f64| v >= 0.5 * t.speed_at;
-                match t.speed_where {
-                    // The step onto a rest node (see `trial`): a gentler final approach, from
-                    // the searches of jerk and acceleration below, is the cure.
-                    Where::End if v1 == 0.0 && !ctx.last => {}
-                    // At the start: across the node, or at the start feed, the previous segment
-                    // must end slower. (A step above the start feed has already risen towards
-                    // the peak: the peak is the cure, below.)
-                    Where::Start if near(v0) && (t.speed_index == 0 || t.speed_at <= v0) => {
-                        return Err(SegmentFailure::StartTooFast(v0 * factor))
-                    }
-                    Where::End if near(v1) => v1 *= factor,
-                    Where::Inside if t.speed_at < ctx.peak_cap * SPLIT_BELOW_PEAK => {
-                        let cap = (1.0 - 1e-3) * t.speed_at * factor;
-                        return Err(SegmentFailure::Split { u: t.speed_u, cap });
-                    }
-                    _ => {
-                        ctx.peak_cap = ctx.peak_cap.min(t.speed_at) * factor;
-                        if v0 > ctx.peak_cap {
-                            return Err(SegmentFailure::PeakTooHigh(ctx.peak_cap));
-                        }
-                        v1 = v1.min(ctx.peak_cap);
-                    }
-                }
+                lower_feeds_for_speed(ctx, &t, v0, &mut v1)?;
                 // Then on to the searches with the new feeds (an axial excess may remain).
             }
         }
         // Steps 3-7 on the estimate.
-        let with_jerk = |j: f64| both(ctx.accel, j);
-        let by_jerk = golden(ctx.jerk, &|j| duration(ctx, v0, v1, with_jerk(j)), &|j, scope| {
-            quick(ctx, from, v0, v1, with_jerk(j), with_jerk(j), scope)
-        });
-        let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
-        let (a, estimated_ratio) = match by_jerk {
-            Some((_, q)) if q.ok() => (ctx.accel, q.ratio),
-            _ => golden(ctx.accel, &|a| duration(ctx, v0, v1, both(a, j)), &|a, scope| {
-                quick(ctx, from, v0, v1, both(a, j), both(a, j), scope)
-            })
-            .map_or((ctx.accel, f64::INFINITY), |(a, q)| (a, q.ratio)),
-        };
+        let ((a, j), estimated_ratio) = estimated_searches(ctx, from, v0, v1);
         let mut worst_at_peak = None;
         if let Some(t) = trial(ctx, from, v0, v1, both(a, j), both(a, j)) {
             if t.ok() {
@@ -1395,22 +1371,8 @@ fn solve_segment(
             }
             continue;
         }
-        let by_jerk = exact_jerk_search(ctx, from, v0, v1, ctx.jerk);
-        let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
-        if let Some((_, t)) = by_jerk {
-            if t.ok() {
-                let t = with_phase_jerks(ctx, from, v0, v1, (ctx.accel, j), t);
-                return Ok((t.record, t.state));
-            }
-        }
-        let by_acc = golden(ctx.accel, &|a| duration(ctx, v0, v1, both(a, j)), &|a, _| {
-            trial(ctx, from, v0, v1, both(a, j), both(a, j))
-        });
-        if let Some((a, t)) = by_acc {
-            if t.ok() {
-                let t = with_phase_jerks(ctx, from, v0, v1, (a, j), t);
-                return Ok((t.record, t.state));
-            }
+        if let Some(t) = exact_searches(ctx, from, v0, v1) {
+            return Ok((t.record, t.state));
         }
         // Step 8: a lower end feed.
         if v1 > 1e-6 {
@@ -1427,6 +1389,81 @@ fn solve_segment(
         }
     }
     Err(SegmentFailure::StartTooFast(START_FEED_STEP * v0))
+}
+
+/// A trial exceeded a speed cap (feed, axial velocity, chord error) by `t.speed_ratio`; lower
+/// jerk or acceleration would not help. Lowers the feed where it happens: the start feed (an
+/// error for the previous segment), the end feed `v1`, a new node inside (an error), or the
+/// peak cap.
+fn lower_feeds_for_speed(ctx: &mut SegmentContext, t: &Trial, v0: f64, v1: &mut f64) -> Result<(), SegmentFailure> {
+    let factor = (1.0 - 1e-6) / t.speed_ratio;
+    // At an end whose feed is well below the sampled speed, the profile rises or falls within
+    // a period or two there: the cure is a lower peak, not end feed.
+    let near = |v: f64| v >= 0.5 * t.speed_at;
+    match t.speed_where {
+        // The step onto a rest node (see `trial`): a gentler final approach, from the searches
+        // of jerk and acceleration, is the cure.
+        Where::End if *v1 == 0.0 && !ctx.last => {}
+        // At the start: across the node, or at the start feed, the previous segment must end
+        // slower. (A step above the start feed has already risen towards the peak: the peak is
+        // the cure, below.)
+        Where::Start if near(v0) && (t.speed_index == 0 || t.speed_at <= v0) => {
+            return Err(SegmentFailure::StartTooFast(v0 * factor))
+        }
+        Where::End if near(*v1) => *v1 *= factor,
+        Where::Inside if t.speed_at < ctx.peak_cap * SPLIT_BELOW_PEAK => {
+            let cap = (1.0 - 1e-3) * t.speed_at * factor;
+            return Err(SegmentFailure::Split { u: t.speed_u, cap });
+        }
+        _ => {
+            ctx.peak_cap = ctx.peak_cap.min(t.speed_at) * factor;
+            if v0 > ctx.peak_cap {
+                return Err(SegmentFailure::PeakTooHigh(ctx.peak_cap));
+            }
+            *v1 = v1.min(ctx.peak_cap);
+        }
+    }
+    Ok(())
+}
+
+/// Steps 3-7 of Erwinski et al. 2022 on the estimate: the golden-section search of the jerk,
+/// then (if that does not pass) of the acceleration. The `(acceleration, jerk)` chosen and the
+/// estimate's worst ratio there (infinite if no profile fits).
+fn estimated_searches(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> ((f64, f64), f64) {
+    let both = Ramp::new;
+    let with_jerk = |j: f64| both(ctx.accel, j);
+    let by_jerk = golden(ctx.jerk, &|j| duration(ctx, v0, v1, with_jerk(j)), &|j, scope| {
+        quick(ctx, from, v0, v1, with_jerk(j), with_jerk(j), scope)
+    });
+    let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
+    let (a, ratio) = match by_jerk {
+        Some((_, q)) if q.ok() => (ctx.accel, q.ratio),
+        _ => golden(ctx.accel, &|a| duration(ctx, v0, v1, both(a, j)), &|a, scope| {
+            quick(ctx, from, v0, v1, both(a, j), both(a, j), scope)
+        })
+        .map_or((ctx.accel, f64::INFINITY), |(a, q)| (a, q.ratio)),
+    };
+    ((a, j), ratio)
+}
+
+/// The same searches on exact trials: the passing trial (with a jerk per phase), if one is
+/// found.
+fn exact_searches(ctx: &SegmentContext, from: &SimState, v0: f64, v1: f64) -> Option<Trial> {
+    let both = Ramp::new;
+    let by_jerk = exact_jerk_search(ctx, from, v0, v1, ctx.jerk);
+    let j = by_jerk.as_ref().map_or(ctx.jerk, |(j, _)| *j);
+    if let Some((_, t)) = by_jerk {
+        if t.ok() {
+            return Some(with_phase_jerks(ctx, from, v0, v1, (ctx.accel, j), t));
+        }
+    }
+    let by_acc = golden(ctx.accel, &|a| duration(ctx, v0, v1, both(a, j)), &|a, _| {
+        trial(ctx, from, v0, v1, both(a, j), both(a, j))
+    });
+    match by_acc {
+        Some((a, t)) if t.ok() => Some(with_phase_jerks(ctx, from, v0, v1, (a, j), t)),
+        _ => None,
+    }
 }
 
 /// A jerk per phase for a segment that passed with acceleration and jerk `(a, j)` on both
