@@ -41,6 +41,48 @@ fn arc_lengths_match_independent_stats_to_1e_6_mm() {
     }
 }
 
+/// The control polygon bounds the arc length of a non-rational curve from above (what the hold
+/// stops rely on to skip integrating an element's length): on the benchmark curves, a straight
+/// line (where the two are equal) and a single short corner spline; none for a rational curve.
+#[test]
+fn control_polygon_bounds_the_arc_length() {
+    let line = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![3.0, 4.0], vec![3.012, 4.016]], None).unwrap();
+    let corner = Nurbs::new(
+        3,
+        vec![0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0],
+        &[
+            vec![0.0, 0.0],
+            vec![0.004, 0.0],
+            vec![0.008, 0.0003],
+            vec![0.0119, 0.001],
+        ],
+        None,
+    )
+    .unwrap();
+    let mut curves: Vec<Nurbs> = CURVES.iter().map(|name| example(name)).collect();
+    curves.extend([line.clone(), corner]);
+    for (k, curve) in curves.iter().enumerate() {
+        let length = ArcLengthTable::new(curve).total();
+        let Some(bound) = curve.polygon_length() else {
+            assert!(curve.weights().iter().any(|&w| w != curve.weights()[0]), "curve {k}");
+            continue;
+        };
+        // As the hold stops use it: above the polygon by more than the table's rounding.
+        assert!(bound * (1.0 + 1e-9) + 1e-12 >= length, "curve {k}: {bound} < {length}");
+        assert!(bound <= 10.0 * length, "curve {k}: {bound} vs {length}");
+    }
+    assert!((line.polygon_length().unwrap() - 0.02).abs() < 1e-15);
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    let quarter = Nurbs::new(
+        2,
+        vec![0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+        &[vec![1.0, 0.0], vec![1.0, 1.0], vec![0.0, 1.0]],
+        Some(vec![1.0, h, 1.0]),
+    )
+    .unwrap();
+    assert_eq!(quarter.polygon_length(), None);
+}
+
 #[test]
 fn max_curvature_and_bbox_match_independent_stats() {
     for name in CURVES {

@@ -50,8 +50,8 @@ pub struct HoldStops {
     /// Index of the motion's next sample.
     samples: u64,
     limits: Limits,
-    /// Arc length of the element the last stop was checked on (element, length).
-    element_length: Option<(usize, f64)>,
+    /// Arc length of the element the last stop was checked on.
+    element_length: Option<ElementLength>,
 }
 
 impl HoldStops {
@@ -95,7 +95,7 @@ impl HoldStops {
     /// the axis limits, if one of [`TRIES`] does.
     fn check(&mut self, s: &Sample, record: &SegmentRecord, curves: &PathCurves) -> Option<(f64, f64)> {
         let dt = self.limits.period;
-        let length = self.element_length(s.curve, curves)?;
+        let mut length = self.element_length(s.curve, curves)?;
         let (accel, jerk) = tangential_limits(curves, &self.limits, s.curve, s.u);
         let (mut accel, mut jerk) = (accel * INSIDE, jerk * INSIDE);
         let from = StopStart {
@@ -109,7 +109,9 @@ impl HoldStops {
         };
         for _ in 0..TRIES {
             if let Some(landed) = landing_jerk(&from, accel, jerk, dt) {
-                if self.passes(&from, accel, landed, length, curves) {
+                let passed = self.passes(&from, accel, landed, &mut length, curves);
+                self.element_length = Some(length);
+                if passed {
                     return Some((accel, landed));
                 }
             }
@@ -122,11 +124,13 @@ impl HoldStops {
     /// Whether the stop from `from` with `accel` and `jerk` stays on its element (of arc length
     /// `length`) and, continuing the motion's samples and held at rest after it, within the axis
     /// limits.
-    fn passes(&self, from: &StopStart, accel: f64, jerk: f64, length: f64, curves: &PathCurves) -> bool {
+    fn passes(&self, from: &StopStart, accel: f64, jerk: f64, length: &mut ElementLength, curves: &PathCurves) -> bool {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
         let (stop, a0) = stop_record(from, accel, jerk);
         // Room for rounding of the arc length at the element's end.
-        if stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9 {
+        let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
+        // Beyond the bound it leaves the exact length too (most stops on short elements).
+        if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
             return false;
         }
         let mut sim = self.replica;
@@ -152,15 +156,40 @@ impl HoldStops {
     }
 
     /// Arc length of element `e` (kept for the element the last check was on).
-    fn element_length(&mut self, e: usize, curves: &PathCurves) -> Option<f64> {
-        if let Some((k, l)) = self.element_length {
-            if k == e {
-                return Some(l);
+    fn element_length(&mut self, e: usize, curves: &PathCurves) -> Option<ElementLength> {
+        match self.element_length {
+            Some(l) if l.element == e => Some(l),
+            _ => {
+                let curve = &curves.get(e)?.curve;
+                // Above the polygon's length by more than the table's rounding (1e-14 per piece).
+                let bound = curve.polygon_length().map(|l| l * (1.0 + 1e-9) + 1e-12);
+                Some(ElementLength {
+                    element: e,
+                    bound,
+                    exact: None,
+                })
             }
         }
-        let l = ArcLengthTable::new(&curves.get(e)?.curve).total();
-        self.element_length = Some((e, l));
-        Some(l)
+    }
+}
+
+/// The arc length of an element: an upper bound first (it decides most stops on short
+/// elements: integrating the arc length of every element the motion passes was a sixth of the
+/// planning time on dense G1 programs), the exact length where it must.
+#[derive(Clone, Copy)]
+struct ElementLength {
+    element: usize,
+    bound: Option<f64>,
+    exact: Option<f64>,
+}
+
+impl ElementLength {
+    fn exact(&mut self, curves: &PathCurves) -> f64 {
+        *self.exact.get_or_insert_with(|| {
+            curves
+                .get(self.element)
+                .map_or(0.0, |e| ArcLengthTable::new(&e.curve).total())
+        })
     }
 }
 

@@ -118,6 +118,27 @@ impl Nurbs {
         self.view().point(u)
     }
 
+    /// An upper bound on the tool tip's arc length without integrating: the length of its
+    /// control polygon, which a non-rational B-spline never exceeds (its derivative is a
+    /// B-spline whose coefficients are the polygon's legs scaled by their knot spans); `None`
+    /// for a rational curve, whose weights can make it longer.
+    pub fn polygon_length(&self) -> Option<f64> {
+        if self.weights.iter().any(|&w| w != self.weights[0]) {
+            return None;
+        }
+        let tip = self.tip_dim;
+        let leg = |i: usize| {
+            let (a, b) = (self.control_point(i), self.control_point(i + 1));
+            a[..tip]
+                .iter()
+                .zip(&b[..tip])
+                .map(|(x, y)| (y - x) * (y - x))
+                .sum::<f64>()
+                .sqrt()
+        };
+        Some((0..self.control_point_count().saturating_sub(1)).map(leg).sum())
+    }
+
     /// Parametric speed |C'(u)| of the tool tip.
     pub fn speed(&self, u: f64) -> f64 {
         self.view().speed(u, self.tip_dim)
