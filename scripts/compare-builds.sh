@@ -1,6 +1,7 @@
 #!/bin/bash
 # Compares two builds of `nurbs-plan` (e.g. copies of target/release/nurbs-plan from two
-# commits): whether every bundled case plans the same setpoints bit for bit, the motion times,
+# commits): whether every bundled case plans the same setpoints bit for bit (the whole plan,
+# and the streamed plan the machine runs), the motion times,
 # `verify` on the second build's output; then the median plan time and time to the first
 # record (`--stream`) of RUNS alternate runs of each (default 11) at lab set 1. Alternate runs
 # share the machine's drift in speed, so their ratio is what to compare.
@@ -17,8 +18,8 @@ for program in examples/*.ngc examples/*.dxf; do
   cases+=("$(basename "$program")|lab set 1|$lab1")
 done
 motion() { python3 -c "import json, sys; print('%.4f' % json.load(open(sys.argv[1]))['motion_time_s'])" "$1"; }
-echo "| path | limits | setpoints | motion old (s) | motion new (s) | verify new |"
-echo "|---|---|---|---|---|---|"
+echo "| path | limits | setpoints | streamed | motion old (s) | motion new (s) | verify new |"
+echo "|---|---|---|---|---|---|---|"
 for c in "${cases[@]}"; do
   IFS='|' read -r path name lim <<<"$c"
   # shellcheck disable=SC2086
@@ -26,9 +27,14 @@ for c in "${cases[@]}"; do
   # shellcheck disable=SC2086
   "$new" plan "examples/$path" $lim --out "$dir/new.csv" --summary "$dir/new.json" >/dev/null 2>&1
   if cmp -s "$dir/old.csv" "$dir/new.csv"; then same=same; else same=DIFFER; fi
+  for which in old new; do
+    # shellcheck disable=SC2086
+    "${!which}" plan "examples/$path" $lim --stream --out "$dir/$which-stream.csv" >/dev/null 2>&1
+  done
+  if cmp -s "$dir/old-stream.csv" "$dir/new-stream.csv"; then streamed=same; else streamed=DIFFER; fi
   # shellcheck disable=SC2086
   if "$new" verify "$dir/new.csv" "examples/$path" $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
-  echo "| $path | $name | $same | $(motion "$dir/old.json") | $(motion "$dir/new.json") | $ok |"
+  echo "| $path | $name | $same | $streamed | $(motion "$dir/old.json") | $(motion "$dir/new.json") | $ok |"
 done
 echo
 echo "| curve (lab set 1) | whole plan old / new (ms) | ratio | first record old / new (ms) | ratio |"

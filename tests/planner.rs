@@ -196,6 +196,66 @@ fn lazy_scans_equal_full_scans() {
         lazy_table.extend_past(curve, f64::INFINITY);
         assert!(lazy_table.is_complete());
         assert_eq!(lazy_table.total(), table.total());
+        // The same, from the samples and table computed beforehand (as the helper thread that
+        // scans ahead of a streamed plan hands them over), in uneven chunks.
+        let samples = full.samples(&view, 2, &limits, 0, full.full_len());
+        let (mut from, mut from_table) = (FlfScan::lazy(&view, 500), ArcLengthTable::lazy(curve));
+        let (mut grid, mut grid_from) = (Vec::new(), Vec::new());
+        let mut lazy = FlfScan::lazy(&view, 500);
+        let mut chunk = 3;
+        while !from.is_complete() {
+            lazy.extend(&view, 2, &limits, chunk, &mut |u, x, speed| grid.push((u, *x, speed)));
+            from.extend_from(&samples, chunk, &mut |u, x, speed| grid_from.push((u, *x, speed)));
+            let u = from.u[from.u.len() / 2];
+            from_table.extend_past_from(&table, u);
+            assert_eq!(from_table.length_to(curve, u), table.length_to(curve, u), "{name}");
+            chunk = chunk * 7 % 991 + 1;
+        }
+        assert_eq!((&from.u, &from.value, &from.speed), (&full.u, &full.value, &full.speed));
+        assert_eq!(grid_from, grid, "{name}: what the quick estimate's grid takes");
+        from_table.extend_past_from(&table, f64::INFINITY);
+        assert_eq!(from_table.total(), table.total());
+    }
+}
+
+/// A G1 program read as a stream (scanned ahead of the planner in a helper thread) is planned
+/// into the same records, bit for bit, as the same path handed over whole (scanned by the
+/// planner itself), streamed or not.
+#[test]
+fn a_path_scanned_ahead_plans_the_same_records() {
+    use nurbs_motion::planner::corner::CornerRounder;
+    use nurbs_motion::planner::PathCurves;
+    use nurbs_motion::readers::open_toolpath;
+    let limits = named("lab1").on(2);
+    let rounded = |file: &str| {
+        let elements = open_toolpath(&common::example_path(file)).unwrap();
+        CornerRounder::new(file, elements, limits.chord_tolerance, false).unwrap()
+    };
+    for file in ["zigzag_g1.ngc", "star_g1.ngc"] {
+        let whole = nurbs_motion::geometry::Toolpath {
+            elements: rounded(file).collect::<Result<Vec<_>, _>>().unwrap(),
+        };
+        let options = PlanOptions {
+            stream: true,
+            ..PlanOptions::default()
+        };
+        let records = |curves: PathCurves| {
+            Planner::with_curves(curves, &limits, &options)
+                .unwrap()
+                .map(|r| r.unwrap())
+                .collect::<Vec<_>>()
+        };
+        let scanned_ahead = records(PathCurves::streamed(Box::new(rounded(file))).unwrap());
+        let by_the_planner = records(PathCurves::new(&whole));
+        assert!(scanned_ahead.len() > whole.elements.len(), "{file}");
+        assert!(
+            scanned_ahead
+                .iter()
+                .zip(&by_the_planner)
+                .all(|(a, b)| a.to_words() == b.to_words())
+                && scanned_ahead.len() == by_the_planner.len(),
+            "{file}: the records differ"
+        );
     }
 }
 

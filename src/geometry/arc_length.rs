@@ -144,6 +144,18 @@ impl ArcLengthTable {
         }
     }
 
+    /// The same as [`ArcLengthTable::extend_past`], copying the pieces of `full`, a complete
+    /// table of the same curve (e.g. built in another thread): the same values.
+    pub fn extend_past_from(&mut self, full: &ArcLengthTable, t: f64) {
+        debug_assert!(full.is_complete() && full.breaks == self.breaks);
+        while !self.is_complete() && *self.u.last().unwrap() <= t {
+            let k = self.u.len();
+            self.u.push(full.u[k]);
+            self.s.push(full.s[k]);
+            self.pieces += 1;
+        }
+    }
+
     pub fn total(&self) -> f64 {
         *self.s.last().unwrap()
     }

@@ -94,6 +94,14 @@ impl PathCurves {
         true
     }
 
+    /// Hands the unread rest of a streamed path to `wrap`, which gives back what to read it
+    /// from instead (the same elements in the same order): e.g. a reader in another thread.
+    pub fn wrap_source(&mut self, wrap: impl FnOnce(ElementStream) -> ElementStream) {
+        if let Some(source) = self.source.take() {
+            self.source = Some(wrap(source));
+        }
+    }
+
     /// Reads the stream to its end (forgetting what it reads on the way but the last element).
     pub fn load_to_end(&mut self) {
         while self.source.is_some() {

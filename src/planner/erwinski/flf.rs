@@ -120,6 +120,17 @@ pub struct CriticalPoint {
     pub flf: f64,
 }
 
+/// One sample of an [`FlfScan`]: its parameter, the arc-length derivatives and parametric speed
+/// it comes from, the full FLF and the speed caps.
+#[derive(Clone, Copy, Debug)]
+pub struct ScanSample {
+    pub u: f64,
+    pub x: [Vector; 4],
+    pub speed: f64,
+    pub value: f64,
+    pub speed_cap: f64,
+}
+
 /// FLF samples over a curve: `u[i]`, `value[i]` (full FLF) and `speed[i]` (speed caps only).
 ///
 /// The samples can be taken lazily, front to back ([`FlfScan::lazy`], [`FlfScan::extend`]);
@@ -190,20 +201,54 @@ impl FlfScan {
         count: usize,
         each: &mut dyn FnMut(f64, &[Vector; 4], f64),
     ) {
-        let (a, b) = (curve.u_min(), curve.u_max());
         let end = self.u.len().saturating_add(count).min(self.full_len());
+        for sample in self.samples(curve, tip, limits, self.u.len(), end) {
+            self.take(&sample, each);
+        }
+    }
+
+    /// The same as [`FlfScan::extend`], from `samples`: the full scan's samples computed
+    /// beforehand ([`FlfScan::samples`] from 0, e.g. in another thread).
+    pub fn extend_from(&mut self, samples: &[ScanSample], count: usize, each: &mut dyn FnMut(f64, &[Vector; 4], f64)) {
+        let end = self
+            .u
+            .len()
+            .saturating_add(count)
+            .min(self.full_len())
+            .min(samples.len());
+        for sample in &samples[self.u.len()..end] {
+            self.take(sample, each);
+        }
+    }
+
+    /// Samples `from..end` of the full scan. Each depends on its index, the curve and the
+    /// limits alone: computed in one go or a chunk at a time, they are the same bit for bit.
+    pub fn samples(&self, curve: &CurveView, tip: usize, limits: &Limits, from: usize, end: usize) -> Vec<ScanSample> {
+        let (a, b) = (curve.u_min(), curve.u_max());
         // Hundreds of samples per span: evaluated through the span's Taylor polynomials.
         let mut spans = SpanCache::new();
         let cached = &mut CachedCurve::new(*curve, &mut spans);
-        for k in self.u.len()..end {
-            let u = a + (b - a) * k as f64 / self.steps as f64;
-            let (x, speed) = arc_from_parametric(&cached.derivatives(u, 3), tip);
-            each(u, &x, speed);
-            let f = flf_of(&x, tip, limits);
-            self.u.push(u);
-            self.value.push(f.value());
-            self.speed.push(f.speed_cap());
-        }
+        (from..end.min(self.full_len()))
+            .map(|k| {
+                let u = a + (b - a) * k as f64 / self.steps as f64;
+                let (x, speed) = arc_from_parametric(&cached.derivatives(u, 3), tip);
+                let f = flf_of(&x, tip, limits);
+                ScanSample {
+                    u,
+                    x,
+                    speed,
+                    value: f.value(),
+                    speed_cap: f.speed_cap(),
+                }
+            })
+            .collect()
+    }
+
+    fn take(&mut self, sample: &ScanSample, each: &mut dyn FnMut(f64, &[Vector; 4], f64)) {
+        each(sample.u, &sample.x, sample.speed);
+        self.u.push(sample.u);
+        self.value.push(sample.value);
+        self.speed.push(sample.speed_cap);
     }
 
     /// Smallest speed cap among the samples strictly inside `(u0, u1)`, with its parameter.

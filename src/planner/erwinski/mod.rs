@@ -7,6 +7,7 @@
 pub mod flf;
 mod nodes;
 mod quick_check;
+mod scan_ahead;
 pub mod scurve_fit;
 mod tuning;
 
@@ -310,11 +311,12 @@ impl Planner {
                 reason: "the start point is not on the path (or at its end)".into(),
             });
         }
+        let nodes = NodeStream::new(&mut curves, tip, planning.clone(), options, start);
         Ok(Planner {
             curves,
             check_limits: strict(&limits),
             feed_cap: planning.feed,
-            nodes: NodeStream::new(tip, planning, options, start),
+            nodes,
             bounds: Window::default(),
             feeds: Window::default(),
             lengths: Window::default(),

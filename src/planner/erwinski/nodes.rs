@@ -23,10 +23,11 @@
 
 use super::flf::{flf, CriticalPoint, CriticalPointSearch, FlfScan};
 use super::quick_check::ArcGrid;
+use super::scan_ahead::{ScanAhead, Scanned};
 use super::scurve_fit::reachable_feed;
 use super::tuning::*;
 use super::{PlanOptions, PlanStart, FEED_HEADROOM};
-use crate::geometry::ArcLengthTable;
+use crate::geometry::{ArcLengthTable, Nurbs, PathElement};
 use crate::planner::window::Window;
 use crate::planner::{Limits, PathCurves};
 use nurbs_rtcore::interpolator::Derivs;
@@ -90,6 +91,27 @@ pub(super) struct ElementScan {
     breaks: VecDeque<(f64, f64)>,
     /// Every C0/C1 knot: a critical point this close to one is superseded by it.
     all_breaks: Vec<f64>,
+    /// The scan's samples and arc-length table as the helper thread computed them, if it did.
+    scanned: Option<Scanned>,
+}
+
+impl ElementScan {
+    /// Extends the arc-length table beyond parameter `t` of `curve` (this element's).
+    fn table_past(&mut self, curve: &Nurbs, t: f64) {
+        match &self.scanned {
+            Some(scanned) => self.table.extend_past_from(&scanned.table, t),
+            None => self.table.extend_past(curve, t),
+        }
+    }
+}
+
+/// The planning limits of `element`: `planning` with the element's programmed feed.
+pub(super) fn element_limits(planning: &Limits, element: &PathElement) -> Limits {
+    let mut limits = planning.clone();
+    if let Some(f) = element.feed {
+        limits.feed = limits.feed.min(f * (1.0 - FEED_HEADROOM));
+    }
+    limits
 }
 
 /// The lazily produced, committed nodes of a path.
@@ -120,11 +142,19 @@ pub(super) struct NodeStream {
     pub criticals: Vec<(usize, CriticalPoint)>,
     /// Every node of the path has been produced.
     exhausted: bool,
+    /// Scans of the elements ahead from the helper thread.
+    ahead: ScanAhead,
 }
 
 impl NodeStream {
-    pub fn new(tip: usize, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
+    /// The nodes of `curves` from `start` on; the unread rest of a streamed path is read and
+    /// scanned ahead in a helper thread ([`ScanAhead`]).
+    pub fn new(curves: &mut PathCurves, tip: usize, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
         let (accel, jerk) = (planning.min_accel(), planning.min_jerk());
+        let of_element = planning.clone();
+        let ahead = ScanAhead::start(curves, tip, options.samples_per_control_point, move |e| {
+            element_limits(&of_element, e)
+        });
         NodeStream {
             tip,
             accel,
@@ -140,6 +170,7 @@ impl NodeStream {
             ready: VecDeque::new(),
             criticals: Vec::new(),
             exhausted: false,
+            ahead,
         }
     }
 
@@ -192,16 +223,14 @@ impl NodeStream {
         if self.elements.len() == c {
             self.begin_element(c, curves);
         }
-        let tip = self.tip;
+        let (tip, count) = (self.tip, self.options.samples_per_control_point);
         let e = &mut self.elements[c];
         let grid = &mut e.grid;
-        e.scan.extend(
-            view,
-            tip,
-            &e.limits,
-            self.options.samples_per_control_point,
-            &mut |u, x, speed| grid.push(u, x, speed),
-        );
+        let each = &mut |u, x: &_, speed| grid.push(u, x, speed);
+        match &e.scanned {
+            Some(scanned) => e.scan.extend_from(&scanned.samples, count, each),
+            None => e.scan.extend(view, tip, &e.limits, count, each),
+        }
         let mut points = Vec::new();
         e.search.advance(view, tip, &e.limits, &e.scan, &mut points);
         let (u0, u1) = (view.u_min(), view.u_max());
@@ -231,7 +260,7 @@ impl NodeStream {
                 Some(_) => e.breaks.pop_front(),
                 None => e.found.pop_front().map(|p| (p.u, p.flf)),
             };
-            e.table.extend_past(curve, p.u);
+            e.table_past(curve, p.u);
             let s = e.table.length_to(curve, p.u);
             let cap = fixed_cap.unwrap_or_else(|| {
                 let v = flf(view, tip, &e.limits, p.u);
@@ -248,7 +277,7 @@ impl NodeStream {
         }
         let e = &mut self.elements[c];
         if e.scan.is_complete() {
-            e.table.extend_past(curve, f64::INFINITY);
+            e.table_past(curve, f64::INFINITY);
             let s1 = e.table.total();
             let next = c + 1;
             let node = if last {
@@ -274,10 +303,7 @@ impl NodeStream {
     /// Sets up the scan of element `c`; on the start element, the start node.
     fn begin_element(&mut self, c: usize, curves: &PathCurves) {
         let view = &curves.view(c);
-        let mut limits = self.planning.clone();
-        if let Some(f) = curves.element(c).feed {
-            limits.feed = limits.feed.min(f * (1.0 - FEED_HEADROOM));
-        }
+        let limits = element_limits(&self.planning, curves.element(c));
         let (u0, u1) = (view.u_min(), view.u_max());
         let all_breaks = interior_breaks(view, self.tip, &limits);
         let breaks = all_breaks
@@ -294,6 +320,7 @@ impl NodeStream {
             breaks,
             all_breaks: all_breaks.into_iter().map(|(u, _)| u).collect(),
             limits,
+            scanned: self.ahead.take(c),
         });
         if c == self.start.curve {
             // The start: at rest, committed at once.
