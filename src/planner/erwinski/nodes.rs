@@ -227,12 +227,18 @@ impl NodeStream {
         let e = &mut self.elements[c];
         let grid = &mut e.grid;
         let each = &mut |u, x: &_, speed| grid.push(u, x, speed);
-        match &e.scanned {
-            Some(scanned) => e.scan.extend_from(&scanned.samples, count, each),
-            None => e.scan.extend(view, tip, &e.limits, count, each),
-        }
-        let mut points = Vec::new();
-        e.search.advance(view, tip, &e.limits, &e.scan, &mut points);
+        let (points, settled) = match &mut e.scanned {
+            Some(scanned) => {
+                e.scan.extend_from(&scanned.samples, count, each);
+                scanned.next_chunk()
+            }
+            None => {
+                e.scan.extend(view, tip, &e.limits, count, each);
+                let mut points = Vec::new();
+                e.search.advance(view, tip, &e.limits, &e.scan, &mut points);
+                (points, e.search.settled_below(&e.scan))
+            }
+        };
         let (u0, u1) = (view.u_min(), view.u_max());
         let near_break = |p: &CriticalPoint| e.all_breaks.iter().any(|&b| (b - p.u).abs() <= 1e-9 * (u1 - u0));
         // Critical points too close to a break are superseded by it; on the start element only
@@ -240,7 +246,6 @@ impl NodeStream {
         let ahead = |u: f64| c != self.start.curve || u > self.start.u + 1e-9 * (u1 - u0);
         let kept: Vec<CriticalPoint> = points.into_iter().filter(|p| !near_break(p) && ahead(p.u)).collect();
         e.found.extend(kept);
-        let settled = e.search.settled_below(&e.scan);
         // Critical points and breaks in order of `u`, as far as no later critical point can
         // come before them (a critical point first at equal `u`).
         loop {

@@ -3,14 +3,15 @@
 //!
 //! The helper reads the path's stream in place of the planner, one bounded step ahead of it
 //! ([`AHEAD`] elements), and for each short element (at most [`MAX_SAMPLES`] scan samples)
-//! computes the scan's samples and the complete arc-length table. The planner takes them in
-//! the same chunks as it would compute them ([`FlfScan::extend_from`],
-//! [`ArcLengthTable::extend_past_from`]); every sample and every table piece depends on its
-//! curve and the limits alone, so the plan is the same bit for bit. A longer element is
+//! computes the scan's samples, the critical points chunk by chunk as the planner would find
+//! them, and the complete arc-length table. The planner takes them in the same chunks as it
+//! would compute them ([`FlfScan::extend_from`], [`ArcLengthTable::extend_past_from`]); every
+//! sample, critical point and table piece depends on its curve and the limits alone, so the
+//! plan is the same bit for bit. A longer element is
 //! scanned by the planner as it goes, so that its first segments need not wait for the scan of
 //! the whole element.
 
-use super::flf::{FlfScan, ScanSample};
+use super::flf::{CriticalPoint, CriticalPointSearch, FlfScan, ScanSample};
 use crate::geometry::{ArcLengthTable, PathElement};
 use crate::planner::{Limits, PathCurves};
 use crate::readers::ReadError;
@@ -28,6 +29,17 @@ const MAX_SAMPLES: usize = 4096;
 pub(super) struct Scanned {
     pub samples: Vec<ScanSample>,
     pub table: ArcLengthTable,
+    /// Per chunk of samples the planner takes (`per_point` at a time, as it would compute
+    /// them), the critical points the search finds once the chunk is in and the parameter
+    /// below which no later one can lie; the next chunk's first.
+    chunks: VecDeque<(Vec<CriticalPoint>, f64)>,
+}
+
+impl Scanned {
+    /// The critical points and settled parameter of the next chunk.
+    pub fn next_chunk(&mut self) -> (Vec<CriticalPoint>, f64) {
+        self.chunks.pop_front().unwrap_or((Vec::new(), f64::INFINITY))
+    }
 }
 
 /// The planner's end: the scans the helper has handed over, by element index.
@@ -102,12 +114,22 @@ impl ScanAhead {
 /// The scan of a short element; `None` for a long one.
 fn scan(element: &PathElement, tip: usize, per_point: usize, limits: &Limits) -> Option<Scanned> {
     let view = element.curve.view();
-    let scan = FlfScan::lazy(&view, per_point);
+    let mut scan = FlfScan::lazy(&view, per_point);
     if scan.full_len() > MAX_SAMPLES {
         return None;
     }
+    let samples = scan.samples(&view, tip, limits, 0, scan.full_len());
+    // The critical-point search as the planner would run it, chunk by chunk.
+    let (mut search, mut chunks) = (CriticalPointSearch::default(), VecDeque::new());
+    while !scan.is_complete() {
+        scan.extend_from(&samples, per_point, &mut |_, _, _| {});
+        let mut points = Vec::new();
+        search.advance(&view, tip, limits, &scan, &mut points);
+        chunks.push_back((points, search.settled_below(&scan)));
+    }
     Some(Scanned {
-        samples: scan.samples(&view, tip, limits, 0, scan.full_len()),
+        samples,
         table: ArcLengthTable::new(&element.curve),
+        chunks,
     })
 }
