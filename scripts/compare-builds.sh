@@ -3,7 +3,9 @@
 # commits): whether every bundled case plans the same setpoints bit for bit (the whole plan,
 # and the streamed plan the machine runs), the motion times,
 # `verify` on the second build's output; then the median plan time and time to the first
-# record (`--stream`) of RUNS alternate runs of each (default 11) at lab set 1. Alternate runs
+# record (`--stream`) of RUNS alternate runs of each (default 11) at lab set 1, and the median
+# plan time of the streamed dense G1 program of scripts/dense-g1.py (DENSE_LINES lines, default
+# 2,000) at F500 A1e4 J6e4. Alternate runs
 # share the machine's drift in speed, so their ratio is what to compare.
 # Usage: scripts/compare-builds.sh OLD_BINARY NEW_BINARY
 # shellcheck source=scripts/common.sh
@@ -63,3 +65,25 @@ for line in open(path):
 print(f"| {curve} | {wo:.1f} / {wn:.1f} | {wn / wo:.2f} | {fo:.2f} / {fn:.2f} | {fn / fo:.2f} |")
 PY
 done
+echo
+echo "| program (streamed) | plan old / new (s) | ratio |"
+echo "|---|---|---|"
+lines=${DENSE_LINES:-2000}
+python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
+for _ in $(seq "${RUNS:-11}"); do
+  for which in old new; do
+    # shellcheck disable=SC2086
+    "${!which}" plan "$dir/dense.ngc" $lab1 --feed 500 --stream --out "$dir/o.csv" --summary "$dir/dense.json" >/dev/null 2>&1
+    python3 -c "import json, sys; print(sys.argv[1], json.load(open(sys.argv[2]))['plan_time_s'])" "$which" "$dir/dense.json"
+  done
+done >"$dir/dense-times.txt"
+python3 - "$lines" "$dir/dense-times.txt" <<'PY'
+import statistics, sys
+lines, path = int(sys.argv[1]), sys.argv[2]
+times = {"old": [], "new": []}
+for line in open(path):
+    which, t = line.split()
+    times[which].append(float(t))
+old, new = statistics.median(times["old"]), statistics.median(times["new"])
+print(f"| dense G1, {lines:,} lines | {old:.3f} / {new:.3f} | {new / old:.2f} |")
+PY
