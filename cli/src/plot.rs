@@ -345,20 +345,17 @@ fn draw(root: &DrawingArea<BitMapBackend, Shift>, p: &Profile) -> Result<(), Plo
     let axes = p.axes.len().min(MAX_AXES);
     let q: Vec<[f64; MAX_AXES]> = p.samples.iter().map(|s| s.q).collect();
     let diffs = axial_differences(&q, axes, p.limits.period);
-    let accel = Axial {
-        order: 1,
-        caption: "(b) axial accelerations",
-        unit: "acceleration",
-        limits: &p.limits.acceleration,
+    let panel = |order, caption, unit, limits| Axial {
+        order,
+        caption,
+        unit,
+        limits,
     };
-    axial_panel(&panels[1], p, &param, &xs, &diffs, &accel)?;
-    let jerk = Axial {
-        order: 2,
-        caption: "(c) axial jerks",
-        unit: "jerk",
-        limits: &p.limits.jerk,
-    };
-    axial_panel(&panels[2], p, &param, &xs, &diffs, &jerk)?;
+    let accel = panel(1, "(b) axial accelerations", "acceleration", &p.limits.acceleration);
+    let jerk = panel(2, "(c) axial jerks", "jerk", &p.limits.jerk);
+    for axial in [accel, jerk] {
+        axial_panel(&panels[axial.order], p, &param, &xs, &diffs, &axial)?;
+    }
     Ok(())
 }
 
