@@ -1006,3 +1006,45 @@ fn cli_plan_vpop_and_verify() {
     assert_tighter_limit_fails(&out5, &pocket, &TABLE1, "--vel", "500,500,500,90,100");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A dense CAM-like G1 program (`scripts/dense-g1.py`, 7,000 lines of 0.02 mm) streamed as the
+/// machine runs it: where back-tracking reaches the records already handed out, the plan
+/// follows the stop chain they rest on only as far as it must, and runs on at the chain's
+/// slower feed, so the motion comes to rest nowhere but at the end; the setpoints pass
+/// `verify`.
+#[test]
+fn a_streamed_dense_program_rests_only_at_its_end() {
+    let dir = scratch_dir("dense-stream");
+    let program = dir.join("dense.ngc");
+    let generated = Command::new("python3")
+        .arg(common::root().join("scripts/dense-g1.py"))
+        .args(["--lines", "7000"])
+        .output()
+        .expect("python3 runs scripts/dense-g1.py");
+    assert!(
+        generated.status.success(),
+        "{}",
+        String::from_utf8_lossy(&generated.stderr)
+    );
+    std::fs::write(&program, generated.stdout).unwrap();
+    let (csv, summary) = (dir.join("dense.csv"), dir.join("dense.json"));
+    let limits = ["--limits", "lab1", "--feed", "500"];
+    let out = bin()
+        .arg("plan")
+        .arg(&program)
+        .args(limits)
+        .arg("--stream")
+        .arg("--out")
+        .arg(&csv)
+        .arg("--summary")
+        .arg(&summary)
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{log}");
+    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    assert_eq!(s["streamed"], true);
+    assert_eq!(s["stops_made"], 0, "{log}");
+    assert!(!log.contains("comes to rest"), "{log}");
+    assert_verifies(&csv, &program, &limits);
+}

@@ -559,24 +559,30 @@ impl Planner {
         Some(chain)
     }
 
-    /// A cascade asks segment `k`, the first not handed out, to start slower: if the last
-    /// settle rests on a stop chain from `k`, the plan takes it (a stop at its end).
+    /// A cascade asks segment `k`, the first not handed out, to start slower, and it can
+    /// neither reach a lower end feed nor stop at its end: if the last settle rests on a stop
+    /// chain from `k`, the plan takes the chain's first record, and the rest of the chain is
+    /// the stop after it. The plan goes on from there at the slower feed, so the chain comes
+    /// to rest only if every segment of it meets the same trouble.
     fn adopt_chain(&mut self, k: usize) {
-        let Some((first, chain)) = self.chain.take().filter(|(first, _)| *first == k) else {
+        let Some((first, mut chain)) = self.chain.take().filter(|(first, _)| *first == k) else {
             return;
         };
         self.records.truncate(first);
         self.states.truncate(first + 1);
         self.start_feeds.truncate(first + 1);
-        for (record, state) in chain {
-            self.records.push(record);
-            self.states.push(state);
-            self.start_feeds.push(record.profile().table().end().v.max(0.0));
-        }
-        if let Some(last) = self.records.last() {
-            self.stops_made.push((last.curve(), last.u_end));
-        }
+        let (record, state) = chain.remove(0);
+        self.records.push(record);
+        self.states.push(state);
+        self.start_feeds.push(record.profile().table().end().v.max(0.0));
         self.k = self.records.len();
+        if chain.is_empty() {
+            self.stops_made.push((record.curve(), record.u_end));
+        } else {
+            self.settled = self.k;
+            self.settled_stop = chain.iter().map(|(r, _)| *r).collect();
+            self.chain = Some((self.k, chain));
+        }
     }
 
     /// Where the records since the last settle make more than [`CHAIN_AFTER`] of motion (no
