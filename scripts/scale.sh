@@ -3,14 +3,15 @@
 # the dense CAM-like G1 program of scripts/dense-g1.py (the butterfly every 0.02 mm, passes
 # back and forth in Z) at F500 A1e4 J6e4, chord tolerance 0.001 mm, 0.25 ms, for each length in
 # LINES (default "1000 10000 100000"): motion time, planning time (the planner alone) and its
-# ratio to the motion, time per 1,000 lines, first record, groups and the longest, peak RSS of
-# the whole command (planning and writing the CSV), then `verify` of the written setpoints.
+# ratio to the motion, time per 1,000 lines, first record, groups and the longest, stops on the
+# way (where back-tracking found no feed but rest; 0 is the aim), peak RSS of the whole command
+# (planning and writing the CSV), then `verify` of the written setpoints.
 # Usage: scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
 limits="--limits lab1 --feed 500"
-echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | peak RSS (MB) | verify |"
-echo "|---|---|---|---|---|---|---|---|---|---|---|"
+echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | stops on the way | peak RSS (MB) | verify |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 for lines in ${LINES:-1000 10000 100000}; do
   python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
   # shellcheck disable=SC2086
@@ -25,6 +26,6 @@ s = json.load(open(path))
 t, plan = s["motion_time_s"], s["plan_time_s"]
 elements = s["elements"]
 print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "
-      f"| {s['first_segment_time_s'] * 1e3:.1f} | {s['groups']:,} | {s['longest_group_s']:.3f} | {rss / 1024:.0f} | {ok} |")
+      f"| {s['first_segment_time_s'] * 1e3:.1f} | {s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']} | {rss / 1024:.0f} | {ok} |")
 PY
 done

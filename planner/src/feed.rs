@@ -1100,8 +1100,10 @@ impl Source {
 /// Motion time (s) planned before the motion starts, where the planner's pace lets the queue
 /// grow from there to the margin as the motion runs (the start rule asks for twice the
 /// motion's pace): the machine moves within milliseconds of the start, whatever the program's
-/// length.
-pub const START_AHEAD: f64 = 0.25;
+/// length. At that pace the next group may be twice as long before it could come late; on a
+/// dense G1 program (groups of 0.1-0.5 s, planned at 8-12 times the motion's pace) the first two
+/// groups make 0.13 s.
+pub const START_AHEAD: f64 = 0.1;
 
 /// Motion time (s) of the groups a streamed plan hands out ahead of the ring: the planner
 /// thread waits beyond it, so that memory follows the look-ahead, not the program's length.
