@@ -573,19 +573,12 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
     let pivot = [-15.0, 40.0, -60.0];
     let csv = dir.join("pivot.csv");
     let summary = dir.join("pivot.json");
-    let out = bin()
-        .arg("plan")
-        .arg(&program)
-        .args(TABLE1)
-        .args(["--planner", "vpop", "--machine", "xyzac", "--pivot", "-15,40,-60"])
-        .arg("--out")
-        .arg(&csv)
-        .arg("--summary")
-        .arg(&summary)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let args = [
+        &TABLE1[..],
+        &["--planner", "vpop", "--machine", "xyzac", "--pivot", "-15,40,-60"],
+    ]
+    .concat();
+    let s = plan_with_summary(&program, &args, &csv, &summary);
     assert_eq!(s["machine"], "xyzac");
     assert_eq!(s["pivot_mm"], serde_json::json!(pivot));
     // Every row: the joints' tool tip and tool axis on the programmed tip and top curves.
@@ -1029,22 +1022,8 @@ fn a_streamed_dense_program_rests_only_at_its_end() {
     std::fs::write(&program, generated.stdout).unwrap();
     let (csv, summary) = (dir.join("dense.csv"), dir.join("dense.json"));
     let limits = ["--limits", "lab1", "--feed", "500"];
-    let out = bin()
-        .arg("plan")
-        .arg(&program)
-        .args(limits)
-        .arg("--stream")
-        .arg("--out")
-        .arg(&csv)
-        .arg("--summary")
-        .arg(&summary)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "{log}");
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&summary).unwrap()).unwrap();
+    let s = plan_with_summary(&program, &[&limits[..], &["--stream"]].concat(), &csv, &summary);
     assert_eq!(s["streamed"], true);
-    assert_eq!(s["stops_made"], 0, "{log}");
-    assert!(!log.contains("comes to rest"), "{log}");
+    assert_eq!(s["stops_made"], 0, "the streamed plan came to rest on the way");
     assert_verifies(&csv, &program, &limits);
 }
