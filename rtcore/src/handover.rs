@@ -13,8 +13,8 @@
 //! outputs pass straight through, from the first period on.
 //!
 //! Engaging never jumps: only at rest (motion and our path), with our start within
-//! [`ENGAGE_TOLERANCE`] of where motion stands. Releasing never jumps: only with every offset
-//! within that tolerance. Machine off while engaged releases at once: the drives are disabled
+//! [`ENGAGE_TOLERANCE`] of where motion stands. Releasing never jumps: only at rest too, with
+//! every offset within that tolerance. Machine off while engaged releases at once: the drives are disabled
 //! and motion takes over from their feedback (it re-syncs to feedback while disabled).
 
 /// Joints the hand-over serves: X, Y and Z of a trivkins machine (joint N = axis N).
@@ -130,11 +130,16 @@ impl Handover {
                 self.offset = offsets(&ours, &i.pos_cmd, &i.driven);
             }
             if !i.engage {
-                if self.offset.iter().all(|o| o.abs() <= ENGAGE_TOLERANCE) {
+                // At rest too, as for engaging: released while motion still moves (a release
+                // asked during the catch-up move), the drive would take up motion's velocity
+                // in one period.
+                if self.offset.iter().any(|o| o.abs() > ENGAGE_TOLERANCE) {
+                    refused = Refusal::OffsetLeft;
+                } else if !(motion_at_rest && i.ours_at_rest) {
+                    refused = Refusal::NotAtRest;
+                } else {
                     self.engaged = false;
                     self.offset = [0.0; JOINTS];
-                } else {
-                    refused = Refusal::OffsetLeft;
                 }
             }
         } else if !i.engage {
@@ -269,9 +274,11 @@ mod tests {
             for j in 0..3 {
                 assert!((o.drive_cmd[j] - drive_at_end[j]).abs() < 1e-12, "{k}: {o:?}");
             }
-            assert_eq!(o.engaged, k < 10, "{k}");
+            // Arrived, but moving in this period: the release waits for motion to stand.
+            assert!(o.engaged, "{k}");
         }
-        assert_eq!(h.step(&inputs(false, end, end)).offset, [0.0; 3]);
+        let o = h.step(&inputs(false, end, end));
+        assert!(!o.engaged && o.offset == [0.0; 3], "{o:?}");
     }
 
     #[test]

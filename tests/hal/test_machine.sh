@@ -10,6 +10,7 @@
 #   and nurbs_interp by a mux2 on `engaged`): the same checks must fail.
 #   MACHINE_ACTION=abort|estop: the operator's abort (or an E-stop) 0.3 s into the first
 #   toolpath instead of running the program to its end (check_machine.py --action);
+#   MACHINE_ACTION=pause-abort: the operator's pause there, then an abort while held;
 #   MACHINE_ACTION=pause: the operator's pause 0.3 s into the first toolpath (halui holds our
 #   path at its next checked stop), resumed: the rest is re-planned from there and the program
 #   runs to its end;
@@ -71,7 +72,7 @@ if [ -z "$action" ] || [ "$action" = travel ] || [ "$action" = pause ]; then
     for k in 0 1; do
         nurbs-plan verify "$work/recorded-$k.csv" "${toolpaths[$k]}" --ini "$config/nurbs-sim.ini"
     done
-elif [ "$action" = abort ]; then
+elif [ "$action" = abort ] || [ "$action" = pause-abort ]; then
     # Stopped on the path: every limit held, only the path's end not reached. (After an E-stop
     # the setpoints are the plan's up to it and the drives are off: nothing to verify.)
     verify=$(nurbs-plan verify "$work/recorded-0.csv" "${toolpaths[0]}" --ini "$config/nurbs-sim.ini" || true)

@@ -6,6 +6,7 @@ E-stop the program gets SIGINT.
 """
 import os
 import signal
+import subprocess
 import sys
 import time
 
@@ -101,14 +102,18 @@ def positions():
 
 
 def abort_on_signal():
-    """On SIGINT/SIGTERM (LinuxCNC's abort or E-stop): nurbs_interp stops on the path."""
+    """On SIGINT/SIGTERM (LinuxCNC's abort or E-stop): nurbs_interp stops on the path, and
+    nurbs_catch_up.py, in a session of its own, then moves motion's command there and releases
+    the drives (no machine off and on needed)."""
 
     def handler(signum, frame):
         set_pin("abort", True)
-        # Release as soon as that is possible without a step: when motion stands where our path
-        # stopped, or (the usual way out) at once when the machine is switched off.
+        # Released as soon as that is possible without a step: when motion stands where our path
+        # stopped (the catch-up), or at once when the machine is switched off.
         set_pin("engage", False)
-        log("aborted: nurbs_interp stops on the path; switch the machine off and on to give motion the drives' position")
+        helper = os.path.join(os.path.dirname(os.path.abspath(__file__)), "nurbs_catch_up.py")
+        subprocess.Popen([sys.executable, helper], start_new_session=True)
+        log("aborted: nurbs_interp stops on the path; motion then catches up with it and takes the drives back")
         sys.exit(1)
 
     signal.signal(signal.SIGINT, handler)

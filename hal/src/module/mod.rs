@@ -148,7 +148,7 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
         "a motion is loaded and has not started: `pos-cmd-*` show its start (where the machine must stand to engage)";
     path_3d: bool, Out, "path-3d", "", "the loaded path drives Z (a 2-D path leaves joint 2 to motion)";
     engage: bool, In, "engage", "",
-        "hand-over: take the drives (at rest, our start within 1e-6 mm of `joint.N.pos-cmd`); false: give them back once every offset is within 1e-6 mm";
+        "hand-over: take the drives (at rest, our start within 1e-6 mm of `joint.N.pos-cmd`); false: give them back once every offset is within 1e-6 mm and motion stands still";
     machine_on: bool, In, "machine-on", "",
         "hand-over: `motion.motion-enabled`; off while engaged releases at once (drives follow their feedback) and ends our motion where it stands";
     engaged: bool, Out, "engaged", "",

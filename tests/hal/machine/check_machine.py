@@ -12,11 +12,11 @@
   finite differences stay within the axis velocity, acceleration and jerk (relative slack 1e-6);
   during the catch-up move (path done, still engaged) the drive stands still while motion's
   command moves to the path's end;
-- with --action abort: one engagement whose setpoints are the plan's for at least 0.25 s, then
-  the stop on the path (checked by `verify`), the drive within every limit to the end of the
-  recording (machine off and on included); with --action estop: the drive never steps (its
-  position; the drives are off, what they do then is theirs) and stands still after the E-stop;
-  either way LinuxCNC takes the drives' position, homed;
+- with --action abort (or pause-abort: paused first, held, then aborted): one engagement whose setpoints are the plan's for at least 0.25 s, then
+  the stop on the path (checked by `verify`), then the catch-up move and the release as after a
+  toolpath's end, the machine staying on (and an MDI move after it); with --action estop: the
+  drive never steps (its position; the drives are off, what they do then is theirs) and stands
+  still after the E-stop; either way LinuxCNC takes the drives' position, homed;
 - following error (motion's joint.N.f-error): 0 (1e-9) while engaged, and within one period of
   the largest velocity (the simulated drive's lag) everywhere (motion compares the feedback with
   its command of the period before, so with this drive it sees 0 there too).
@@ -74,9 +74,13 @@ def main():
                     help="largest following error while engaged (mm): the drives' resolution")
     ap.add_argument("--ferror-max", type=float,
                     help="largest following error anywhere (mm); default: one period at the largest velocity")
-    ap.add_argument("--action", choices=("abort", "estop", "travel", "pause"),
+    ap.add_argument("--action", choices=("abort", "estop", "travel", "pause", "pause-abort"),
                     help="the run was aborted, E-stopped or paused and resumed mid-path, or its first toolpath leaves the travel")
     a = ap.parse_args()
+    # Paused first, then aborted: checked as an abort, and the pause held the path.
+    paused_first = a.action == "pause-abort"
+    if paused_first:
+        a.action = "abort"
     vmax, amax, jmax, T = ini_limits(a.ini, a.joints)
     with open(a.result) as f:
         result = json.load(f)
@@ -95,7 +99,9 @@ def main():
         fail(f"no refusal naming the travel in LinuxCNC's errors: {result['errors']}")
     elif a.action in ("abort", "estop", "pause") and not result.get("action_moving"):
         fail(f"the {a.action} did not come while our path moved")
-    if a.action == "pause" and not result.get("paused_at_rest"):
+    if a.action == "abort" and not (result.get("released_after_abort") and result.get("moved_after_abort")):
+        fail("after the abort the drives were not released with the machine on, or MDI did not move it")
+    if (a.action == "pause" or paused_first) and not result.get("paused_at_rest"):
         fail("paused, our path was not held at rest")
     if not all(result.get("homed", [])):
         fail(f"joints not homed at the end: {result.get('homed')}")
@@ -149,7 +155,7 @@ def main():
     # Following error as motion sees it.
     fe_engaged = max(abs(f) for k in engaged for f in rows[k]["ferror"])
     fe_all = max(abs(f) for r in rows for f in r["ferror"])
-    if a.action:
+    if a.action == "estop":
         # Released by the machine switched off, motion's feedback steps to the drives' position
         # (by the offset) while motion is disabled and re-syncs to it: its error is moot there.
         fe_all = max(abs(f) for r in rows[: engaged[-1] + 1] for f in r["ferror"])
@@ -204,10 +210,8 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
         fail(f"{offline}: engaged, the drive command is off our position by {follow:.3e} mm")
 
     # No step: finite differences of the drive command around and through the hand-over (after
-    # an abort to the end of the recording; after an E-stop only up to it, and the position).
+    # an E-stop only up to it, and the position).
     lo, hi = max(e0 - 2, 3), min(e1 + 3, len(rows) - 1)
-    if action == "abort":
-        hi = len(rows) - 1
     if action == "estop":
         hi = e1
         moved = max(abs(rows[k]["drive"][i] - rows[k - 1]["drive"][i]) / T for k in range(e1, len(rows))
@@ -227,10 +231,10 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
                 if abs(x) > lim * (1 + 1e-6):
                     fail(f"period {k}, joint {i}: drive {['velocity', 'acceleration', 'jerk'][n]} "
                          f"{x:.6g} exceeds {lim:g}")
-    if action and action != "pause":
+    if action == "estop":
         return (f"{len(ours)} setpoints, the first {same} as planned, then the {action}", 0, 0.0)
     # The catch-up move: from the path's last setpoint to the release, the drive stands still
-    # while motion's command goes to the path's end.
+    # while motion's command goes to the path's end (after an abort, to where the path stopped).
     catch_up = range(active[-1] + 1, e1 + 1)
     still = max((abs(rows[k]["drive"][i] - rows[active[-1]]["drive"][i]) for k in catch_up for i in range(len(vmax))),
                 default=0.0)
@@ -240,8 +244,8 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
         fail(f"{offline}: the drive moved by {still:.3e} mm during the catch-up move")
     if arrived > 1e-6:
         fail(f"{offline}: released with motion {arrived:.3e} mm from the path's end")
-    what = (f"the first {same} as planned, held, resumed to the end" if action == "pause"
-            else "= offline plan")
+    what = {"pause": f"the first {same} as planned, held, resumed to the end",
+            "abort": f"the first {same} as planned, then the abort's stop"}.get(action, "= offline plan")
     return (f"{len(ours)} setpoints {what}, catch-up {moved:.3f} mm in {len(catch_up)} periods "
             "with the drive still", len(catch_up), moved)
 

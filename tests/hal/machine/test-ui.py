@@ -2,8 +2,9 @@
 """The test's user interface for a headless LinuxCNC ([DISPLAY]DISPLAY): E-stop reset, machine
 on, home, run the program named by $NURBS_TEST_PROGRAM to its end with the sampler recording,
 then write what the machine says of itself to $NURBS_TEST_RESULT (JSON) and switch off, which
-ends LinuxCNC. $NURBS_TEST_ACTION: `abort` (the operator's abort 0.3 s into the first toolpath,
-then machine off and on, as the hand-over asks after an abort), `estop` (E-stop there, then
+ends LinuxCNC. $NURBS_TEST_ACTION: `abort` (the operator's abort 0.3 s into the first toolpath;
+motion catches up with where our path stopped and takes the drives back, then moves 1 mm in X
+by MDI), `pause-abort` (the same after a pause), `estop` (E-stop there, then
 reset and on) or `pause` (the operator's pause there, resumed 0.3 s after our path is held)."""
 import json
 import os
@@ -75,7 +76,7 @@ c.wait_complete()
 c.auto(linuxcnc.AUTO_RUN, 0)
 wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")
 action = os.environ.get("NURBS_TEST_ACTION", "")
-if action in ("abort", "estop", "pause"):
+if action in ("abort", "estop", "pause", "pause-abort"):
     # 0.3 s after our path starts moving (not after the hand-over: on a slow machine the
     # planner's start can take a good part of that), so the check's 0.25 s of planned
     # setpoints before the action holds whatever the start took.
@@ -88,22 +89,37 @@ if action in ("abort", "estop", "pause"):
         result["paused_at_rest"] = hal.get_value("nurbs_interp.held")
         time.sleep(0.3)
         c.auto(linuxcnc.AUTO_RESUME)
-    elif action == "abort":
+    if action in ("abort", "pause-abort"):
+        if action == "pause-abort":
+            c.auto(linuxcnc.AUTO_PAUSE)
+            wait(lambda: hal.get_value("nurbs_interp.held"), 5, "our path held")
+            result["paused_at_rest"] = hal.get_value("nurbs_interp.held")
+            time.sleep(0.3)
         c.abort()
         c.wait_complete()
-        # The path stops on the path (at its next checked stop), then the machine is switched
-        # off and on: motion takes the drives' position.
-        wait(lambda: hal.get_value("nurbs_interp.held") or hal.get_value("nurbs_interp.done"), 5, "the stop")
+        # The path stops on the path (at its next checked stop; paused, it stands already);
+        # M102's abort handler then has motion catch up with it and the drives released, the
+        # machine staying on.
+        result["released_after_abort"] = wait(lambda: not hal.get_value("nurbs_interp.engaged"), 30,
+                                              "the release after the abort")
+        # The helper restores the mode it found; then the machine runs MDI again.
+        wait(lambda: s.task_mode != linuxcnc.MODE_MDI, 10, "the catch-up to hand back the mode")
         time.sleep(0.1)
-        c.state(linuxcnc.STATE_OFF)
-        # (LinuxCNC reports a machine switched off as ESTOP_RESET.)
-        wait(lambda: s.task_state in (linuxcnc.STATE_OFF, linuxcnc.STATE_ESTOP_RESET), 5, "machine off")
+        c.mode(linuxcnc.MODE_MDI)
+        c.wait_complete()
+        c.mdi("G91 G1 X1 F600")
+        c.wait_complete()
+        wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE, 10, "an MDI move after the abort")
+        c.mdi("G90")
+        c.wait_complete()
+        wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE, 10, "G90")
+        result["moved_after_abort"] = True
     elif action == "estop":
         c.state(linuxcnc.STATE_ESTOP)
         wait(lambda: s.task_state == linuxcnc.STATE_ESTOP, 5, "E-stop")
         time.sleep(0.1)
         c.state(linuxcnc.STATE_ESTOP_RESET)
-    if action != "pause":
+    if action == "estop":
         time.sleep(0.1)
         c.state(linuxcnc.STATE_ON)
         wait(lambda: s.task_state == linuxcnc.STATE_ON, 5, "machine on again")
