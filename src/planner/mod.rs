@@ -12,7 +12,10 @@ pub mod verify;
 pub mod vpop;
 mod window;
 
-pub use erwinski::{flf, plan, scurve_fit, FinalRecord, Plan, PlanError, PlanOptions, PlanReport, Planner};
+pub use erwinski::{
+    flf, plan, scurve_fit, FinalRecord, MovingStart, Plan, PlanError, PlanOptions, PlanReport, Planner,
+    SLOW_DOWN_SHARES,
+};
 pub use limits::{Limits, LimitsError};
 
 use crate::geometry::{PathElement, Toolpath};

@@ -15,7 +15,7 @@ use super::axial::FiniteDifferences;
 use super::simulate::{run_segment, SimState};
 use super::window::Window;
 use super::{Limits, LimitsError, PathCurves};
-use crate::geometry::Toolpath;
+use crate::geometry::{ArcLengthTable, Toolpath};
 use flf::CriticalPoint;
 use nodes::{Node, NodeStream};
 use nurbs_rtcore::interpolator::CurveSet;
@@ -46,6 +46,14 @@ pub struct PlanOptions {
     /// were handed out), and settling costs an extra solve per segment. `false`: records are
     /// handed out when the whole plan is done, with back-tracking unbounded (Erwinski et al. 2022, step 9).
     pub stream: bool,
+    /// Feed override: the programmed feeds (the planner's and each element's) times this
+    /// factor; the axis limits stay the limits (1: as programmed).
+    pub feed_override: f64,
+    /// Plan from a motion in progress instead of from rest: at `start` (which must be given),
+    /// the end of a record handed out by another plan of the same path, with that record's end
+    /// feed and the interpolator state after it ([`Planner::state_after_last`]). The feed
+    /// there cannot change: a plan that cannot continue from it is refused.
+    pub moving: Option<MovingStart>,
 }
 
 impl Default for PlanOptions {
@@ -55,9 +63,35 @@ impl Default for PlanOptions {
             flf_margin: 0.95,
             start: None,
             stream: false,
+            feed_override: 1.0,
+            moving: None,
         }
     }
 }
+
+/// The motion state a plan continues from ([`PlanOptions::moving`]): the end of a record, with
+/// zero tangential acceleration there.
+#[derive(Clone, Copy, Debug)]
+pub struct MovingStart {
+    /// Feed at the start (mm/s).
+    pub feed: f64,
+    /// The interpolator and finite-difference state after the record (the check spans the
+    /// join).
+    pub state: SimState,
+    /// Sequence number of the first record (the one after the record continued from).
+    pub seq: u32,
+    /// The feed override of the plan continued. Where the new one is lower, the motion keeps
+    /// the old caps until a ramp down from the start feed at `brake_share` of the nominal
+    /// tangential limits has reached the new ones, and the new caps hold from there on. Where
+    /// the path turns, the axes need part of their limits for the turn: a plan refused with one
+    /// share may pass with a smaller one ([`SLOW_DOWN_SHARES`], tried in turn).
+    pub feed_override: f64,
+    pub brake_share: f64,
+}
+
+/// Shares of the nominal tangential limits with which a plan from a motion faster than its
+/// new feed caps ramps down to them ([`MovingStart::brake_share`]), gentlest last.
+pub const SLOW_DOWN_SHARES: [f64; 3] = [0.7, 0.35, 0.15];
 
 /// A point on the path to plan from, at rest: element `curve`, parameter `u`, taken to be at
 /// arc length `s` from the element's start (the first record gets exactly these `u_start`,
@@ -262,6 +296,23 @@ pub struct Planner {
     /// Nominal tangential acceleration and jerk.
     accel: f64,
     jerk: f64,
+    /// Sequence number of segment 0's record ([`MovingStart::seq`]).
+    first_seq: u32,
+    /// The feed override the caps are made with ([`PlanOptions::feed_override`], or the
+    /// continued plan's where that is higher), and the lower one that takes over from a
+    /// distance into the path.
+    feed_override: f64,
+    slow_down: Option<SlowDown>,
+    /// Path length from the start to the last committed node (mm).
+    committed_distance: f64,
+}
+
+/// A lower feed override that holds from `distance` (mm from the start of a plan continuing a
+/// motion) on: the length of a ramp from the start feed down to its feed cap.
+#[derive(Clone, Copy, Debug)]
+struct SlowDown {
+    feed_override: f64,
+    distance: f64,
 }
 
 /// Whether a segment of `length` starting at `feed` could end at any lower feed within its
@@ -289,6 +340,30 @@ impl Planner {
         }
         let tip = curves.tip_dim();
         let limits = limits.for_axes(tip)?;
+        let target_override = options.feed_override;
+        let previous_override = options.moving.map_or(target_override, |m| m.feed_override);
+        if ![target_override, previous_override]
+            .iter()
+            .all(|k| k.is_finite() && *k > 0.0)
+        {
+            return Err(PlanError::Infeasible {
+                curve: 0,
+                u: 0.0,
+                reason: format!("feed override {target_override} is not a positive factor"),
+            });
+        }
+        // The override scales the programmed feeds, never an axis limit. Until a lower one has
+        // taken over, the higher one still holds (see `SlowDown`).
+        let feed_override = target_override.max(previous_override);
+        let slow_down = (target_override < previous_override).then_some(SlowDown {
+            feed_override: target_override,
+            distance: f64::INFINITY,
+        });
+        let target_feed = limits.feed * target_override;
+        let limits = Limits {
+            feed: limits.feed * feed_override,
+            ..limits
+        };
         // Feed caps a hair below the programmed feed: the sampled path speed (chord / period)
         // then stays below it through rounding, with no retry of the segment.
         let planning = Limits {
@@ -311,7 +386,34 @@ impl Planner {
                 reason: "the start point is not on the path (or at its end)".into(),
             });
         }
-        let nodes = NodeStream::new(&mut curves, tip, planning.clone(), options, start);
+        if let Some(m) = &options.moving {
+            if options.start.is_none() || !(m.feed.is_finite() && m.feed >= 0.0) {
+                return Err(PlanError::Infeasible {
+                    curve: start.curve,
+                    u: start.u,
+                    reason: "a plan from a motion in progress needs its start point and a feed >= 0 there".into(),
+                });
+            }
+        }
+        let (first_state, first_feed, first_seq) = match &options.moving {
+            Some(m) => (m.state, m.feed, m.seq),
+            None => (SimState::start(tip, limits.period), 0.0, 0),
+        };
+        let scan_options = PlanOptions {
+            feed_override,
+            ..options.clone()
+        };
+        let nodes = NodeStream::new(&mut curves, tip, planning.clone(), &scan_options, start);
+        let share = options.moving.map_or(1.0, |m| m.brake_share).clamp(0.01, 1.0);
+        let slow_down = slow_down.map(|s| SlowDown {
+            distance: ramp_distance(
+                first_feed,
+                (target_feed * (1.0 - FEED_HEADROOM)).min(first_feed),
+                share * limits.min_accel(),
+                share * limits.min_jerk(),
+            ),
+            ..s
+        });
         Ok(Planner {
             curves,
             check_limits: strict(&limits),
@@ -323,8 +425,12 @@ impl Planner {
             peak_caps: Window::default(),
             end_known: false,
             records: Window::default(),
-            states: Window::from_vec(vec![SimState::start(tip, limits.period)]),
-            start_feeds: Window::from_vec(vec![0.0]),
+            states: Window::from_vec(vec![first_state]),
+            start_feeds: Window::from_vec(vec![first_feed]),
+            first_seq,
+            feed_override,
+            slow_down,
+            committed_distance: 0.0,
             k: 0,
             splits: 0,
             backtracks: 0,
@@ -419,6 +525,12 @@ impl Planner {
         }
     }
 
+    /// The interpolator and finite-difference state after the last record handed out (what a
+    /// plan continuing from its end starts from: [`MovingStart`]).
+    pub fn state_after_last(&self) -> Option<SimState> {
+        self.states.get(self.emitted).copied()
+    }
+
     /// The path as far as it is read: the curves of the records handed out (the last one's
     /// until the next call) and of the stops after them.
     pub fn curves(&self) -> &PathCurves {
@@ -458,16 +570,75 @@ impl Planner {
                 break;
             };
             if let Some(prev) = self.bounds.last() {
-                self.lengths.push((b.node.end_s - prev.start_s).max(0.0));
+                let length = (b.node.end_s - prev.start_s).max(0.0);
+                self.lengths.push(length);
+                if let Some(slow) = self.slow_down {
+                    let before = self.committed_distance;
+                    if before < slow.distance && before + length > slow.distance {
+                        self.slow_down_within_last(slow);
+                    }
+                }
+                self.committed_distance += length;
             }
-            let programmed = self.curves.element(b.node.start_curve).feed.unwrap_or(f64::INFINITY);
-            self.peak_caps
-                .push(self.feed_cap.min(programmed * (1.0 - FEED_HEADROOM)));
+            let (cap, feed) = self.caps_at(&b.node, b.feed);
+            self.peak_caps.push(cap);
             self.bounds.push(b.node);
-            self.feeds.push(b.feed);
+            self.feeds.push(feed);
             self.end_known = b.path_end;
         }
         self.k + 1 < self.bounds.len()
+    }
+
+    /// The peak feed cap of the segment starting at `node` (committed now, at
+    /// `committed_distance` from the start) and the end feed aimed for there: the programmed
+    /// feeds times the override in force there.
+    fn caps_at(&self, node: &Node, look_ahead_feed: f64) -> (f64, f64) {
+        let feed_override = match self.slow_down {
+            Some(slow) if self.committed_distance >= slow.distance => slow.feed_override,
+            _ => self.feed_override,
+        };
+        let scale = feed_override / self.feed_override;
+        let programmed = self
+            .curves
+            .element(node.start_curve)
+            .feed
+            .map_or(f64::INFINITY, |f| f * feed_override * (1.0 - FEED_HEADROOM));
+        let cap = (self.feed_cap * scale).min(programmed);
+        // The start node's feed is the motion's and never changes.
+        let feed = if self.bounds.len() == 0 {
+            look_ahead_feed
+        } else {
+            look_ahead_feed.min(cap)
+        };
+        (cap, feed)
+    }
+
+    /// The last committed segment runs past where a lower override takes over: a node there
+    /// (the ramp down ends there), from which the segment goes on at the new caps.
+    fn slow_down_within_last(&mut self, slow: SlowDown) {
+        let k = self.bounds.len() - 1;
+        let start = self.bounds[k];
+        let into = slow.distance - self.committed_distance;
+        let c = start.start_curve;
+        let curve = &self.curves.element(c).curve;
+        let table = ArcLengthTable::new(curve);
+        let u = table.parameter_at(curve, table.length_to(curve, start.start_u) + into);
+        let total = self.lengths[k];
+        if !(u > start.start_u && into < total) {
+            return;
+        }
+        // The node goes in as if it had come from the scan, at the new caps.
+        self.lengths[k] = into;
+        self.committed_distance += into;
+        let node = Node::within(c, u, start.start_s + into, 0.0);
+        let (cap, _) = self.caps_at(&node, f64::INFINITY);
+        let node = Node { cap, ..node };
+        self.peak_caps.push(cap);
+        self.bounds.push(node);
+        self.feeds.push(cap);
+        self.lengths.push(total - into);
+        // The caller adds the whole segment's length.
+        self.committed_distance -= into;
     }
 
     /// What [`solve_segment`] needs of segment `k` (its nodes committed).
@@ -482,7 +653,7 @@ impl Planner {
             peak_cap: self.peak_caps[k],
             grid: &element.grid,
             last: self.end_known && k + 2 == self.bounds.len(),
-            seq: k as u32,
+            seq: self.first_seq.wrapping_add(k as u32),
             accel: self.accel,
             jerk: self.jerk,
             work: &self.work,

@@ -106,10 +106,10 @@ impl ElementScan {
 }
 
 /// The planning limits of `element`: `planning` with the element's programmed feed.
-pub(super) fn element_limits(planning: &Limits, element: &PathElement) -> Limits {
+pub(super) fn element_limits(planning: &Limits, element: &PathElement, feed_override: f64) -> Limits {
     let mut limits = planning.clone();
     if let Some(f) = element.feed {
-        limits.feed = limits.feed.min(f * (1.0 - FEED_HEADROOM));
+        limits.feed = limits.feed.min(f * feed_override * (1.0 - FEED_HEADROOM));
     }
     limits
 }
@@ -152,9 +152,12 @@ impl NodeStream {
     pub fn new(curves: &mut PathCurves, tip: usize, planning: Limits, options: &PlanOptions, start: PlanStart) -> Self {
         let (accel, jerk) = (planning.min_accel(), planning.min_jerk());
         let of_element = planning.clone();
+        let feed_override = options.feed_override;
         let ahead = ScanAhead::start(curves, tip, options.samples_per_control_point, move |e| {
-            element_limits(&of_element, e)
+            element_limits(&of_element, e, feed_override)
         });
+        // A plan from a motion in progress starts at its feed, not at rest.
+        let start_feed = options.moving.map_or(0.0, |m| m.feed);
         NodeStream {
             tip,
             accel,
@@ -165,7 +168,7 @@ impl NodeStream {
             options: options.clone(),
             start,
             window: Vec::new(),
-            window_feeds: vec![0.0],
+            window_feeds: vec![start_feed],
             commit_at: 0,
             ready: VecDeque::new(),
             criticals: Vec::new(),
@@ -308,7 +311,7 @@ impl NodeStream {
     /// Sets up the scan of element `c`; on the start element, the start node.
     fn begin_element(&mut self, c: usize, curves: &PathCurves) {
         let view = &curves.view(c);
-        let limits = element_limits(&self.planning, curves.element(c));
+        let limits = element_limits(&self.planning, curves.element(c), self.options.feed_override);
         let (u0, u1) = (view.u_min(), view.u_max());
         let all_breaks = interior_breaks(view, self.tip, &limits);
         let breaks = all_breaks
@@ -328,13 +331,14 @@ impl NodeStream {
             scanned: self.ahead.take(c),
         });
         if c == self.start.curve {
-            // The start: at rest, committed at once.
+            // The start: at rest (or at the feed of the motion continued), committed at once.
             let PlanStart { u, s, .. } = self.start;
-            let node = Node::within(c, u, s, 0.0);
+            let feed = self.window_feeds[0];
+            let node = Node::within(c, u, s, feed);
             self.window.push(node);
             self.ready.push_back(Boundary {
                 node,
-                feed: 0.0,
+                feed,
                 path_end: false,
             });
         }
