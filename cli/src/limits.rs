@@ -54,6 +54,12 @@ impl LimitArgs {
             .transpose()
     }
 
+    /// `[DISPLAY]MAX_FEED_OVERRIDE` of the INI, if it has one.
+    pub fn ini_max_feed_override(&self) -> Result<Option<f64>, String> {
+        self.ini()?
+            .map_or(Ok(None), |i| i.number("DISPLAY", "MAX_FEED_OVERRIDE"))
+    }
+
     /// The chord tolerance: `--chord-tol`, else the --limits set's, else
     /// `[NURBS]CHORD_TOLERANCE` of the INI.
     pub fn chord_tolerance(&self) -> Result<f64, String> {

@@ -7,7 +7,7 @@ use clap::Parser;
 use std::path::PathBuf;
 
 /// `nurbs-planner TOOLPATH ...`: plans a toolpath and streams it to `nurbs_interp`.
-#[derive(Parser, Debug)]
+#[derive(Parser, Clone, Debug)]
 #[command(
     name = "nurbs-planner",
     about = "Plan a NURBS toolpath and stream it to nurbs_interp"
@@ -17,9 +17,16 @@ pub struct PlannerArgs {
     pub toolpath: PathBuf,
     #[command(flatten)]
     pub limits: LimitArgs,
-    /// Motion time (s) to keep queued ahead of the module.
-    #[arg(long, default_value_t = 2.0)]
+    /// Motion time (s) to keep queued ahead of the module (a group goes in whole, so up to a
+    /// group more): what a planner that falls behind has to catch up in, and what runs at the
+    /// old feed override before a new one takes effect.
+    #[arg(long, default_value_t = 0.25)]
     pub margin: f64,
+    /// Highest feed override the plans follow (`nurbs-planner.feed-override` is clamped to
+    /// it); default: `[DISPLAY]MAX_FEED_OVERRIDE` of --ini, else 1. Above 1 the axis limits
+    /// still bound every feed.
+    #[arg(long)]
+    pub max_feed_override: Option<f64>,
     /// VPOp: largest tangential deceleration and jerk of the module's stop after a path block,
     /// as a fraction of what the axes allow along the path there. The planner runs the stop
     /// from every block end and lowers it where the axis limits need it.
@@ -40,4 +47,19 @@ pub struct PlannerArgs {
     /// serving until a signal ends it.
     #[arg(long)]
     pub exit_when_done: bool,
+}
+
+impl PlannerArgs {
+    /// [`PlannerArgs::max_feed_override`] as given, from the INI, or 1.
+    pub fn max_feed_override(&self) -> Result<f64, String> {
+        let k = match self.max_feed_override {
+            Some(k) => k,
+            None => self.limits.ini_max_feed_override()?.unwrap_or(1.0),
+        };
+        if k.is_finite() && k > 0.0 {
+            Ok(k)
+        } else {
+            Err(format!("the maximum feed override must be a positive factor, not {k}"))
+        }
+    }
 }

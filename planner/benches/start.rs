@@ -9,7 +9,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::PathCurves;
-use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent};
+use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent, StreamStart};
 
 #[path = "../tests/common/test_paths.rs"]
 #[allow(dead_code)]
@@ -24,7 +24,8 @@ fn bench_start(c: &mut Criterion) {
         g.bench_function(format!("first group ({lines} lines)"), |b| {
             b.iter(|| {
                 let mut first = None;
-                stream_plan(PathCurves::new(&toolpath), &limits, None, &mut |e| {
+                let open = || Ok(PathCurves::new(&toolpath));
+                stream_plan(&open, &limits, StreamStart::Rest(None), 1.0, &mut |e| {
                     if let PlanEvent::Group(group) = e {
                         first = Some(group.slots.len());
                     }

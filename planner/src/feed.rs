@@ -14,6 +14,7 @@
 use std::cell::{OnceCell, RefCell};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
+use std::sync::Arc;
 use std::time::Instant;
 
 use crate::hold_stops::HoldStops;
@@ -24,12 +25,13 @@ use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
+use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
-use nurbs_motion::planner::{FinalRecord, Limits, PathCurves, PlanOptions, Planner};
+use nurbs_motion::planner::{FinalRecord, Limits, MovingStart, PathCurves, PlanOptions, Planner, SLOW_DOWN_SHARES};
 use nurbs_rtcore::block_stop::block_stop;
 use nurbs_rtcore::interpolator::{Interpolator, Step};
-use nurbs_rtcore::{CachedCurve, SpanCache, StopRun};
+use nurbs_rtcore::{CachedCurve, SegmentRecord, SpanCache, StopRun};
 
 /// Where a plan from the module's stop point starts: there, or where the machine stands at
 /// the end of an element (not the last), at the start of the next one (the module accepts
@@ -55,7 +57,7 @@ pub fn plan_start(curves: &mut PathCurves, stop: &StopPoint) -> PlanStart {
 
 /// Segment records that go into the ring together: a run of final records whose last one has
 /// a stop (or ends the path).
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default)]
 pub struct SegmentGroup {
     pub slots: Vec<SegmentSlot>,
     /// The stop's records after its first (in the last slot), as arena values: they go into the
@@ -71,6 +73,51 @@ pub struct SegmentGroup {
     /// they go into the arena before the group into the ring
     /// ([`SegmentSlot::hold_stops_offset`]).
     pub hold_stops: Vec<Vec<f64>>,
+    /// Where the group leaves the motion (what a plan at another feed override continues
+    /// from); `None` where it ends the path.
+    pub end: Option<Box<GroupEnd>>,
+}
+
+/// The end of a group of a streamed plan: its last record, the planner's state after it, and
+/// the feed override the plan was made with.
+#[derive(Clone, Copy, Debug)]
+pub struct GroupEnd {
+    pub record: SegmentRecord,
+    pub state: SimState,
+    pub feed_override: f64,
+}
+
+impl GroupEnd {
+    /// Where a plan continuing after the group starts: the last record's end, or the start of
+    /// the next element where it ends its own (the module accepts either).
+    fn start(&self, curves: &mut PathCurves) -> PlanStart {
+        let curve = self.record.curve();
+        let at_end = curves.load(curve) && self.record.u_end >= curves.view(curve).u_max();
+        if at_end && curves.load(curve + 1) {
+            PlanStart {
+                curve: curve + 1,
+                u: curves.view(curve + 1).u_min(),
+                s: 0.0,
+            }
+        } else {
+            PlanStart {
+                curve,
+                u: self.record.u_end,
+                s: self.record.s_start + self.record.length,
+            }
+        }
+    }
+
+    /// The motion state there, as the planner continues it.
+    fn moving(&self, brake_share: f64) -> MovingStart {
+        MovingStart {
+            feed: self.record.profile().table().end().v.max(0.0),
+            state: self.state,
+            seq: self.record.seq.wrapping_add(1),
+            feed_override: self.feed_override,
+            brake_share,
+        }
+    }
 }
 
 impl SegmentGroup {
@@ -131,6 +178,7 @@ impl Grouper {
             curves: Vec::new(),
             first_curve: 0,
             hold_stops,
+            end: None,
         })
     }
 }
@@ -154,36 +202,99 @@ pub enum PlanEvent {
     Failed(String),
 }
 
+/// Where a streamed plan starts.
+#[derive(Clone, Debug)]
+pub enum StreamStart {
+    /// At rest: the path start (`None`) or the module's stop point.
+    Rest(Option<StopPoint>),
+    /// After a group already sent, at another feed override (the motion goes on); the curves
+    /// from `send_from` on are still to be sent.
+    After { end: Box<GroupEnd>, send_from: usize },
+}
+
 /// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `curves` (read as it
-/// plans), from its start or from rest at the module's stop point `from`, and hands each group
-/// of final records, with the curves it is the first to need, to `emit` as soon as it is
-/// complete; stops early when `emit` returns false (nobody listens any more).
+/// plans) at `feed_override`, from `start`, and hands each group of final records, with the
+/// curves it is the first to need, to `emit` as soon as it is
+/// complete; stops early when `emit` returns false (nobody listens any more). A plan after a
+/// group whose motion is faster than the new caps ramps down to them; where that ramp does
+/// not pass, gentler ones are tried ([`SLOW_DOWN_SHARES`], each from `open()`, a fresh read of
+/// the path).
 pub fn stream_plan(
-    mut curves: PathCurves,
+    open: &dyn Fn() -> Result<PathCurves, String>,
     limits: &Limits,
-    from: Option<&StopPoint>,
+    start: StreamStart,
+    feed_override: f64,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) {
-    let start = from.map(|p| plan_start(&mut curves, p));
-    // A re-plan from a stop point never needs the path before it.
-    let mut next_curve = start.map_or(0, |s| s.curve);
-    curves.release_before(next_curve);
+    let shares: &[f64] = match start {
+        StreamStart::Rest(_) => &SLOW_DOWN_SHARES[..1],
+        StreamStart::After { .. } => &SLOW_DOWN_SHARES,
+    };
+    let mut refusals = Vec::new();
+    for (k, &share) in shares.iter().enumerate() {
+        let curves = match open() {
+            Ok(c) => c,
+            Err(e) => {
+                emit(PlanEvent::Failed(e));
+                return;
+            }
+        };
+        let last_try = k + 1 == shares.len();
+        match stream_plan_once(curves, limits, &start, (feed_override, share), last_try, emit) {
+            Ok(()) => return,
+            Err(e) => refusals.push(e),
+        }
+    }
+    emit(PlanEvent::Failed(refusals.join("; ")));
+}
+
+/// One try of [`stream_plan`] (with ramp share `brake_share` after a group): `Err` where the
+/// plan is refused before its first group and another try may pass (`last_try`: none may).
+fn stream_plan_once(
+    mut curves: PathCurves,
+    limits: &Limits,
+    start: &StreamStart,
+    (feed_override, brake_share): (f64, f64),
+    last_try: bool,
+    emit: &mut dyn FnMut(PlanEvent) -> bool,
+) -> Result<(), String> {
+    let (plan_from, moving) = match start {
+        StreamStart::Rest(from) => (from.map(|p| plan_start(&mut curves, &p)), None),
+        StreamStart::After { end, .. } => (Some(end.start(&mut curves)), Some(end.moving(brake_share))),
+    };
+    // A plan from a point on the path never needs the path before it.
+    curves.release_before(plan_from.map_or(0, |s| s.curve));
     let options = PlanOptions {
         stream: true,
-        start,
+        start: plan_from,
+        moving,
+        feed_override,
         ..PlanOptions::default()
+    };
+    let why = |e: String| match start {
+        StreamStart::Rest(None) => e,
+        StreamStart::Rest(Some(_)) => format!("re-plan from the stop point: {e}"),
+        StreamStart::After { .. } => format!("re-plan at feed override {feed_override}: {e}"),
     };
     let mut planner = match Planner::with_curves(curves, limits, &options) {
         Ok(p) => p,
         Err(e) => {
-            emit(PlanEvent::Failed(e.to_string()));
-            return;
+            emit(PlanEvent::Failed(why(e.to_string())));
+            return Ok(());
         }
     };
     let mut grouper = Grouper::default();
-    let mut hold_stops = HoldStops::new(limits);
+    let mut hold_stops = match start {
+        StreamStart::After { end, .. } => HoldStops::continuing(limits, &end.state),
+        StreamStart::Rest(_) => HoldStops::new(limits),
+    };
     let (mut groups, mut longest) = (0usize, 0.0f64);
-    // The curves of the group being collected, from `first_curve` on.
+    // The curves of the group being collected, from `first_curve` on: after a group, those not
+    // sent yet; from rest, a new geometry stream from the plan's first curve.
+    let mut next_curve = match start {
+        StreamStart::After { send_from, .. } => *send_from,
+        StreamStart::Rest(_) => plan_from.map_or(0, |s| s.curve),
+    };
     let (mut first_curve, mut new_curves) = (next_curve as u32, Vec::new());
     while let Some(next) = planner.next_final() {
         match next {
@@ -198,23 +309,30 @@ pub fn stream_plan(
                     next_curve += 1;
                 }
                 let inside = hold_stops.after(&record.record, planner.curves());
+                let last = record.record;
                 if let Some(mut group) = grouper.push(record, inside) {
                     groups += 1;
                     longest = longest.max(group.time);
                     group.first_curve = first_curve;
                     first_curve = next_curve as u32;
                     group.curves = std::mem::take(&mut new_curves);
+                    group.end = (!last.is_last()).then(|| {
+                        Box::new(GroupEnd {
+                            record: last,
+                            state: planner.state_after_last().expect("the state after a record handed out"),
+                            feed_override,
+                        })
+                    });
                     if !emit(PlanEvent::Group(group)) {
-                        return;
+                        return Ok(());
                     }
                 }
             }
+            // Refused before anything went out: a gentler ramp down may pass.
+            Err(e) if groups == 0 && !last_try && moving.is_some() => return Err(e.to_string()),
             Err(e) => {
-                emit(PlanEvent::Failed(match from {
-                    None => e.to_string(),
-                    Some(_) => format!("re-plan from the stop point: {e}"),
-                }));
-                return;
+                emit(PlanEvent::Failed(why(e.to_string())));
+                return Ok(());
             }
         }
     }
@@ -234,9 +352,13 @@ pub fn stream_plan(
             made[0].1
         ),
     };
+    let what = match start {
+        StreamStart::After { .. } => format!("streamed plan at feed override {feed_override} complete"),
+        StreamStart::Rest(_) => "streamed plan complete".to_string(),
+    };
     emit(PlanEvent::Done {
         line: format!(
-            "streamed plan complete: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms{stops}",
+            "{what}: {} segments in {groups} groups (longest {longest:.3} s of motion), motion {:.6} s, planned in {:.3} s, first record final after {:.3} ms{stops}",
             report.records,
             report.motion_time,
             report.plan_time,
@@ -244,6 +366,7 @@ pub fn stream_plan(
         ),
         error,
     });
+    Ok(())
 }
 
 /// The stop chosen after one record.
@@ -1023,6 +1146,9 @@ pub enum Source {
         total: Option<f64>,
         /// The plan ended before the file did (it could not be read further).
         error: Option<String>,
+        /// How the plan is made again at another feed override (`None`: groups planned
+        /// already, which keep theirs).
+        replanner: Option<Box<Replanner>>,
     },
     /// A VPOp plan with its checked stops, sent block group by block group.
     Blocks {
@@ -1048,21 +1174,77 @@ pub struct Group {
     /// written to the arena.
     hold_stops: Vec<Vec<f64>>,
     hold_stops_written: usize,
+    /// Segment records: where the group leaves the motion.
+    end: Option<Box<GroupEnd>>,
 }
 
+/// Reads the path afresh, from its start (each plan of a motion reads it as it plans).
+pub type PathOpener = Arc<dyn Fn() -> Result<PathCurves, String> + Send + Sync>;
+
+/// Plans a streamed motion again at another feed override, in a thread of its own, from the
+/// end of the last group sent: the module runs into the new plan's groups as it ran into the
+/// old ones, and the old ones not yet sent are dropped.
+pub struct Replanner {
+    open: PathOpener,
+    limits: Limits,
+    /// Where the motion started (a new plan from there while nothing has been sent).
+    from: Option<StopPoint>,
+    /// The override of the plan being sent, and the last one asked for (a re-plan refused is
+    /// not tried again until it changes).
+    feed_override: f64,
+    asked: f64,
+    pending: Option<Pending>,
+}
+
+/// A re-plan in progress: its events, the groups it has handed out, and how many slots had
+/// been sent when it began (it continues their last group; it is stale once more went out).
+struct Pending {
+    events: Receiver<PlanEvent>,
+    groups: VecDeque<SegmentGroup>,
+    queued: f64,
+    total: Option<f64>,
+    error: Option<String>,
+    pushed: u64,
+    feed_override: f64,
+    began: Instant,
+}
+
+/// Runs [`stream_plan`] in a thread of its own; its events, at most [`EVENTS_AHEAD`] waiting.
+fn spawn_plan(open: PathOpener, limits: Limits, start: StreamStart, feed_override: f64) -> Receiver<PlanEvent> {
+    let (sender, receiver) = mpsc::sync_channel(EVENTS_AHEAD);
+    std::thread::spawn(move || stream_plan(&*open, &limits, start, feed_override, &mut |e| sender.send(e).is_ok()));
+    receiver
+}
+
+/// A feed override change smaller than this (relative) is not worth a re-plan (`halui`
+/// reports the knob in steps of 1 % or more).
+const OVERRIDE_STEP: f64 = 1e-3;
+
+/// While a re-plan at another feed override is on its way, the old plan's next group waits
+/// unless the ring holds less motion than this (s): the re-plan then joins after it instead.
+const REPLAN_LOW_WATER: f64 = 0.05;
+
 impl Source {
-    /// The Erwinski plan of `curves` (from its start, or from rest at the stop point `from`)
-    /// as a stream, planned in a thread of its own that reads the path as it plans and waits
-    /// while [`QUEUED_AHEAD`] seconds of motion wait to be sent.
-    pub fn streamed(curves: PathCurves, limits: Limits, from: Option<StopPoint>) -> Source {
-        let (sender, receiver) = mpsc::sync_channel(EVENTS_AHEAD);
-        std::thread::spawn(move || stream_plan(curves, &limits, from.as_ref(), &mut |e| sender.send(e).is_ok()));
+    /// The Erwinski plan of the path `open` reads (from its start, or from rest at the stop
+    /// point `from`) at `feed_override` as a stream, planned in a thread of its own that reads
+    /// the path as it plans and waits while [`QUEUED_AHEAD`] seconds of motion wait to be sent;
+    /// planned again when the override changes ([`Streamer::set_feed_override`]).
+    pub fn streamed(open: PathOpener, limits: Limits, from: Option<StopPoint>, feed_override: f64) -> Source {
+        let events = spawn_plan(open.clone(), limits.clone(), StreamStart::Rest(from), feed_override);
         Source::Segments {
-            events: Some(receiver),
+            events: Some(events),
             queue: VecDeque::new(),
             queued: 0.0,
             total: None,
             error: None,
+            replanner: Some(Box::new(Replanner {
+                open,
+                limits,
+                from,
+                feed_override,
+                asked: feed_override,
+                pending: None,
+            })),
         }
     }
 
@@ -1075,6 +1257,7 @@ impl Source {
             queued: total,
             total: Some(total),
             error: None,
+            replanner: None,
         }
     }
 
@@ -1119,7 +1302,8 @@ pub fn plan_groups(
 ) -> Result<Vec<SegmentGroup>, String> {
     let mut groups = Vec::new();
     let mut failed = None;
-    stream_plan(PathCurves::new(toolpath), limits, from, &mut |e| {
+    let open = || Ok(PathCurves::new(toolpath));
+    stream_plan(&open, limits, StreamStart::Rest(from.copied()), 1.0, &mut |e| {
         match e {
             PlanEvent::Group(g) => groups.push(g),
             PlanEvent::Done { error, .. } => failed = error,
@@ -1156,6 +1340,9 @@ pub struct Streamer<'a> {
     started: bool,
     /// Longest group sent (s of motion: how long a hold may take to begin).
     pub longest_group: f64,
+    /// Where the last group sent leaves the motion (`None` before the first, and after the
+    /// path's last).
+    last_end: Option<Box<GroupEnd>>,
 }
 
 impl<'a> Streamer<'a> {
@@ -1189,6 +1376,7 @@ impl<'a> Streamer<'a> {
             margin,
             started: false,
             longest_group: 0.0,
+            last_end: None,
         })
     }
 
@@ -1239,12 +1427,14 @@ impl<'a> Streamer<'a> {
 
     /// Takes what the planner thread has handed out so far, up to [`QUEUED_AHEAD`].
     fn receive(&mut self) -> Result<(), String> {
+        self.receive_replan();
         let Source::Segments {
             events,
             queue,
             queued,
             total,
             error,
+            ..
         } = &mut self.source
         else {
             return Ok(());
@@ -1280,6 +1470,140 @@ impl<'a> Streamer<'a> {
         Ok(())
     }
 
+    /// Asks for the motion at feed override `feed_override` (the operator's, clamped to what
+    /// the machine allows): a streamed plan is planned again at it from the end of the last
+    /// group sent (or from its start while nothing has been sent), and the motion runs into
+    /// the new plan there. 0 (a hold, which the module carries out) and small changes keep the
+    /// plan. Plans sent whole keep their override.
+    pub fn set_feed_override(&mut self, feed_override: f64) {
+        let (pushed, next_queued) = (self.pushed, self.next_queued);
+        let last_end = self.last_end.clone();
+        let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+            return;
+        };
+        let close = |a: f64, b: f64| (a - b).abs() <= OVERRIDE_STEP * b;
+        if feed_override.is_nan() || feed_override <= 0.0 || close(feed_override, r.asked) {
+            return;
+        }
+        r.asked = feed_override;
+        if close(feed_override, r.feed_override) {
+            // Back to the plan being sent: a re-plan on its way is not needed any more.
+            r.pending = None;
+            return;
+        }
+        let start = match &last_end {
+            Some(end) => StreamStart::After {
+                end: end.clone(),
+                send_from: next_queued as usize,
+            },
+            // The path's last group has gone out: nothing left to plan.
+            None if pushed > 0 => return,
+            None => StreamStart::Rest(r.from),
+        };
+        say!(
+            "nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {}",
+            match &last_end {
+                Some(end) => format!("the end of record {}", end.record.seq),
+                None => "its start".to_string(),
+            }
+        );
+        r.pending = Some(Pending {
+            events: spawn_plan(r.open.clone(), r.limits.clone(), start, feed_override),
+            groups: VecDeque::new(),
+            queued: 0.0,
+            total: None,
+            error: None,
+            pushed,
+            feed_override,
+            began: Instant::now(),
+        });
+    }
+
+    /// Takes what a re-plan at another feed override has handed out; once it has a group,
+    /// the motion runs into it if nothing was sent since it began (else it begins again from
+    /// the new end). A re-plan that fails leaves the plan as it is.
+    fn receive_replan(&mut self) {
+        let pushed = self.pushed;
+        let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+            return;
+        };
+        let Some(p) = &mut r.pending else {
+            return;
+        };
+        while p.queued < QUEUED_AHEAD && p.total.is_none() {
+            match p.events.try_recv() {
+                Ok(PlanEvent::Group(g)) => {
+                    p.queued += g.time;
+                    p.groups.push_back(g);
+                }
+                Ok(PlanEvent::Done { line, error }) => {
+                    say!("nurbs-planner: {line}");
+                    p.total = Some(p.queued);
+                    p.error = error;
+                }
+                Ok(PlanEvent::Failed(e)) => {
+                    say!(
+                        "nurbs-planner: feed override {} not taken, the motion goes on at {}: {e}",
+                        p.feed_override,
+                        r.feed_override
+                    );
+                    r.pending = None;
+                    return;
+                }
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => {
+                    say!(
+                        "nurbs-planner: the re-plan at feed override {} ended early",
+                        p.feed_override
+                    );
+                    r.pending = None;
+                    return;
+                }
+            }
+        }
+        if p.groups.is_empty() {
+            return;
+        }
+        if p.pushed != pushed {
+            // The old plan's next group went out meanwhile: plan again after it.
+            let asked = p.feed_override;
+            r.pending = None;
+            r.asked = r.feed_override;
+            self.set_feed_override(asked);
+            return;
+        }
+        let Some(p) = r.pending.take() else {
+            return;
+        };
+        say!(
+            "nurbs-planner: feed override {}: the motion runs into the new plan after {} records ({:.3} s of motion), re-planned in {:.1} ms",
+            p.feed_override,
+            pushed,
+            self.pushed_time,
+            p.began.elapsed().as_secs_f64() * 1e3
+        );
+        r.feed_override = p.feed_override;
+        let Source::Segments {
+            events,
+            queue,
+            queued,
+            total,
+            error,
+            ..
+        } = &mut self.source
+        else {
+            return;
+        };
+        *events = (p.total.is_none()).then_some(p.events);
+        *queue = p.groups;
+        *queued = p.queued;
+        *total = p.total.map(|t| self.pushed_time + t);
+        *error = p.error;
+        self.planned = self.pushed_time + p.queued;
+        // The old plan's group waiting to go out is not part of the motion any more.
+        self.current = None;
+    }
+
     /// The next group from the source, if one is ready; the curves it is the first to need
     /// join the queue of curves to publish.
     fn next_group(&mut self) -> Result<Option<Group>, String> {
@@ -1290,14 +1614,17 @@ impl<'a> Streamer<'a> {
                 };
                 *queued -= g.time;
                 let curve_needed = g.curve_needed();
-                if !g.curves.is_empty() && g.first_curve != self.next_queued {
+                if !g.curves.is_empty() && g.first_curve > self.next_queued {
                     return Err(format!(
                         "a group brings curves from {}, but curve {} comes next",
                         g.first_curve, self.next_queued
                     ));
                 }
-                self.next_queued += g.curves.len() as u32;
-                self.curves.extend(g.curves);
+                // A re-plan may bring curves again that an earlier plan's groups brought (the
+                // same path): those are queued already.
+                let known = (self.next_queued.saturating_sub(g.first_curve) as usize).min(g.curves.len());
+                self.next_queued += (g.curves.len() - known) as u32;
+                self.curves.extend(g.curves.into_iter().skip(known));
                 Ok(Some(Group {
                     curve_needed,
                     times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
@@ -1307,6 +1634,7 @@ impl<'a> Streamer<'a> {
                     chain: (!g.chain.is_empty()).then_some(g.chain),
                     hold_stops: g.hold_stops,
                     hold_stops_written: 0,
+                    end: g.end,
                 }))
             }
             Source::Blocks { plan, next, .. } => {
@@ -1335,6 +1663,7 @@ impl<'a> Streamer<'a> {
                     chain: None,
                     hold_stops: Vec::new(),
                     hold_stops_written: 0,
+                    end: None,
                 }))
             }
         }
@@ -1492,7 +1821,7 @@ impl<'a> Streamer<'a> {
                 return Err("a group's curves and stops do not fit the channel's arena".into());
             }
             let room = SEGMENT_SLOTS - self.channel.segments.len() >= group.slots.len();
-            if !(ready && room && self.may_push()) {
+            if !(ready && room && self.may_push() && !self.replan_waits()) {
                 self.current = Some(group);
                 return Ok(progressed);
             }
@@ -1508,9 +1837,23 @@ impl<'a> Streamer<'a> {
                 self.pushed_time += time;
             }
             self.longest_group = self.longest_group.max(group.times.iter().sum());
+            self.last_end = group.end;
             self.channel.set_planned_time(self.pushed_time);
             progressed = true;
         }
+    }
+
+    /// Whether the old plan's next group waits for a re-plan at another feed override on its
+    /// way (see [`REPLAN_LOW_WATER`]).
+    fn replan_waits(&mut self) -> bool {
+        let pending = matches!(
+            &self.source,
+            Source::Segments {
+                replanner: Some(r),
+                ..
+            } if r.pending.is_some()
+        );
+        pending && self.buffered() >= REPLAN_LOW_WATER
     }
 
     /// Whether the start rule has held: records go into the ring.

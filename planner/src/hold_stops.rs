@@ -19,6 +19,7 @@
 use nurbs_hal::slot::MAX_HOLD_STOPS;
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::axial::FiniteDifferences;
+use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_rtcore::block_stop::{stop_record, StopStart};
@@ -62,6 +63,18 @@ impl HoldStops {
             samples: 0,
             limits: limits.clone(),
             element_length: None,
+        }
+    }
+
+    /// Continues a motion whose planner stands at `state` (a plan at another feed override,
+    /// after a group already sent): the replica, its history and its sample count are the
+    /// planner's there, as the module's are.
+    pub fn continuing(limits: &Limits, state: &SimState) -> HoldStops {
+        HoldStops {
+            replica: state.interp,
+            fd: state.check,
+            samples: state.samples as u64,
+            ..HoldStops::new(limits)
         }
     }
 

@@ -10,6 +10,7 @@ mod common;
 
 use common::test_paths::g1_zigzag;
 use common::*;
+use nurbs_hal::mock;
 use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_planner::hold_stops::HOLD_STOP_SPACING;
 
@@ -24,13 +25,18 @@ fn line(length: f64) -> Toolpath {
 /// latency in samples from the edge to the first sample that is not the plan's (`None` if
 /// the motion ended at C(1) first: a hold in the last group without a stop inside it).
 fn hold_at(job: &Job, at: usize) -> (Vec<Out>, Option<usize>) {
+    hold_by(job, at, &|on| set_bit("nurbs_interp.hold", on))
+}
+
+/// [`hold_at`] with the hold raised and released by `raise`.
+fn hold_by(job: &Job, at: usize, raise: &dyn Fn(bool)) -> (Vec<Out>, Option<usize>) {
     let l = load();
     let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
     let mut got: Vec<Out> = Vec::new();
     for _ in 0..job.samples.len() + 20_000 {
         s.fill().unwrap();
         if got.len() >= at {
-            set_bit("nurbs_interp.hold", true);
+            raise(true);
         }
         assert!(!period(), "the update path allocated");
         if bit("nurbs_interp.active") {
@@ -55,7 +61,7 @@ fn hold_at(job: &Job, at: usize) -> (Vec<Out>, Option<usize>) {
     } else {
         Some(left.unwrap_or(got.len()).saturating_sub(at))
     };
-    set_bit("nurbs_interp.hold", false);
+    raise(false);
     drop(l);
     hold_position(&mut got);
     (got, latency)
@@ -131,4 +137,27 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
         all.get(all.len() / 2).copied().unwrap_or(0),
         all.last().copied().unwrap_or(0)
     );
+}
+
+/// A feed override of 0 (the operator's knob at 0 %) is a hold: the same stop, sample for
+/// sample, as `hold` raised at the same sample; 1 releases it. Unconnected, the pin reads 1:
+/// the motion runs.
+#[test]
+fn a_feed_override_of_zero_holds_as_hold_does() {
+    let _guard = lock_module();
+    let job = job_of(line(2000.0));
+    let at = job.samples.len() / 3;
+    let (held, latency) = hold_at(&job, at);
+    let set_override = |v: f64| assert!(mock::set_pin("nurbs_interp.feed-override", mock::Value::Float(v)));
+    let (by_override, by_override_latency) = hold_by(&job, at, &|on| set_override(if on { 0.0 } else { 1.0 }));
+    assert!(latency.is_some());
+    assert_eq!(by_override_latency, latency);
+    assert_eq!(by_override.len(), held.len());
+    assert!(by_override
+        .iter()
+        .zip(&held)
+        .all(|(a, b)| a.q.map(f64::to_bits) == b.q.map(f64::to_bits)));
+    // Unconnected (as loaded), the pin reads 1.
+    let _l = load();
+    assert_eq!(mock::pin("nurbs_interp.feed-override"), Some(mock::Value::Float(1.0)));
 }

@@ -4,17 +4,20 @@
 
 mod common;
 
+use std::sync::Arc;
 use std::time::Instant;
 
-use common::test_paths::{dense_arc, g1_zigzag};
+use common::test_paths::{dense_arc, g1_zigzag, rounded_polyline};
 use common::*;
 use nurbs_hal::channel::Slot;
 use nurbs_hal::mock;
 use nurbs_hal::module::FaultCode;
 use nurbs_hal::slot::{SegmentSlot, KIND_BLOCK};
 use nurbs_hal::sys;
+use nurbs_motion::planner::simulate::setpoints;
+use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::PathCurves;
-use nurbs_planner::feed::{plan_groups, Source, Streamer};
+use nurbs_planner::feed::{plan_groups, PathOpener, Source, Streamer};
 use nurbs_planner::writer::GeometryWriter;
 
 #[test]
@@ -533,7 +536,9 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
     let _guard = lock_module();
     let job = job_of(g1_zigzag(60));
     let l = load();
-    let source = Source::streamed(PathCurves::new(&job.toolpath), job.limits.clone(), None);
+    let toolpath = job.toolpath.clone();
+    let open: PathOpener = Arc::new(move || Ok(PathCurves::new(&toolpath)));
+    let source = Source::streamed(open, job.limits.clone(), None, 1.0);
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.5, began).unwrap();
     // The module at 8 times the real pace (the planner is far faster than that here).
@@ -575,4 +580,114 @@ fn a_new_stream_starts_a_new_motion_after_done_underrun_or_abort() {
     set_bit("nurbs_interp.abort", false);
     period();
     whole(&l);
+}
+
+/// A feed override change while a streamed plan runs through the module (as `nurbs-planner`
+/// carries it out): the rest of the motion is planned again from the end of the last group in
+/// the ring, and the module runs into it there. The motion up to the join is the plan at the
+/// old override bit for bit; every sample passes the finite-difference check (across the
+/// join too); the feed comes under the new cap once the motion queued at the change has run
+/// and the ramp down is over; no underrun; the motion ends at the path end. Then back up.
+#[test]
+fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
+    let _guard = lock_module();
+    // Lines of 30-80 mm at F250: the plan runs at the programmed feed most of the time.
+    let toolpath = rounded_polyline();
+    let limits = nurbs_motion::planner::presets::named("table3-f250")
+        .on(2)
+        .for_axes(2)
+        .unwrap();
+    assert_eq!(limits.period, PERIOD);
+    let unchanged = {
+        let groups = plan_groups(&toolpath, &limits, None).unwrap();
+        let records: Vec<_> = groups.iter().flat_map(|g| g.slots.iter().map(|s| s.record)).collect();
+        setpoints(&PathCurves::new(&toolpath), &limits, &records)
+    };
+    let l = load();
+    let tp = toolpath.clone();
+    let open: PathOpener = Arc::new(move || Ok(PathCurves::new(&tp)));
+    let source = Source::streamed(open, limits.clone(), None, 1.0);
+    let began = Instant::now();
+    let mut s = Streamer::new(l.channel, 2, source, 0, 0.25, began).unwrap();
+    // Half-way down early on the first line, back to 100 % (if the motion lasts that long).
+    let changes = [(400, 0.5), (8000, 1.0)];
+    let mut got: Vec<Out> = Vec::new();
+    let mut queued_at_change = Vec::new();
+    for k in 0..200_000 {
+        s.fill().unwrap();
+        if let Some(&(_, ov)) = changes.iter().find(|(at, _)| *at == got.len()) {
+            if queued_at_change.len() < changes.len() && queued_at_change.last() != Some(&(got.len(), ov)) {
+                s.set_feed_override(ov);
+                queued_at_change.push((got.len(), ov));
+                eprintln!("override {ov} at sample {}: {:.3} s queued", got.len(), s.buffered());
+            }
+        }
+        // The module at 4 times the real pace.
+        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 4.0 {
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+        assert!(!period(), "the update path allocated (period {k})");
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+        if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
+            break;
+        }
+    }
+    assert!(
+        bit("nurbs_interp.done"),
+        "the motion ends at the path end: {} samples ({} planned at 100 %; {} slots sent, done {}, {:?}), fault {}, held {}, underruns {}",
+        got.len(),
+        unchanged.len(),
+        s.pushed,
+        s.done(),
+        s.plan_error(),
+        u32_pin("nurbs_interp.fault-code"),
+        bit("nurbs_interp.held"),
+        u32_pin("nurbs_interp.underruns")
+    );
+    assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+    // Every sample within the limits (the programmed feed at its highest override).
+    let rows: Vec<Row> = got
+        .iter()
+        .enumerate()
+        .map(|(k, o)| Row {
+            t: k as f64 * PERIOD,
+            curve: o.curve,
+            u: o.u,
+            q: o.q[..2].to_vec(),
+        })
+        .collect();
+    let report = verify(&mut PathCurves::new(&toolpath), &limits, &rows);
+    assert!(report.violations.is_empty(), "{:?}", report.violations);
+    // Before the first join, the plan at 100 % bit for bit.
+    let first_change = queued_at_change[0].0;
+    let same = got
+        .iter()
+        .zip(&unchanged)
+        .take_while(|(g, e)| g.q[0].to_bits() == e.point[0].to_bits() && g.q[1].to_bits() == e.point[1].to_bits())
+        .count();
+    assert!(
+        same > first_change,
+        "the motion changed before the override did ({same} samples the same)"
+    );
+    // After the change to 50 %, the feed is under the new cap from some point before the
+    // change back, and stays there until then.
+    let cap = 0.5 * limits.feed * (1.0 + 1e-6);
+    let back = queued_at_change.get(1).map_or(got.len(), |c| c.0);
+    let last_above = (first_change..back)
+        .rev()
+        .find(|&k| got[k].feed > cap)
+        .unwrap_or(first_change);
+    let latency = (last_above + 1 - first_change) as f64 * PERIOD;
+    eprintln!(
+        "feed under 50 % of F {} mm/s {:.1} ms after the change (the motion {:.3} s, unchanged {:.3} s); {same} samples as planned at 100 %",
+        limits.feed,
+        latency * 1e3,
+        got.len() as f64 * PERIOD,
+        unchanged.len() as f64 * PERIOD
+    );
+    assert!(last_above + 1 < back, "the feed never came under the new cap");
+    // Slower at 50 % for a while: the motion takes longer than the plan at 100 %.
+    assert!(got.len() > unchanged.len());
 }

@@ -14,6 +14,8 @@
 #   MACHINE_ACTION=pause: the operator's pause 0.3 s into the first toolpath (halui holds our
 #   path at its next checked stop), resumed: the rest is re-planned from there and the program
 #   runs to its end;
+#   MACHINE_ACTION=override: the operator's feed override to 10 % 0.1 s into the first toolpath
+#   (the planner plans the rest again, the motion runs into it), back to 100 % after it;
 #   MACHINE_ACTION=travel: the INI's Y travel ends at 20 mm, inside the trident (Y to 27): M101
 #   must refuse it before any motion and abort the program.
 here=$(cd "$(dirname "$0")" && pwd)
@@ -67,7 +69,7 @@ grep "^nurbs" "$work/linuxcnc.log" "$work/nurbs-planner.log" || true
 python3 "$here/machine/check_machine.py" --samples "$work/samples.txt" --result "$work/result.json" \
     --ini "$config/nurbs-sim.ini" "${plans[@]}" ${action:+--action $action} \
     || { echo "--- LinuxCNC log:"; tail -n 40 "$work/linuxcnc.log"; exit 1; }
-if [ -z "$action" ] || [ "$action" = travel ] || [ "$action" = pause ]; then
+if [ -z "$action" ] || [ "$action" = travel ] || [ "$action" = pause ] || [ "$action" = override ]; then
     [ "$action" = travel ] && exit 0
     for k in 0 1; do
         nurbs-plan verify "$work/recorded-$k.csv" "${toolpaths[$k]}" --ini "$config/nurbs-sim.ini"

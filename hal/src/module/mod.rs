@@ -120,6 +120,8 @@ crate::declare_pins! { "nurbs_interp", Pins, PINS,
         "run; when false nothing advances and the outputs hold (an immediate freeze: use `hold` to stop a moving machine)";
     hold: bool, In, "hold", "",
         "feed hold: the planner's next checked stop to rest on the path (inside the record, every 5 ms where one passes, else at the end of the group); released, the plan from the stop point runs";
+    feed_override: f64, In, "feed-override", "",
+        "the operator's feed override (wire `halui.feed-override.value`, also to `nurbs-planner.feed-override`, which plans for it); 0 or less holds as `hold` does; 1 when unconnected";
     abort: bool, In, "abort", "",
         "stop as for hold, then discard the queue; the motion is over until a planner begins a new stream";
     resume: bool, In, "resume", "",
@@ -296,7 +298,10 @@ impl Instance {
         if self.fault == FaultCode::None {
             self.follow_geometry(channel);
         }
-        let (hold, abort) = (self.pins.hold.get(), self.pins.abort.get());
+        // A feed override of 0 (or a value that is not a number) is a hold.
+        let feed_override = self.pins.feed_override.get();
+        let stopped_by_override = feed_override.is_nan() || feed_override <= 0.0;
+        let (hold, abort) = (self.pins.hold.get() || stopped_by_override, self.pins.abort.get());
         let resume = self.pins.resume.get();
         // Only an edge while a plan from the stop point is queued counts; one without data (or
         // under hold) is dropped.
@@ -685,6 +690,8 @@ unsafe fn create(comp_id: c_int) -> c_int {
         error(c"nurbs_interp: pin export failed");
         return rc;
     }
+    // Unconnected, the programmed feed (not a hold).
+    (*inst).pins.feed_override.set(1.0);
 
     let shmem_id = sys::rtapi_shmem_new(CHANNEL_KEY, comp_id, Channel::SIZE as _);
     if shmem_id < 0 {

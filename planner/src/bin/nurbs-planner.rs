@@ -26,7 +26,15 @@
 //!
 //! Pins: `nurbs-planner.ready` (bit out: first records queued), `.running` (bit out: records
 //! remain to be sent), `.error` (bit out), `.records-sent` (u32 out), `.buffered` (float out,
-//! s: motion time queued in the ring).
+//! s: motion time queued in the ring), `.feed-override` (float in, 1 unconnected: wire
+//! `halui.feed-override.value`).
+//!
+//! Feed override: the Erwinski plan is planned again at a new override (at most
+//! `--max-feed-override`, else `[DISPLAY]MAX_FEED_OVERRIDE` of `--ini`, else 1) from the end of
+//! the last group sent into the ring, and the motion runs into the new plan there: it takes
+//! effect once the motion queued in the ring (at most `--margin` plus a group) has run, with a
+//! ramp within the axis limits. 0 keeps the plan (wire the same signal to
+//! `nurbs_interp.feed-override`, which holds). VPOp plans keep the programmed feed.
 //! Exits on SIGTERM/SIGINT (what `halcmd unload` and halrun's shutdown send), at any stage;
 //! with `--exit-when-done`, also once the module is done with the motion.
 //!
@@ -45,10 +53,10 @@ use clap::Parser;
 use nurbs_cli::corners::{open, prepare};
 use nurbs_cli::{PlannerArgs as Args, PlannerKind};
 use nurbs_hal::channel::{Channel, StopPoint};
-use nurbs_hal::sys::HAL_OUT;
+use nurbs_hal::sys::{HAL_IN, HAL_OUT};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{self, Source, Streamer};
+use nurbs_planner::feed::{self, PathOpener, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 use nurbs_planner::say;
 
@@ -59,10 +67,10 @@ fn open_path(args: &Args) -> Result<PathCurves, String> {
     PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())
 }
 
-/// What a motion runs on: the file read as a stream for each motion (the Erwinski planner), or
+/// What a motion runs on: the file read as a stream by each plan (the Erwinski planner), or
 /// the whole path, read once (VPOp plans it whole).
 enum PathSource {
-    Stream,
+    Stream(PathOpener),
     Whole(Arc<Toolpath>),
 }
 
@@ -75,6 +83,7 @@ fn start_motion<'a>(
     limits: &Limits,
     channel: &'a Channel,
     from: Option<&StopPoint>,
+    feed_override: f64,
 ) -> Result<Streamer<'a>, String> {
     if let Some(p) = from {
         say!(
@@ -93,11 +102,12 @@ fn start_motion<'a>(
     let (source, first_curve, tip) = match path {
         // The planner runs in a thread of its own, reading the file as it plans; its groups
         // wait until the stream has begun.
-        PathSource::Stream => {
-            let mut curves = open_path(args)?;
+        PathSource::Stream(open) => {
+            let mut curves = open()?;
             let first = from.map_or(0, |p| feed::plan_start(&mut curves, p).curve);
             let tip = curves.tip_dim();
-            (Source::streamed(curves, limits.clone(), from.copied()), first, tip)
+            let source = Source::streamed(open.clone(), limits.clone(), from.copied(), feed_override);
+            (source, first, tip)
         }
         PathSource::Whole(path) => {
             let first = from.map_or(0, |p| feed::plan_start(&mut PathCurves::new(path), p).curve);
@@ -195,7 +205,12 @@ fn run(args: &Args) -> Result<&'static str, String> {
     // dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
     // half-started component.
     let (path, tip) = match args.planner {
-        PlannerKind::Erwinski => (PathSource::Stream, open_path(args)?.tip_dim()),
+        PlannerKind::Erwinski => {
+            let tip = open_path(args)?.tip_dim();
+            let for_plans = args.clone();
+            let open: PathOpener = Arc::new(move || open_path(&for_plans));
+            (PathSource::Stream(open), tip)
+        }
         PlannerKind::Vpop => {
             let prepared = prepare(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
             feed::check_tip_path(&prepared.toolpath)?;
@@ -204,6 +219,7 @@ fn run(args: &Args) -> Result<&'static str, String> {
         }
     };
     let limits = args.limits.limits(tip)?;
+    let max_feed_override = args.max_feed_override()?;
     // Until here a signal ends the process at once (nothing to clean up); from here on it is
     // a request the loops below honour, so that the component and the channel are released.
     install_signal_handlers();
@@ -214,11 +230,24 @@ fn run(args: &Args) -> Result<&'static str, String> {
     let error = comp.pin::<bool>("error", HAL_OUT)?;
     let sent_pin = comp.pin::<u32>("records-sent", HAL_OUT)?;
     let buffered_pin = comp.pin::<f64>("buffered", HAL_OUT)?;
+    let override_pin = comp.pin::<f64>("feed-override", HAL_IN)?;
+    // Unconnected, the programmed feed.
+    override_pin.set(1.0);
+    // The override the plans are made with: the operator's, within the machine's maximum; 0 (a
+    // hold, carried out by the module) keeps the last one.
+    let mut feed_override = 1.0;
+    let mut read_override = || {
+        let asked = override_pin.get();
+        if asked.is_finite() && asked > 0.0 {
+            feed_override = asked.min(max_feed_override);
+        }
+        feed_override
+    };
     let result = (|| {
         let channel = comp.attach_channel(Duration::from_secs(5))?;
         // The module may be standing where an underrun stopped it: then plan from there.
         let mut from = channel.stop.read();
-        let mut streamer = start_motion(args, &path, &limits, channel, from.as_ref())?;
+        let mut streamer = start_motion(args, &path, &limits, channel, from.as_ref(), read_override())?;
         let show = |s: &mut Streamer| {
             sent_pin.set(s.pushed as u32);
             running.set(!s.done());
@@ -236,10 +265,11 @@ fn run(args: &Args) -> Result<&'static str, String> {
                 if from.is_none_or(|f| f.epoch != p.epoch) {
                     from = Some(p);
                     drop(streamer);
-                    streamer = start_motion(args, &path, &limits, channel, from.as_ref())?;
+                    streamer = start_motion(args, &path, &limits, channel, from.as_ref(), read_override())?;
                     reported = false;
                 }
             }
+            streamer.set_feed_override(read_override());
             let progressed = streamer.fill()?;
             show(&mut streamer);
             if streamer.done() && !reported {

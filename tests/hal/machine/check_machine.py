@@ -17,6 +17,11 @@
   toolpath's end, the machine staying on (and an MDI move after it); with --action estop: the
   drive never steps (its position; the drives are off, what they do then is theirs) and stands
   still after the E-stop; either way LinuxCNC takes the drives' position, homed;
+- with --action override: the operator's feed override went to 10 % while the first toolpath
+  ran: its setpoints are the plan's up to where the override came and further (the motion
+  queued in the ring), then the re-planned rest, whose feed comes under 10 % of [NURBS]FEED and
+  stays there to the path's end (the time from the knob to that point is reported); checked
+  by `verify` like every path, and the second toolpath (back at 100 %) as planned;
 - following error (motion's joint.N.f-error): 0 (1e-9) while engaged, and within one period of
   the largest velocity (the simulated drive's lag) everywhere (motion compares the feedback with
   its command of the period before, so with this drive it sees 0 there too).
@@ -74,7 +79,7 @@ def main():
                     help="largest following error while engaged (mm): the drives' resolution")
     ap.add_argument("--ferror-max", type=float,
                     help="largest following error anywhere (mm); default: one period at the largest velocity")
-    ap.add_argument("--action", choices=("abort", "estop", "travel", "pause", "pause-abort"),
+    ap.add_argument("--action", choices=("abort", "estop", "travel", "pause", "pause-abort", "override"),
                     help="the run was aborted, E-stopped or paused and resumed mid-path, or its first toolpath leaves the travel")
     a = ap.parse_args()
     # Paused first, then aborted: checked as an abort, and the pause held the path.
@@ -97,7 +102,7 @@ def main():
     said = [e for e in result["errors"] if a.action == "travel" and "leaves the machine's travel: Y" in e]
     if a.action == "travel" and not said:
         fail(f"no refusal naming the travel in LinuxCNC's errors: {result['errors']}")
-    elif a.action in ("abort", "estop", "pause") and not result.get("action_moving"):
+    elif a.action in ("abort", "estop", "pause", "override") and not result.get("action_moving"):
         fail(f"the {a.action} did not come while our path moved")
     if a.action == "abort" and not (result.get("released_after_abort") and result.get("moved_after_abort")):
         fail("after the abort the drives were not released with the machine on, or MDI did not move it")
@@ -129,7 +134,7 @@ def main():
             windows[-1][1] = k
         else:
             windows.append([k, k])
-    expected = {None: len(a.offline), "pause": len(a.offline), "travel": 0}.get(a.action, 1)
+    expected = {None: len(a.offline), "pause": len(a.offline), "override": len(a.offline), "travel": 0}.get(a.action, 1)
     if len(windows) != expected:
         fail(f"engaged {len(windows)} times, {expected} expected")
     if errors:
@@ -146,7 +151,8 @@ def main():
     for k, ((e0, e1), offline, recorded) in enumerate(zip(windows, a.offline, a.recorded_csv)):
         # An action acts on the first toolpath.
         summary.append(check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail,
-                                    a.action if k == 0 else None))
+                                    a.action if k == 0 else None,
+                                    (result.get("override_at"), 0.1 * ini_feed(a.ini))))
     if errors:
         report(errors)
     if not a.action and max(moved for _, _, moved in summary) < 1.0:
@@ -173,9 +179,18 @@ def main():
           f"motor offsets {offset}; homed, positions agree at the end")
 
 
-def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail, action=None):
+def ini_feed(path):
+    cp = configparser.ConfigParser(strict=False, interpolation=None, inline_comment_prefixes=("#",))
+    cp.optionxform = str
+    cp.read(path)
+    return float(cp["NURBS"]["FEED"])
+
+
+def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, worst_ratio, fail, action=None,
+                 override=(None, 0.0)):
     """One engagement (periods e0..e1): its setpoints against the offline plan, the drive
     following them, no step, the catch-up (or, after `action`, the stop and what follows).
+    `override`: where the override came (curve, u) and the feed cap it set.
     Returns (what it saw, catch-up periods, catch-up mm)."""
     active = [k for k in range(e0, e1 + 1) if rows[k]["active"]]
     if not active or active[0] == e0:
@@ -190,15 +205,31 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
         if max(abs(r["ours"][i] - float(p[c])) for i, c in enumerate(axes)) > 1e-9:
             break
         same += 1
-    worst = 0.0 if same else float("inf")
+    override_text = ""
+    if action == "override":
+        (at_curve, at_u), cap = override
+        # The first setpoint at or past where the knob was turned.
+        k0 = next((k for k, r in enumerate(ours) if (r["curve"], r["u"]) >= (at_curve, at_u)), len(ours))
+        above = [k for k, r in enumerate(ours) if r["feed"] > cap * (1 + 1e-6)]
+        settled = above[-1] + 1 if above else 0
+        if same < k0 or same == len(ours):
+            fail(f"{offline}: {same} setpoints as planned, the override came at {k0}: "
+                 "the plan changed before the override, or not at all")
+        if len(ours) <= len(plan):
+            fail(f"{offline}: {len(ours)} setpoints at 10 %, {len(plan)} planned at 100 %: not slower")
+        if settled >= len(ours) - 1:
+            fail(f"{offline}: the feed never came under the override's {cap:g} mm/s")
+        override_text = (f", override 10 % at setpoint {k0}: the new plan from setpoint {same} "
+                         f"({(same - k0) * T * 1e3:.1f} ms after the knob), the feed under {cap:g} mm/s from "
+                         f"setpoint {settled} to the end")
     if action == "pause":
         if same < int(0.25 / T) or same == len(ours):
             fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all: not a hold after 0.25 s")
-    elif action:
+    elif action and action != "override":
         if same < int(0.25 / T) or len(ours) >= len(plan):
             fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all (plan {len(plan)}): "
                  f"not a stop after 0.25 s or more of the plan")
-    elif same != len(plan) or len(ours) != len(plan):
+    elif action != "override" and (same != len(plan) or len(ours) != len(plan)):
         fail(f"{offline}: {len(ours)} setpoints, the first {same} of them as the offline plan's {len(plan)}")
     write_recorded_csv(recorded, [dict(zip("xyz", r["ours"]), u=r["u"], feed=r["feed"], curve=r["curve"])
                                   for r in ours], axes, T)
@@ -245,6 +276,7 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
     if arrived > 1e-6:
         fail(f"{offline}: released with motion {arrived:.3e} mm from the path's end")
     what = {"pause": f"the first {same} as planned, held, resumed to the end",
+            "override": f"the first {same} as planned{override_text}",
             "abort": f"the first {same} as planned, then the abort's stop"}.get(action, "= offline plan")
     return (f"{len(ours)} setpoints {what}, catch-up {moved:.3f} mm in {len(catch_up)} periods "
             "with the drive still", len(catch_up), moved)

@@ -5,7 +5,9 @@ then write what the machine says of itself to $NURBS_TEST_RESULT (JSON) and swit
 ends LinuxCNC. $NURBS_TEST_ACTION: `abort` (the operator's abort 0.3 s into the first toolpath;
 motion catches up with where our path stopped and takes the drives back, then moves 1 mm in X
 by MDI), `pause-abort` (the same after a pause), `estop` (E-stop there, then
-reset and on) or `pause` (the operator's pause there, resumed 0.3 s after our path is held)."""
+reset and on), `pause` (the operator's pause there, resumed 0.3 s after our path is held) or
+`override` (the operator's feed override to 10 % 0.1 s into the first toolpath, back to 100 %
+once it is over)."""
 import json
 import os
 import sys
@@ -76,13 +78,19 @@ c.wait_complete()
 c.auto(linuxcnc.AUTO_RUN, 0)
 wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")
 action = os.environ.get("NURBS_TEST_ACTION", "")
-if action in ("abort", "estop", "pause", "pause-abort"):
+if action in ("abort", "estop", "pause", "pause-abort", "override"):
     # 0.3 s after our path starts moving (not after the hand-over: on a slow machine the
     # planner's start can take a good part of that), so the check's 0.25 s of planned
     # setpoints before the action holds whatever the start took.
     wait(lambda: hal.get_value("nurbs_interp.active"), 60, "our path to move")
-    time.sleep(0.3)
+    time.sleep(0.1 if action == "override" else 0.3)
     result["action_moving"] = hal.get_value("nurbs_interp.active")
+    if action == "override":
+        c.feedrate(0.1)
+        # Where our path was when the operator turned the knob (located in the samples).
+        result["override_at"] = [hal.get_value("nurbs_interp.curve"), hal.get_value("nurbs_interp.u")]
+        wait(lambda: not hal.get_value("nurbs_interp.engaged"), 60, "the first toolpath's end")
+        c.feedrate(1.0)
     if action == "pause":
         c.auto(linuxcnc.AUTO_PAUSE)
         wait(lambda: hal.get_value("nurbs_interp.held"), 5, "our path held")
