@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 11
+#define CHANNEL_VERSION 12
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into
@@ -45,6 +45,16 @@
  * Most joints a record may drive (5-axis machines; this build drives the tool tip only).
  */
 #define MAX_JOINTS 5
+
+#define SPLICE_IDLE 0
+
+#define SPLICE_REQUESTED 1
+
+#define SPLICE_ACCEPTED 2
+
+#define SPLICE_MISSED 3
+
+#define SPLICE_DONE 4
 
 /**
  * Checks of curve values (knots, coordinates and weights once, interior knots once more) the

@@ -36,7 +36,7 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 11;
+pub const CHANNEL_VERSION: u32 = 12;
 /// Slots in the record ring (a power of two). A group of records that share one stop goes into
 /// the ring whole before the module takes its first record, so the longest group must fit.
 pub const SEGMENT_SLOTS: usize = 8192;
@@ -152,6 +152,37 @@ impl<T: Copy, const N: usize> SpscRing<T, N> {
         Ok(Some(unsafe { slot.get().read_volatile() }))
     }
 
+    /// Consumer side: a copy of the record `i` places after the oldest, if it is queued.
+    fn peek_at(&self, i: u32) -> Result<Option<T>, ChannelError> {
+        let tail = self.tail.0.load(Ordering::Relaxed);
+        let head = self.head.0.load(Ordering::Acquire);
+        let used = head.wrapping_sub(tail) as usize;
+        if used > N {
+            return Err(ChannelError::Corrupt);
+        }
+        if i as usize >= used {
+            return Ok(None);
+        }
+        let slot = self
+            .slots
+            .get((tail.wrapping_add(i) & Self::MASK) as usize)
+            .ok_or(ChannelError::Corrupt)?;
+        // SAFETY: the slot is inside [tail, head): the producer finished writing it.
+        Ok(Some(unsafe { slot.get().read_volatile() }))
+    }
+
+    /// Consumer side: drop every record before count `n` (records read so far, wrapping); `n`
+    /// must lie within the queue. O(1).
+    fn skip_to(&self, n: u32) -> Result<(), ChannelError> {
+        let tail = self.tail.0.load(Ordering::Relaxed);
+        let head = self.head.0.load(Ordering::Acquire);
+        if head.wrapping_sub(tail) as usize > N || n.wrapping_sub(tail) > head.wrapping_sub(tail) {
+            return Err(ChannelError::Corrupt);
+        }
+        self.tail.0.store(n, Ordering::Release);
+        Ok(())
+    }
+
     /// Consumer side: take the oldest record. Never allocates, locks or panics.
     fn pop(&self) -> Result<Option<T>, ChannelError> {
         let record = self.peek()?;
@@ -183,6 +214,16 @@ impl<T: Copy, const N: usize> Producer<'_, T, N> {
     pub fn is_empty(&self) -> bool {
         self.0.is_empty()
     }
+
+    /// Records written so far (wrapping): the count the next one gets.
+    pub fn pushed(&self) -> u32 {
+        self.0.head.0.load(Ordering::Relaxed)
+    }
+
+    /// Records the consumer has read (or dropped) so far (wrapping).
+    pub fn taken(&self) -> u32 {
+        self.0.tail.0.load(Ordering::Acquire)
+    }
 }
 
 /// The reading end of a ring: what the module holds (one consumer per ring).
@@ -198,6 +239,21 @@ impl<T: Copy, const N: usize> Consumer<'_, T, N> {
     /// Take the oldest record. Never allocates, locks or panics.
     pub fn pop(&self) -> Result<Option<T>, ChannelError> {
         self.0.pop()
+    }
+
+    /// A copy of the record `i` places after the oldest, if it is queued.
+    pub fn peek_at(&self, i: u32) -> Result<Option<T>, ChannelError> {
+        self.0.peek_at(i)
+    }
+
+    /// Drop every record before count `n` (within the queue). O(1): no record is copied.
+    pub fn skip_to(&self, n: u32) -> Result<(), ChannelError> {
+        self.0.skip_to(n)
+    }
+
+    /// Records read (or dropped) so far (wrapping).
+    pub fn taken(&self) -> u32 {
+        self.0.tail.0.load(Ordering::Relaxed)
     }
 
     /// Records waiting to be read.
@@ -230,6 +286,9 @@ pub struct Channel {
     pub stop: StopStatus,
     /// Module → planner: which curves it still needs.
     pub progress: Progress,
+    /// Planner ⇄ module: a plan at another feed override joins the motion at a group end still
+    /// queued.
+    pub splice: Splice,
     /// Planner → module records (segments or path blocks).
     pub segments: SpscRing<Slot, SEGMENT_SLOTS>,
     /// Planner → module curve geometry.
@@ -258,6 +317,7 @@ impl Channel {
         channel.arena_values.store(ARENA_VALUES as u32, Ordering::Relaxed);
         channel.planned_time.store(0, Ordering::Relaxed);
         channel.stop.clear();
+        channel.splice.state.store(SPLICE_IDLE, Ordering::Relaxed);
         channel.progress.report(Report {
             generation: 0,
             moving: false,
@@ -679,6 +739,83 @@ impl GeometryStream {
     }
 }
 
+/// Planner ⇄ module: the rest of a motion planned again (at another feed override) joins it at
+/// the end of a group the module has not finished: there the module drops the old plan's
+/// records queued after it, up to `drop_to`, and runs on with what follows. The planner writes
+/// `after` and `drop_to`, then the state [`SPLICE_REQUESTED`], and pushes nothing until the
+/// module answers: [`SPLICE_ACCEPTED`] (then it pushes the new plan, which lands at `drop_to`)
+/// or [`SPLICE_MISSED`] (too late, or not in a running segment motion: nothing changes). The
+/// module sets [`SPLICE_DONE`] once it has dropped them, or [`SPLICE_MISSED`] if its motion
+/// stops before. Each party writes the state only while it is the other's answer that is
+/// awaited, so they never write it at once.
+#[repr(C)]
+pub struct Splice {
+    /// Count (in the ring's numbering) of the record whose end is the join: a group's last.
+    after: AtomicU32,
+    /// Count of the new plan's first record: the old plan's records before it are dropped.
+    drop_to: AtomicU32,
+    state: AtomicU32,
+}
+
+pub const SPLICE_IDLE: u32 = 0;
+pub const SPLICE_REQUESTED: u32 = 1;
+pub const SPLICE_ACCEPTED: u32 = 2;
+pub const SPLICE_MISSED: u32 = 3;
+pub const SPLICE_DONE: u32 = 4;
+
+impl Splice {
+    pub fn state(&self) -> u32 {
+        self.state.load(Ordering::Acquire)
+    }
+
+    fn open(state: u32) -> bool {
+        state == SPLICE_REQUESTED || state == SPLICE_ACCEPTED
+    }
+
+    /// Planner side: asks for a join after record `after`, dropping up to `drop_to`; false
+    /// while an earlier request is open.
+    pub fn request(&self, after: u32, drop_to: u32) -> bool {
+        if Self::open(self.state()) {
+            return false;
+        }
+        self.after.store(after, Ordering::Relaxed);
+        self.drop_to.store(drop_to, Ordering::Relaxed);
+        self.state.store(SPLICE_REQUESTED, Ordering::Release);
+        true
+    }
+
+    /// Planner side: forgets a finished request (a new stream); false while one is open.
+    pub fn reset(&self) -> bool {
+        if Self::open(self.state()) {
+            return false;
+        }
+        self.state.store(SPLICE_IDLE, Ordering::Release);
+        true
+    }
+
+    /// Module side: the request waiting for an answer, as (after, drop_to).
+    pub fn requested(&self) -> Option<(u32, u32)> {
+        (self.state() == SPLICE_REQUESTED).then(|| self.fields())
+    }
+
+    /// Module side: the request accepted and not yet carried out, as (after, drop_to).
+    pub fn accepted(&self) -> Option<(u32, u32)> {
+        (self.state() == SPLICE_ACCEPTED).then(|| self.fields())
+    }
+
+    fn fields(&self) -> (u32, u32) {
+        (self.after.load(Ordering::Relaxed), self.drop_to.load(Ordering::Relaxed))
+    }
+
+    /// Module side: the answer to an open request ([`SPLICE_ACCEPTED`], [`SPLICE_MISSED`],
+    /// [`SPLICE_DONE`]); nothing when none is open.
+    pub fn answer(&self, state: u32) {
+        if Self::open(self.state()) {
+            self.state.store(state, Ordering::Release);
+        }
+    }
+}
+
 /// Module → planner: how far the module has got, so the planner may reuse what lies behind
 /// and knows when it may begin a new stream. One 64-bit word (the stream's generation, whether
 /// a motion is running, and a curve index), so the three are read together.
@@ -815,6 +952,45 @@ mod tests {
         for i in 0..6 {
             assert_eq!(ring.consumer().pop(), Ok(Some(record(i))));
         }
+    }
+
+    /// A join's tools on the module's side: a record further down the queue read in place, the
+    /// queue dropped up to a count (across the counters' wrap), never beyond what is queued;
+    /// and the join's states: one request at a time, answered only while open.
+    #[test]
+    fn peek_at_skip_to_and_the_splice_states() {
+        let mut b = block();
+        let c = unsafe { Channel::init(aligned(&mut b)) };
+        let ring = &c.segments;
+        ring.head.0.store(u32::MAX - 2, Ordering::Relaxed);
+        ring.tail.0.store(u32::MAX - 2, Ordering::Relaxed);
+        for i in 0..8 {
+            ring.producer().push(&record(i)).unwrap();
+        }
+        let consumer = ring.consumer();
+        assert_eq!(consumer.peek_at(5), Ok(Some(record(5))));
+        assert_eq!(consumer.peek_at(8), Ok(None));
+        assert_eq!(consumer.skip_to(u32::MAX.wrapping_add(7)), Err(ChannelError::Corrupt));
+        let base = consumer.taken();
+        consumer.skip_to(base.wrapping_add(6)).unwrap();
+        assert_eq!(consumer.pop(), Ok(Some(record(6))));
+        assert_eq!(ring.len(), 1);
+        assert_eq!(ring.producer().taken(), base.wrapping_add(7));
+
+        let splice = &c.splice;
+        assert_eq!(splice.state(), SPLICE_IDLE);
+        splice.answer(SPLICE_ACCEPTED); // nothing open: no effect
+        assert_eq!(splice.state(), SPLICE_IDLE);
+        assert!(splice.request(3, 9));
+        assert!(!splice.request(4, 9), "one request at a time");
+        assert!(!splice.reset());
+        assert_eq!(splice.requested(), Some((3, 9)));
+        splice.answer(SPLICE_ACCEPTED);
+        assert_eq!(splice.accepted(), Some((3, 9)));
+        splice.answer(SPLICE_DONE);
+        assert_eq!(splice.state(), SPLICE_DONE);
+        assert!(splice.reset());
+        assert_eq!(splice.state(), SPLICE_IDLE);
     }
 
     #[test]

@@ -20,7 +20,7 @@ use std::time::Instant;
 use crate::hold_stops::HoldStops;
 use crate::say;
 use crate::writer::{GeometryWriter, Release, WriteError};
-use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS};
+use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_REQUESTED};
 use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
@@ -1207,6 +1207,11 @@ struct Pending {
     pushed: u64,
     feed_override: f64,
     began: Instant,
+    /// Where it joins: after the slot of this number (a group end still queued, through the
+    /// module's [`nurbs_hal::channel::Splice`]), or `None`: at the end of the slots sent.
+    join: Option<u64>,
+    /// The join has been asked of the module (nothing is sent until it answers).
+    requested: bool,
 }
 
 /// Runs [`stream_plan`] in a thread of its own; its events, at most [`EVENTS_AHEAD`] waiting.
@@ -1220,9 +1225,17 @@ fn spawn_plan(open: PathOpener, limits: Limits, start: StreamStart, feed_overrid
 /// reports the knob in steps of 1 % or more).
 const OVERRIDE_STEP: f64 = 1e-3;
 
-/// While a re-plan at another feed override is on its way, the old plan's next group waits
-/// unless the ring holds less motion than this (s): the re-plan then joins after it instead.
+/// While a re-plan at another feed override that joins at the end of the slots sent is on its
+/// way, the old plan's next group waits unless the ring holds less motion than this (s): the
+/// re-plan then joins after it instead.
 const REPLAN_LOW_WATER: f64 = 0.05;
+
+/// A re-plan at another feed override joins at the first group end with at least this much
+/// motion queued before it (s): time to plan the first group and ask the module.
+const SPLICE_LEAD: f64 = 0.04;
+
+/// ... and asks the module only while at least this much is (s).
+const SPLICE_LAST_CALL: f64 = 0.005;
 
 impl Source {
     /// The Erwinski plan of the path `open` reads (from its start, or from rest at the stop
@@ -1328,8 +1341,13 @@ pub struct Streamer<'a> {
     current: Option<Group>,
     /// Motion time of the slots pushed and not yet taken by the module, oldest first, and
     /// their sum; slots pushed in all, and the motion time they make.
-    in_ring: VecDeque<f64>,
+    in_ring: VecDeque<(u64, f64)>,
     buffered: f64,
+    /// The ring's count of this stream's first slot (slot `k` has count `ring_base + k`).
+    ring_base: u32,
+    /// Slots (numbers) that end a group still in the ring or running, with where they leave
+    /// the motion: where a re-plan at another feed override may join.
+    group_ends: VecDeque<(u64, Box<GroupEnd>)>,
     pub pushed: u64,
     pub pushed_time: f64,
     /// Motion time planned (received from the planner) and when planning began.
@@ -1340,6 +1358,10 @@ pub struct Streamer<'a> {
     started: bool,
     /// Longest group sent (s of motion: how long a hold may take to begin).
     pub longest_group: f64,
+    /// Plans at another feed override run into: at a group end in the ring (the module
+    /// dropping the old plan's slots after it), and at the end of the slots sent.
+    pub joins_in_ring: u32,
+    pub joins_at_end: u32,
     /// Where the last group sent leaves the motion (`None` before the first, and after the
     /// path's last).
     last_end: Option<Box<GroupEnd>>,
@@ -1360,6 +1382,8 @@ impl<'a> Streamer<'a> {
         let first = u32::try_from(first_curve).map_err(|_| "path element index beyond 32 bits".to_string())?;
         let writer = GeometryWriter::begin(channel, first, tip)?;
         channel.set_planned_time(0.0);
+        // No motion runs, so no join of an earlier stream is open.
+        channel.splice.reset();
         Ok(Streamer {
             channel,
             writer,
@@ -1369,6 +1393,8 @@ impl<'a> Streamer<'a> {
             source,
             current: None,
             in_ring: VecDeque::new(),
+            ring_base: channel.segments.producer().pushed(),
+            group_ends: VecDeque::new(),
             buffered: 0.0,
             pushed: 0,
             pushed_time: 0.0,
@@ -1376,6 +1402,8 @@ impl<'a> Streamer<'a> {
             margin,
             started: false,
             longest_group: 0.0,
+            joins_in_ring: 0,
+            joins_at_end: 0,
             last_end: None,
         })
     }
@@ -1392,13 +1420,39 @@ impl<'a> Streamer<'a> {
 
     /// Motion time queued in the ring.
     pub fn buffered(&mut self) -> f64 {
-        let queued = self.channel.segments.len();
-        while self.in_ring.len() > queued {
-            if let Some(t) = self.in_ring.pop_front() {
+        let taken = self.taken();
+        while self.in_ring.front().is_some_and(|&(k, _)| k < taken) {
+            if let Some((_, t)) = self.in_ring.pop_front() {
                 self.buffered -= t;
             }
         }
+        while self.group_ends.front().is_some_and(|(k, _)| k + 1 < taken) {
+            self.group_ends.pop_front();
+        }
         self.buffered.max(0.0)
+    }
+
+    /// Motion time queued in the ring up to slot `k` (its own included).
+    fn queued_through(&mut self, k: u64) -> f64 {
+        self.buffered();
+        self.in_ring.iter().take_while(|&&(j, _)| j <= k).map(|&(_, t)| t).sum()
+    }
+
+    /// Where a re-plan at another feed override joins: the first group end in the ring with
+    /// [`SPLICE_LEAD`] of motion queued before it (its slot number and end), or `None`: at the
+    /// end of the slots sent.
+    fn join_point(&mut self) -> Option<(u64, Box<GroupEnd>)> {
+        let last = self.pushed.checked_sub(1)?;
+        let ends: Vec<(u64, Box<GroupEnd>)> = self.group_ends.iter().cloned().collect();
+        for (k, end) in ends {
+            if k >= last {
+                return None;
+            }
+            if self.queued_through(k) >= SPLICE_LEAD {
+                return Some((k, end));
+            }
+        }
+        None
     }
 
     /// Every slot has gone into the ring.
@@ -1471,18 +1525,25 @@ impl<'a> Streamer<'a> {
     }
 
     /// Asks for the motion at feed override `feed_override` (the operator's, clamped to what
-    /// the machine allows): a streamed plan is planned again at it from the end of the last
-    /// group sent (or from its start while nothing has been sent), and the motion runs into
-    /// the new plan there. 0 (a hold, which the module carries out) and small changes keep the
-    /// plan. Plans sent whole keep their override.
+    /// the machine allows): a streamed plan is planned again at it from the first group end in
+    /// the ring with [`SPLICE_LEAD`] of motion before it (the module drops the old plan's slots
+    /// after it there: [`nurbs_hal::channel::Splice`]), else from the end of the last group
+    /// sent (or from its start while nothing has been sent), and the motion runs into the new
+    /// plan there. 0 (a hold, which the module carries out) and small changes keep the plan.
+    /// Plans sent whole keep their override.
     pub fn set_feed_override(&mut self, feed_override: f64) {
         let (pushed, next_queued) = (self.pushed, self.next_queued);
         let last_end = self.last_end.clone();
+        let join = self.join_point();
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
             return;
         };
         let close = |a: f64, b: f64| (a - b).abs() <= OVERRIDE_STEP * b;
         if feed_override.is_nan() || feed_override <= 0.0 || close(feed_override, r.asked) {
+            return;
+        }
+        if r.pending.as_ref().is_some_and(|p| p.requested) {
+            // The module is asked to join one already: this one follows once it has answered.
             return;
         }
         r.asked = feed_override;
@@ -1491,22 +1552,19 @@ impl<'a> Streamer<'a> {
             r.pending = None;
             return;
         }
-        let start = match &last_end {
-            Some(end) => StreamStart::After {
-                end: end.clone(),
-                send_from: next_queued as usize,
-            },
+        let (start, from) = match (&join, &last_end) {
+            (Some((_, end)), _) | (None, Some(end)) => (
+                StreamStart::After {
+                    end: end.clone(),
+                    send_from: next_queued as usize,
+                },
+                format!("the end of record {}", end.record.seq),
+            ),
             // The path's last group has gone out: nothing left to plan.
-            None if pushed > 0 => return,
-            None => StreamStart::Rest(r.from),
+            (None, None) if pushed > 0 => return,
+            (None, None) => (StreamStart::Rest(r.from), "its start".to_string()),
         };
-        say!(
-            "nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {}",
-            match &last_end {
-                Some(end) => format!("the end of record {}", end.record.seq),
-                None => "its start".to_string(),
-            }
-        );
+        say!("nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {from}");
         r.pending = Some(Pending {
             events: spawn_plan(r.open.clone(), r.limits.clone(), start, feed_override),
             groups: VecDeque::new(),
@@ -1516,12 +1574,16 @@ impl<'a> Streamer<'a> {
             pushed,
             feed_override,
             began: Instant::now(),
+            join: join.map(|(k, _)| k),
+            requested: false,
         });
     }
 
-    /// Takes what a re-plan at another feed override has handed out; once it has a group,
-    /// the motion runs into it if nothing was sent since it began (else it begins again from
-    /// the new end). A re-plan that fails leaves the plan as it is.
+    /// Takes what a re-plan at another feed override has handed out; once it has a group, the
+    /// motion runs into it: at a group end still queued once the module has accepted the join
+    /// (asked while the module is [`SPLICE_LAST_CALL`] or more before it), or at the end of the
+    /// slots sent if nothing was sent since it began. Otherwise it begins again from a later
+    /// join. A re-plan that fails leaves the plan as it is.
     fn receive_replan(&mut self) {
         let pushed = self.pushed;
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
@@ -1541,7 +1603,7 @@ impl<'a> Streamer<'a> {
                     p.total = Some(p.queued);
                     p.error = error;
                 }
-                Ok(PlanEvent::Failed(e)) => {
+                Ok(PlanEvent::Failed(e)) if !p.requested => {
                     say!(
                         "nurbs-planner: feed override {} not taken, the motion goes on at {}: {e}",
                         p.feed_override,
@@ -1550,39 +1612,101 @@ impl<'a> Streamer<'a> {
                     r.pending = None;
                     return;
                 }
-                Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => {
+                Ok(PlanEvent::Failed(e)) => {
+                    // Asked of the module already: the plan has failed after its first groups;
+                    // it ends there, at rest at a checked stop, as an underrun.
                     say!(
-                        "nurbs-planner: the re-plan at feed override {} ended early",
+                        "nurbs-planner: the re-plan at feed override {} failed: {e}",
                         p.feed_override
                     );
-                    r.pending = None;
-                    return;
+                    p.total = Some(p.queued);
+                    p.error = Some(e);
+                }
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => {
+                    p.total = Some(p.queued);
+                    break;
                 }
             }
         }
         if p.groups.is_empty() {
+            if p.total.is_some() && !p.requested {
+                r.pending = None;
+            }
             return;
         }
-        if p.pushed != pushed {
-            // The old plan's next group went out meanwhile: plan again after it.
-            let asked = p.feed_override;
-            r.pending = None;
-            r.asked = r.feed_override;
-            self.set_feed_override(asked);
-            return;
+        let (join, requested, asked) = (p.join, p.requested, p.feed_override);
+        match join {
+            None if p.pushed != pushed => {
+                // The old plan's next group went out meanwhile: plan again after it.
+                r.pending = None;
+                r.asked = r.feed_override;
+                self.set_feed_override(asked);
+                return;
+            }
+            None => {}
+            Some(k) if !requested => {
+                // The module must still be far enough from the join to answer in time.
+                let (after, drop_to) = (
+                    self.ring_base.wrapping_add(k as u32),
+                    self.ring_base.wrapping_add(pushed as u32),
+                );
+                let ahead = self.queued_through(k);
+                let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+                    return;
+                };
+                if ahead < SPLICE_LAST_CALL || !self.channel.splice.request(after, drop_to) {
+                    r.pending = None;
+                    r.asked = r.feed_override;
+                    self.set_feed_override(asked);
+                    return;
+                }
+                if let Some(p) = &mut r.pending {
+                    p.requested = true;
+                }
+                return;
+            }
+            Some(_) => match self.channel.splice.state() {
+                SPLICE_ACCEPTED | SPLICE_DONE => {}
+                SPLICE_REQUESTED => return,
+                _ => {
+                    // Missed (too late, or the motion stopped): plan again from a later join.
+                    r.pending = None;
+                    r.asked = r.feed_override;
+                    self.set_feed_override(asked);
+                    return;
+                }
+            },
         }
+        let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+            return;
+        };
         let Some(p) = r.pending.take() else {
             return;
         };
+        r.feed_override = p.feed_override;
+        let still_asked = r.asked;
+        if p.join.is_some() {
+            self.joins_in_ring += 1;
+        } else {
+            self.joins_at_end += 1;
+        }
+        if let Some(k) = p.join {
+            // The module drops the old plan's slots after the join: they are not queued motion.
+            let dropped: f64 = self.in_ring.iter().filter(|&&(j, _)| j > k).map(|&(_, t)| t).sum();
+            self.in_ring.retain(|&(j, _)| j <= k);
+            self.group_ends.retain(|&(j, _)| j <= k);
+            self.buffered -= dropped;
+            self.pushed_time -= dropped;
+            self.channel.set_planned_time(self.pushed_time);
+        }
         say!(
-            "nurbs-planner: feed override {}: the motion runs into the new plan after {} records ({:.3} s of motion), re-planned in {:.1} ms",
+            "nurbs-planner: feed override {}: the motion runs into the new plan after slot {} ({}), re-planned in {:.1} ms",
             p.feed_override,
-            pushed,
-            self.pushed_time,
+            p.join.map_or(pushed, |k| k + 1),
+            if p.join.is_some() { "a join the module accepted" } else { "the end of the slots sent" },
             p.began.elapsed().as_secs_f64() * 1e3
         );
-        r.feed_override = p.feed_override;
         let Source::Segments {
             events,
             queue,
@@ -1602,6 +1726,13 @@ impl<'a> Streamer<'a> {
         self.planned = self.pushed_time + p.queued;
         // The old plan's group waiting to go out is not part of the motion any more.
         self.current = None;
+        if (still_asked - p.feed_override).abs() > OVERRIDE_STEP * p.feed_override {
+            // The knob moved on while the module answered.
+            if let Source::Segments { replanner: Some(r), .. } = &mut self.source {
+                r.asked = r.feed_override;
+            }
+            self.set_feed_override(still_asked);
+        }
     }
 
     /// The next group from the source, if one is ready; the curves it is the first to need
@@ -1831,10 +1962,13 @@ impl<'a> Streamer<'a> {
                     .producer()
                     .push(slot)
                     .map_err(|e| format!("channel: {e:?}"))?;
-                self.in_ring.push_back(*time);
+                self.in_ring.push_back((self.pushed, *time));
                 self.buffered += time;
                 self.pushed += 1;
                 self.pushed_time += time;
+            }
+            if let Some(end) = &group.end {
+                self.group_ends.push_back((self.pushed - 1, end.clone()));
             }
             self.longest_group = self.longest_group.max(group.times.iter().sum());
             self.last_end = group.end;
@@ -1846,14 +1980,16 @@ impl<'a> Streamer<'a> {
     /// Whether the old plan's next group waits for a re-plan at another feed override on its
     /// way (see [`REPLAN_LOW_WATER`]).
     fn replan_waits(&mut self) -> bool {
-        let pending = matches!(
-            &self.source,
-            Source::Segments {
-                replanner: Some(r),
-                ..
-            } if r.pending.is_some()
-        );
-        pending && self.buffered() >= REPLAN_LOW_WATER
+        let (to_ring_end, asked) = match &self.source {
+            Source::Segments { replanner: Some(r), .. } => match &r.pending {
+                Some(p) => (p.join.is_none(), p.requested),
+                None => (false, false),
+            },
+            _ => (false, false),
+        };
+        // While the module is asked, nothing goes out: the new plan must land where it was
+        // told to.
+        asked || (to_ring_end && self.buffered() >= REPLAN_LOW_WATER)
     }
 
     /// Whether the start rule has held: records go into the ring.

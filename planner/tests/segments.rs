@@ -7,8 +7,9 @@ mod common;
 use std::sync::Arc;
 use std::time::Instant;
 
-use common::test_paths::{dense_arc, g1_zigzag, rounded_polyline};
+use common::test_paths::{dense_arc, g1_zigzag};
 use common::*;
+use nurbs_cli::corners::{prepare, RoundCorners};
 use nurbs_hal::channel::Slot;
 use nurbs_hal::mock;
 use nurbs_hal::module::FaultCode;
@@ -582,17 +583,23 @@ fn a_new_stream_starts_a_new_motion_after_done_underrun_or_abort() {
     whole(&l);
 }
 
-/// A feed override change while a streamed plan runs through the module (as `nurbs-planner`
-/// carries it out): the rest of the motion is planned again from the end of the last group in
-/// the ring, and the module runs into it there. The motion up to the join is the plan at the
-/// old override bit for bit; every sample passes the finite-difference check (across the
-/// join too); the feed comes under the new cap once the motion queued at the change has run
-/// and the ramp down is over; no underrun; the motion ends at the path end. Then back up.
+/// A feed override change while a streamed plan of the trident (at F250) runs through the
+/// module (as `nurbs-planner` carries it out): the rest of the motion is planned again from a
+/// group end still in the ring, and the module, asked, drops the old plan's records after it
+/// and runs into the new plan there. The motion up to the join is the plan at the old override
+/// bit for bit; every sample passes the finite-difference check (across the joins too); the
+/// feed comes under the new cap after the ramp down and stays there; no underrun; the motion
+/// ends at the path end. Then back up to 100 %.
 #[test]
 fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     let _guard = lock_module();
-    // Lines of 30-80 mm at F250: the plan runs at the programmed feed most of the time.
-    let toolpath = rounded_polyline();
+    let toolpath = prepare(
+        &examples().join("trident.json"),
+        RoundCorners::Auto,
+        &chord_tolerance(0.001),
+    )
+    .unwrap()
+    .toolpath;
     let limits = nurbs_motion::planner::presets::named("table3-f250")
         .on(2)
         .for_axes(2)
@@ -609,8 +616,9 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     let source = Source::streamed(open, limits.clone(), None, 1.0);
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, 2, source, 0, 0.25, began).unwrap();
-    // Half-way down early on the first line, back to 100 % (if the motion lasts that long).
-    let changes = [(400, 0.5), (8000, 1.0)];
+    // Down to 20 % at 0.25 s of motion, back to 100 % at 0.75 s.
+    let low = 0.2;
+    let changes = [(1000, low), (3000, 1.0)];
     let mut got: Vec<Out> = Vec::new();
     let mut queued_at_change = Vec::new();
     for k in 0..200_000 {
@@ -622,8 +630,8 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
                 eprintln!("override {ov} at sample {}: {:.3} s queued", got.len(), s.buffered());
             }
         }
-        // The module at 4 times the real pace.
-        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 4.0 {
+        // The module at twice the real pace.
+        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 2.0 {
             std::thread::sleep(std::time::Duration::from_micros(200));
         }
         assert!(!period(), "the update path allocated (period {k})");
@@ -671,9 +679,9 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
         same > first_change,
         "the motion changed before the override did ({same} samples the same)"
     );
-    // After the change to 50 %, the feed is under the new cap from some point before the
+    // After the change to 20 %, the feed is under the new cap from some point before the
     // change back, and stays there until then.
-    let cap = 0.5 * limits.feed * (1.0 + 1e-6);
+    let cap = low * limits.feed * (1.0 + 1e-6);
     let back = queued_at_change.get(1).map_or(got.len(), |c| c.0);
     let last_above = (first_change..back)
         .rev()
@@ -681,13 +689,76 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
         .unwrap_or(first_change);
     let latency = (last_above + 1 - first_change) as f64 * PERIOD;
     eprintln!(
-        "feed under 50 % of F {} mm/s {:.1} ms after the change (the motion {:.3} s, unchanged {:.3} s); {same} samples as planned at 100 %",
+        "feed under {low} of F {} mm/s {:.1} ms after the change (the motion {:.3} s, unchanged {:.3} s); {same} samples as planned at 100 %",
         limits.feed,
         latency * 1e3,
         got.len() as f64 * PERIOD,
         unchanged.len() as f64 * PERIOD
     );
     assert!(last_above + 1 < back, "the feed never came under the new cap");
+    eprintln!(
+        "joins: {} at a group end in the ring, {} at the end of the slots sent",
+        s.joins_in_ring, s.joins_at_end
+    );
+    assert!(s.joins_in_ring >= 1, "no join inside the ring");
     // Slower at 50 % for a while: the motion takes longer than the plan at 100 %.
     assert!(got.len() > unchanged.len());
+}
+
+/// The join of a plan at another feed override ([`nurbs_hal::channel::Splice`]), asked of the
+/// module directly: a join after a record the module has finished is missed; one after a group
+/// end still queued is accepted, and there the module drops the records queued after it and
+/// runs on with what follows. With the same records pushed again as the "new plan", the motion
+/// is the plan's bit for bit, and the join reports done.
+#[test]
+fn the_module_joins_a_new_plan_at_a_queued_group_end_and_drops_the_old_records() {
+    use nurbs_hal::channel::{SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_MISSED};
+    let _guard = lock_module();
+    let job = job("butterfly.json");
+    let slots = slots_of(&job);
+    let ends: Vec<usize> = (0..slots.len()).filter(|&k| slots[k].group_left == 1).collect();
+    assert!(ends.len() >= 4, "{} groups", ends.len());
+    let l = load();
+    let _w = raw_stream(&l, &job);
+    let ring = l.channel.segments.producer();
+    let base = ring.pushed();
+    for s in &slots {
+        ring.push(&Slot::segment(s)).unwrap();
+    }
+    let taken = || ring.taken().wrapping_sub(base) as usize;
+    let mut got: Vec<Out> = Vec::new();
+    let step = |got: &mut Vec<Out>| {
+        assert!(!period(), "the update path allocated");
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+    };
+    // Past the first group.
+    while taken() <= ends[0] + 1 {
+        step(&mut got);
+    }
+    assert!(l
+        .channel
+        .splice
+        .request(base.wrapping_add(ends[0] as u32), ring.pushed()));
+    step(&mut got);
+    assert_eq!(l.channel.splice.state(), SPLICE_MISSED, "a join behind the module");
+    // A group end still queued: accepted; the records after it again, as the new plan.
+    let join = *ends.iter().find(|&&k| k > taken()).unwrap();
+    assert!(l.channel.splice.request(base.wrapping_add(join as u32), ring.pushed()));
+    step(&mut got);
+    assert_eq!(l.channel.splice.state(), SPLICE_ACCEPTED);
+    for s in &slots[join + 1..] {
+        ring.push(&Slot::segment(s)).unwrap();
+    }
+    for _ in 0..job.samples.len() + 1000 {
+        step(&mut got);
+        if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
+            break;
+        }
+    }
+    assert!(bit("nurbs_interp.done"), "fault {}", u32_pin("nurbs_interp.fault-code"));
+    assert_eq!(l.channel.splice.state(), SPLICE_DONE);
+    assert_exact("butterfly joined", &got, &job.samples, 2);
+    assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
 }

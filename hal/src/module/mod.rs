@@ -58,7 +58,7 @@ use nurbs_rtcore::{CurveView, StopRun};
 
 use crate::channel::{
     check_curve, stop_points, trusted_curve, validate_header, Channel, GeometryHeader, GeometryStream, Report,
-    StopPoint, ValueCursor, CHANNEL_KEY,
+    StopPoint, ValueCursor, CHANNEL_KEY, SPLICE_ACCEPTED, SPLICE_MISSED,
 };
 use crate::pins::Pin;
 use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
@@ -323,6 +323,7 @@ impl Instance {
             self.cause = StopCause::None;
             channel.stop.clear();
         }
+        self.answer_splice(channel, hold || abort);
         let mut active = false;
         let started = self.started();
         if abort && !started && self.geometry.is_valid() && !self.aborted && self.fault == FaultCode::None {
@@ -373,6 +374,41 @@ impl Instance {
         });
         self.show_start();
         self.hand_over(channel);
+    }
+
+    /// The planner asks to join a plan at another feed override after a group end still ahead
+    /// ([`crate::channel::Splice`]): accepted while a segment motion runs on undisturbed (no
+    /// stop begun or asked for) and the record `after` is the one running or one queued, the
+    /// last of its group, with `drop_to` beyond it within the queue; otherwise missed. An
+    /// accepted join the motion stops before is missed too.
+    fn answer_splice(&mut self, channel: &Channel, stop_asked: bool) {
+        let running = self.mode == Mode::Segments
+            && self.fault == FaultCode::None
+            && self.in_motion()
+            && !self.stopping
+            && !stop_asked
+            && !self.awaiting_resume;
+        if channel.splice.accepted().is_some() && !running {
+            channel.splice.answer(SPLICE_MISSED);
+        }
+        let Some((after, drop_to)) = channel.splice.requested() else {
+            return;
+        };
+        let ring = channel.segments.consumer();
+        let (taken, queued) = (ring.taken(), ring.len() as u32);
+        // Places after the oldest queued record: -1 is the record running.
+        let at = after.wrapping_sub(taken) as i32;
+        let drop_at = drop_to.wrapping_sub(taken) as i32;
+        let group_end = match at {
+            -1 => self.segment_player.slot.group_left == 1,
+            i if i >= 0 && (i as u32) < queued => matches!(
+                ring.peek_at(i as u32).map(|s| s.and_then(|s| s.decode())),
+                Ok(Some(Record::Segment(slot))) if slot.group_left == 1
+            ),
+            _ => false,
+        };
+        let ok = running && group_end && at < drop_at && drop_at >= 0 && drop_at as u32 <= queued;
+        channel.splice.answer(if ok { SPLICE_ACCEPTED } else { SPLICE_MISSED });
     }
 
     /// Before the motion starts, its start on the position pins: where the machine must stand

@@ -3,7 +3,7 @@
 //! inside a record ([`hold_stop_at`]).
 
 use super::*;
-use crate::channel::{Consumer, SEGMENT_SLOTS};
+use crate::channel::{Consumer, Splice, SEGMENT_SLOTS, SPLICE_DONE};
 use crate::slot::Slot;
 
 /// Where a segment-record motion stands: the slot of the record it runs and what is left of a
@@ -57,6 +57,7 @@ impl ChainCursor {
 /// Where the interpolator takes segment records from: the ring, a group at a time.
 struct SegmentSource<'a> {
     ring: Consumer<'a, Slot, SEGMENT_SLOTS>,
+    splice: &'a Splice,
     geometry: &'a RtGeometry,
     /// Take nothing more at a group's end.
     no_more: bool,
@@ -84,6 +85,19 @@ impl SegmentSource<'_> {
         let at_group_end = self.slot.group_left <= 1;
         if at_group_end && self.no_more {
             return None;
+        }
+        if at_group_end {
+            // A plan at another feed override joins here: the old plan's records after this
+            // group are dropped.
+            if let Some((after, drop_to)) = self.splice.accepted() {
+                if self.ring.taken().wrapping_sub(1) == after {
+                    if self.ring.skip_to(drop_to).is_err() {
+                        *self.pull = Pull::Fault(FaultCode::Channel);
+                        return None;
+                    }
+                    self.splice.answer(SPLICE_DONE);
+                }
+            }
         }
         let slot = match self.ring.peek() {
             Ok(Some(slot)) => slot,
@@ -185,6 +199,7 @@ impl Instance {
         } else {
             let source = SegmentSource {
                 ring: channel.segments.consumer(),
+                splice: &channel.splice,
                 geometry: &self.geometry,
                 // Hold and abort wait for the end of the group; nothing is taken during a stop.
                 no_more: self.stopping || hold || abort,
