@@ -300,7 +300,8 @@ fn random_curves_never_violate() {
 /// The same random curves planned as a stream ([`PlanOptions::stream`]: records final before
 /// the path end, so back-tracking reaches less far): every plan must pass the checker; a
 /// refusal is allowed for at most 2 % of the cases. `PROPTEST_STREAM_CASES` (default 128);
-/// `PROPTEST_FIRST_CASE` and `PROPTEST_DUMP` as for [`random_curves_never_violate`].
+/// `PROPTEST_FIRST_CASE`, `PROPTEST_VERBOSE` and `PROPTEST_DUMP` as for
+/// [`random_curves_never_violate`].
 #[test]
 fn random_curves_never_violate_when_streamed() {
     let env = |name: &str, default: u64| std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
@@ -309,7 +310,8 @@ fn random_curves_never_violate_when_streamed() {
         stream: true,
         ..PlanOptions::default()
     };
-    let run = random_run(seed, env("PROPTEST_FIRST_CASE", 0)..cases, false, &options);
+    let verbose = env("PROPTEST_VERBOSE", 0) != 0;
+    let run = random_run(seed, env("PROPTEST_FIRST_CASE", 0)..cases, verbose, &options);
     assert!(
         run.refused.len() * 50 <= cases as usize,
         "too many refusals: {:?}",

@@ -185,8 +185,27 @@ pub fn chord_tolerance(tolerance: f64) -> LimitArgs {
 
 /// The job of a bundled example.
 pub fn job(name: &str) -> Job {
-    let prepared = prepare(&examples().join(name), RoundCorners::Auto, &chord_tolerance(0.001)).unwrap();
+    job_at(&examples().join(name))
+}
+
+/// [`job`] of a file anywhere.
+pub fn job_at(path: &Path) -> Job {
+    let prepared = prepare(path, RoundCorners::Auto, &chord_tolerance(0.001)).unwrap();
     job_of(prepared.toolpath)
+}
+
+/// A dense CAM-like G1 program of `lines` lines of 0.02 mm (`scripts/dense-g1.py`), written
+/// to `dir`.
+pub fn dense_g1(lines: usize, dir: &Path) -> PathBuf {
+    let out = std::process::Command::new("python3")
+        .arg(examples().join("../scripts/dense-g1.py"))
+        .args(["--lines", &lines.to_string()])
+        .output()
+        .expect("python3 runs scripts/dense-g1.py");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let path = dir.join(format!("dense-{lines}.ngc"));
+    std::fs::write(&path, out.stdout).unwrap();
+    path
 }
 
 pub fn job_of(toolpath: Toolpath) -> Job {

@@ -25,6 +25,7 @@ use nurbs_rtcore::SegmentRecord;
 use quick_check::{estimate, ArcGrid, Estimate, Scope};
 use scurve_fit::{fit_ramps, ramp_distance, reachable_feed, Ramp};
 use std::cell::Cell;
+use std::collections::VecDeque;
 use std::fmt;
 use std::time::Instant;
 use tuning::*;
@@ -276,6 +277,12 @@ pub struct Planner {
     emitted: usize,
     /// The stop after the last settled record (see [`FinalRecord::stop`]).
     settled_stop: Vec<SegmentRecord>,
+    /// Stops after records settled before the last one, as (boundary, stop): the boundary
+    /// `i` is the end of record `i - 1` ([`Planner::offer_inner_stops`]).
+    inner_stops: VecDeque<(usize, Vec<SegmentRecord>)>,
+    /// Sample count at the last boundary given a stop, and at the last one tried.
+    last_stop_samples: usize,
+    last_try_samples: usize,
     /// A stop chain the last settle rests on: its first segment and each record with the
     /// state after it, adopted as the plan if a cascade reaches that segment (see
     /// [`Planner::stop_chain`]); dropped when a split changes the nodes under it.
@@ -313,6 +320,50 @@ pub struct Planner {
 struct SlowDown {
     feed_override: f64,
     distance: f64,
+}
+
+/// Which stop a segment re-planned to rest makes.
+#[derive(Clone, Copy)]
+enum StopKind {
+    /// The stop after the settled records, on which the plan relies (as every segment: up to
+    /// [`SOLVE_ATTEMPTS`]; it may speed up before it brakes, as the plan's segments do).
+    Plan,
+    /// A stop inside a settled run, for holds and underruns only
+    /// ([`Planner::offer_inner_stops`]): never faster than where it starts (an operator's hold
+    /// must not speed the machine up), and [`INNER_STOP_ATTEMPTS`] (the next boundary is
+    /// tried instead).
+    Inner,
+}
+
+impl StopKind {
+    /// The end feed a stop's segment aims at, `target`, when it starts at `feed`.
+    fn end_feed(self, target: f64, feed: f64) -> f64 {
+        match self {
+            StopKind::Plan => target,
+            StopKind::Inner => target.min(feed),
+        }
+    }
+
+    /// Most segments of a stop chain of this kind.
+    fn chain_max(self) -> usize {
+        match self {
+            StopKind::Plan => CHAIN_MAX,
+            StopKind::Inner => INNER_CHAIN_MAX,
+        }
+    }
+
+    /// `ctx` (of a segment to be started at `feed`) for this kind of stop.
+    fn context(self, ctx: SegmentContext<'_>, feed: f64) -> SegmentContext<'_> {
+        match self {
+            StopKind::Plan => SegmentContext { refine: false, ..ctx },
+            StopKind::Inner => SegmentContext {
+                refine: false,
+                attempts: INNER_STOP_ATTEMPTS,
+                peak_cap: ctx.peak_cap.min(feed),
+                ..ctx
+            },
+        }
+    }
 }
 
 /// Whether a segment of `length` starting at `feed` could end at any lower feed within its
@@ -438,6 +489,9 @@ impl Planner {
             work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
             settled: 0,
             settled_stop: Vec::new(),
+            inner_stops: VecDeque::new(),
+            last_stop_samples: 0,
+            last_try_samples: 0,
             chain: None,
             first_absorber_failed: None,
             emitted: 0,
@@ -476,6 +530,8 @@ impl Planner {
                 let record = self.records[self.emitted - 1];
                 let stop = if self.emitted == self.settled {
                     std::mem::take(&mut self.settled_stop)
+                } else if self.inner_stops.front().is_some_and(|(i, _)| *i == self.emitted) {
+                    self.inner_stops.pop_front().map(|(_, stop)| stop).unwrap_or_default()
                 } else {
                     Vec::new()
                 };
@@ -659,6 +715,7 @@ impl Planner {
             work: &self.work,
             work_budget,
             refine: true,
+            attempts: SOLVE_ATTEMPTS,
         }
     }
 
@@ -667,20 +724,72 @@ impl Planner {
     /// stop): a back-tracking cascade that reaches `j` once the records before it are final
     /// (and cannot be revised) is absorbed there, by that stop at worst, and it is the stop
     /// after those records.
-    fn stop_at_end(&self, j: usize, work_budget: u64) -> Option<SegmentRecord> {
-        let ctx = SegmentContext {
-            refine: false,
-            ..self.context(j, work_budget)
-        };
+    fn stop_at_end(&self, j: usize, work_budget: u64, kind: StopKind) -> Option<SegmentRecord> {
+        let ctx = kind.context(self.context(j, work_budget), self.start_feeds[j]);
         let (stop, _) = solve_segment(&ctx, self.start_feeds[j], 0.0, &self.states[j]).ok()?;
         holds_after(&ctx, &self.states[j], stop).then_some(stop)
     }
 
     /// Records before `j` are final; the stop after them is `stop`.
     fn settle(&mut self, j: usize, stop: Option<SegmentRecord>) {
+        self.offer_inner_stops(j);
         self.settled = j;
         self.settled_stop = stop.into_iter().collect();
         self.chain = None;
+    }
+
+    /// Stops inside the run of records that settling at `j` makes final, so that a hold (or an
+    /// underrun) need not wait for the run's end: once [`INNER_STOP_GAP`] of motion has passed
+    /// since the last stop, at boundaries [`INNER_STOP_RETRY`] apart until one passes, the next
+    /// segment re-planned to rest or, where it is too short, a stop chain, checked as every
+    /// stop is. Each boundary with a stop ends a group of its own. The plan itself is the same:
+    /// the trials' work is not counted against the plan's budget, so no decision of the plan
+    /// changes. Not in the first run (the machine waits for it) nor in a whole-path plan.
+    fn offer_inner_stops(&mut self, j: usize) {
+        if !self.stream || self.settled == 0 {
+            return;
+        }
+        let periods = |t: f64| (t / self.limits.period).round() as usize;
+        let (gap, retry) = (periods(INNER_STOP_GAP), periods(INNER_STOP_RETRY));
+        for i in self.settled + 1..j {
+            let at = self.states[i].samples;
+            if at < self.last_stop_samples + gap || at < self.last_try_samples + retry || self.start_feeds[i] <= 0.0 {
+                continue;
+            }
+            self.last_try_samples = at;
+            let work = self.work.get();
+            // Not the plan's budget: a stop that needs more simulated periods than that is not
+            // worth it (the next boundary is tried).
+            let budget = work + INNER_STOP_WORK;
+            // Never faster than where it starts, a stop on a segment much longer than its
+            // braking distance would crawl to the node (the hold stops inside the record serve
+            // there), and one from a crawl would take ages.
+            let (v0, braking) = (
+                self.start_feeds[i],
+                ramp_distance(self.start_feeds[i], 0.0, self.accel, self.jerk),
+            );
+            if v0 <= REST_FEED * self.feed_cap || self.lengths[i] > 2.0 * braking {
+                continue;
+            }
+            let stop = if braking <= self.lengths[i] {
+                self.stop_at_end(i, budget, StopKind::Inner).map(|r| vec![r])
+            } else {
+                None
+            }
+            .or_else(|| {
+                self.stop_chain(i, budget, StopKind::Inner)
+                    .map(|chain| chain.into_iter().map(|(r, _)| r).collect())
+            });
+            self.work.set(work);
+            // Not a stop that ends where the path ends: that is the plan's own end.
+            if let Some(stop) = stop.filter(|stop| !stop.iter().any(SegmentRecord::is_last)) {
+                self.inner_stops.push_back((i, stop));
+                self.last_stop_samples = at;
+            }
+        }
+        if let Some(state) = self.states.get(j) {
+            self.last_stop_samples = state.samples;
+        }
     }
 
     /// Segments `j..` re-planned from `j`'s start feed to rest at the first node far enough
@@ -689,16 +798,20 @@ impl Planner {
     /// `j` where no single segment can stop (the short segments of a dense G1 program). Each
     /// segment is solved and checked as every segment is, and the machine holding after the
     /// last; `None` if one fails. Returns the records with the state after each.
-    fn stop_chain(&self, j: usize, work_budget: u64) -> Option<Vec<(SegmentRecord, SimState)>> {
+    fn stop_chain(&self, j: usize, work_budget: u64, kind: StopKind) -> Option<Vec<(SegmentRecord, SimState)>> {
         let v0 = self.start_feeds[j];
         let braking = 2.0 * ramp_distance(v0, 0.0, self.accel, self.jerk);
         let (mut m, mut room) = (j, 0.0);
         while room < braking {
-            if m + 1 >= self.bounds.len() || m >= j + CHAIN_MAX {
+            if m + 1 >= self.bounds.len() || m >= j + kind.chain_max() {
                 return None;
             }
             room += self.lengths[m];
             m += 1;
+        }
+        if matches!(kind, StopKind::Inner) && room > 2.0 * braking {
+            // Never faster than where it starts, it would crawl over the room left.
+            return None;
         }
         // Target end feeds: rest at node m, and what a ramp from each next one allows.
         let mut targets = vec![0.0; m - j + 1];
@@ -715,11 +828,8 @@ impl Planner {
         let (mut v, mut state) = (v0, self.states[j]);
         let mut chain = Vec::with_capacity(m - j);
         for i in j..m {
-            let ctx = SegmentContext {
-                refine: false,
-                ..self.context(i, work_budget)
-            };
-            let (record, next) = solve_segment(&ctx, v, targets[i - j + 1], &state).ok()?;
+            let ctx = kind.context(self.context(i, work_budget), v);
+            let (record, next) = solve_segment(&ctx, v, kind.end_feed(targets[i - j + 1], v), &state).ok()?;
             if i + 1 == m && !holds_after(&ctx, &state, record) {
                 return None;
             }
@@ -774,7 +884,8 @@ impl Planner {
         if unsettled < CHAIN_AFTER && self.settled > 0 {
             return;
         }
-        if let Some(chain) = self.stop_chain(j, budget) {
+        if let Some(chain) = self.stop_chain(j, budget, StopKind::Plan) {
+            self.offer_inner_stops(j);
             self.settled = j;
             self.settled_stop = chain.iter().map(|(r, _)| *r).collect();
             self.chain = Some((j, chain));
@@ -858,7 +969,7 @@ impl Planner {
         // the reason for a refusal.
         let absorbs = |this: &Self, j: usize| {
             can_absorb(this.start_feeds[j], this.lengths[j], this.accel, this.jerk)
-                .then(|| this.stop_at_end(j, budget))
+                .then(|| this.stop_at_end(j, budget, StopKind::Plan))
                 .flatten()
         };
         if last {
@@ -1053,6 +1164,8 @@ struct SegmentContext<'a> {
     work_budget: u64,
     /// The record will be used (not only whether one exists): worth [`with_phase_jerks`].
     refine: bool,
+    /// Attempts (end feeds, peaks) before the segment fails.
+    attempts: usize,
 }
 
 /// One candidate profile, interpolated and measured.
@@ -1469,7 +1582,7 @@ fn solve_segment(
     let (mut stalled, mut stop_tried) = (0usize, false);
     // End-feed lowerings so far (step 8).
     let mut lowerings = 0usize;
-    for attempt in 0..40 {
+    for attempt in 0..ctx.attempts {
         if ctx.work.get() > ctx.work_budget {
             return Err(SegmentFailure::OutOfWork);
         }
