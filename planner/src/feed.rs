@@ -1532,26 +1532,32 @@ impl<'a> Streamer<'a> {
     /// plan there. 0 (a hold, which the module carries out) and small changes keep the plan.
     /// Plans sent whole keep their override.
     pub fn set_feed_override(&mut self, feed_override: f64) {
+        {
+            let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+                return;
+            };
+            let close = |a: f64, b: f64| (a - b).abs() <= OVERRIDE_STEP * b;
+            if feed_override.is_nan() || feed_override <= 0.0 || close(feed_override, r.asked) {
+                return;
+            }
+            if r.pending.as_ref().is_some_and(|p| p.requested) {
+                // The module is asked to join one already: this one follows once it has
+                // answered.
+                return;
+            }
+            r.asked = feed_override;
+            if close(feed_override, r.feed_override) {
+                // Back to the plan being sent: a re-plan on its way is not needed any more.
+                r.pending = None;
+                return;
+            }
+        }
         let (pushed, next_queued) = (self.pushed, self.next_queued);
         let last_end = self.last_end.clone();
         let join = self.join_point();
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
             return;
         };
-        let close = |a: f64, b: f64| (a - b).abs() <= OVERRIDE_STEP * b;
-        if feed_override.is_nan() || feed_override <= 0.0 || close(feed_override, r.asked) {
-            return;
-        }
-        if r.pending.as_ref().is_some_and(|p| p.requested) {
-            // The module is asked to join one already: this one follows once it has answered.
-            return;
-        }
-        r.asked = feed_override;
-        if close(feed_override, r.feed_override) {
-            // Back to the plan being sent: a re-plan on its way is not needed any more.
-            r.pending = None;
-            return;
-        }
         let (start, from) = match (&join, &last_end) {
             (Some((_, end)), _) | (None, Some(end)) => (
                 StreamStart::After {

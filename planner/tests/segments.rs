@@ -16,7 +16,6 @@ use nurbs_hal::module::FaultCode;
 use nurbs_hal::slot::{SegmentSlot, KIND_BLOCK};
 use nurbs_hal::sys;
 use nurbs_motion::planner::simulate::setpoints;
-use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{plan_groups, PathOpener, Source, Streamer};
 use nurbs_planner::writer::GeometryWriter;
@@ -655,19 +654,15 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
         u32_pin("nurbs_interp.underruns")
     );
     assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
-    // Every sample within the limits (the programmed feed at its highest override).
-    let rows: Vec<Row> = got
-        .iter()
-        .enumerate()
-        .map(|(k, o)| Row {
-            t: k as f64 * PERIOD,
-            curve: o.curve,
-            u: o.u,
-            q: o.q[..2].to_vec(),
-        })
-        .collect();
-    let report = verify(&mut PathCurves::new(&toolpath), &limits, &rows);
-    assert!(report.violations.is_empty(), "{:?}", report.violations);
+    // Every sample within the limits (the programmed feed at its highest override, 100 %).
+    let checked = Job {
+        toolpath: toolpath.clone(),
+        limits: limits.clone(),
+        groups: Vec::new(),
+        samples: Vec::new(),
+    };
+    let found = violations(&checked, &got, true);
+    assert!(found.is_empty(), "{found:?}");
     // Before the first join, the plan at 100 % bit for bit.
     let first_change = queued_at_change[0].0;
     let same = got
