@@ -31,25 +31,6 @@ fn streamed(tp: &Toolpath, limits: &Limits, feed_override: f64) -> Vec<(FinalRec
     out
 }
 
-/// Where a plan continuing after `r` starts: its end, or the start of the next element where it
-/// ends its own.
-fn start_after(tp: &Toolpath, r: &SegmentRecord) -> PlanStart {
-    let c = r.curve();
-    if r.u_end >= tp.elements[c].curve.u_max() {
-        PlanStart {
-            curve: c + 1,
-            u: tp.elements[c + 1].curve.u_min(),
-            s: 0.0,
-        }
-    } else {
-        PlanStart {
-            curve: c,
-            u: r.u_end,
-            s: r.s_start + r.length,
-        }
-    }
-}
-
 /// What the check of one join found.
 struct Joined {
     /// Share of the nominal limits the ramp down was planned with.
@@ -74,7 +55,12 @@ fn join_and_verify(tp: &Toolpath, limits: &Limits, before: &[(FinalRecord, SimSt
         let options = PlanOptions {
             stream: true,
             feed_override,
-            start: Some(start_after(tp, &last.record)),
+            start: Some(PlanStart::at(
+                &mut PathCurves::new(tp),
+                last.record.curve(),
+                last.record.u_end,
+                last.record.s_start + last.record.length,
+            )),
             moving: Some(MovingStart {
                 feed: feed_at_join,
                 state: *state,
@@ -229,7 +215,12 @@ fn a_re_plan_at_the_same_override_continues_the_plan_unchanged() {
     let (last, state) = &base[m];
     let options = PlanOptions {
         stream: true,
-        start: Some(start_after(&tp, &last.record)),
+        start: Some(PlanStart::at(
+            &mut PathCurves::new(&tp),
+            last.record.curve(),
+            last.record.u_end,
+            last.record.s_start + last.record.length,
+        )),
         moving: Some(MovingStart {
             feed: last.record.profile().table().end().v.max(0.0),
             state: *state,

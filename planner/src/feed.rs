@@ -37,22 +37,7 @@ use nurbs_rtcore::{CachedCurve, SegmentRecord, SpanCache, StopRun};
 /// the end of an element (not the last), at the start of the next one (the module accepts
 /// either).
 pub fn plan_start(curves: &mut PathCurves, stop: &StopPoint) -> PlanStart {
-    let curve = stop.curve as usize;
-    let next = curve + 1;
-    let at_end = curves.load(curve) && stop.u >= curves.view(curve).u_max();
-    if at_end && curves.load(next) {
-        PlanStart {
-            curve: next,
-            u: curves.view(next).u_min(),
-            s: 0.0,
-        }
-    } else {
-        PlanStart {
-            curve,
-            u: stop.u,
-            s: stop.s,
-        }
-    }
+    PlanStart::at(curves, stop.curve as usize, stop.u, stop.s)
 }
 
 /// Segment records that go into the ring together: a run of final records whose last one has
@@ -88,24 +73,11 @@ pub struct GroupEnd {
 }
 
 impl GroupEnd {
-    /// Where a plan continuing after the group starts: the last record's end, or the start of
-    /// the next element where it ends its own (the module accepts either).
+    /// Where a plan continuing after the group starts: the last record's end
+    /// ([`PlanStart::at`]).
     fn start(&self, curves: &mut PathCurves) -> PlanStart {
-        let curve = self.record.curve();
-        let at_end = curves.load(curve) && self.record.u_end >= curves.view(curve).u_max();
-        if at_end && curves.load(curve + 1) {
-            PlanStart {
-                curve: curve + 1,
-                u: curves.view(curve + 1).u_min(),
-                s: 0.0,
-            }
-        } else {
-            PlanStart {
-                curve,
-                u: self.record.u_end,
-                s: self.record.s_start + self.record.length,
-            }
-        }
+        let r = &self.record;
+        PlanStart::at(curves, r.curve(), r.u_end, r.s_start + r.length)
     }
 
     /// The motion state there, as the planner continues it.
@@ -1443,13 +1415,17 @@ impl<'a> Streamer<'a> {
     /// end of the slots sent.
     fn join_point(&mut self) -> Option<(u64, Box<GroupEnd>)> {
         let last = self.pushed.checked_sub(1)?;
-        let ends: Vec<(u64, Box<GroupEnd>)> = self.group_ends.iter().cloned().collect();
-        for (k, end) in ends {
-            if k >= last {
+        self.buffered();
+        let (mut queued, mut slots) = (0.0, self.in_ring.iter().peekable());
+        for (k, end) in &self.group_ends {
+            if *k >= last {
                 return None;
             }
-            if self.queued_through(k) >= SPLICE_LEAD {
-                return Some((k, end));
+            while let Some(&(_, t)) = slots.next_if(|(j, _)| j <= k) {
+                queued += t;
+            }
+            if queued >= SPLICE_LEAD {
+                return Some((*k, end.clone()));
             }
         }
         None

@@ -104,6 +104,25 @@ pub struct PlanStart {
     pub s: f64,
 }
 
+impl PlanStart {
+    /// Where a plan from the point at parameter `u` (arc length `s`) of element `curve`
+    /// starts: there, or where that is the end of an element (not the last), at the start of
+    /// the next one (the module accepts either).
+    pub fn at(curves: &mut PathCurves, curve: usize, u: f64, s: f64) -> PlanStart {
+        let next = curve + 1;
+        let at_end = curves.load(curve) && u >= curves.view(curve).u_max();
+        if at_end && curves.load(next) {
+            PlanStart {
+                curve: next,
+                u: curves.view(next).u_min(),
+                s: 0.0,
+            }
+        } else {
+            PlanStart { curve, u, s }
+        }
+    }
+}
+
 /// A record handed out by the [`Planner`], final, with the stop that follows it if the motion
 /// must end at its end (underrun, hold, abort).
 #[derive(Clone, Debug, PartialEq)]
