@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 12
+#define CHANNEL_VERSION 13
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into
@@ -45,6 +45,11 @@
  * Most joints a record may drive (5-axis machines; this build drives the tool tip only).
  */
 #define MAX_JOINTS 5
+
+/**
+ * [`Join::at_sample`] of a join at the end of record `after`.
+ */
+#define AT_RECORD_END UINT64_MAX
 
 #define SPLICE_IDLE 0
 

@@ -36,7 +36,7 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 12;
+pub const CHANNEL_VERSION: u32 = 13;
 /// Slots in the record ring (a power of two). A group of records that share one stop goes into
 /// the ring whole before the module takes its first record, so the longest group must fit.
 pub const SEGMENT_SLOTS: usize = 8192;
@@ -739,23 +739,43 @@ impl GeometryStream {
     }
 }
 
-/// Planner ⇄ module: the rest of a motion planned again (at another feed override) joins it at
-/// the end of a group the module has not finished: there the module drops the old plan's
-/// records queued after it, up to `drop_to`, and runs on with what follows. The planner writes
-/// `after` and `drop_to`, then the state [`SPLICE_REQUESTED`], and pushes nothing until the
-/// module answers: [`SPLICE_ACCEPTED`] (then it pushes the new plan, which lands at `drop_to`)
-/// or [`SPLICE_MISSED`] (too late, or not in a running segment motion: nothing changes). The
-/// module sets [`SPLICE_DONE`] once it has dropped them, or [`SPLICE_MISSED`] if its motion
-/// stops before. Each party writes the state only while it is the other's answer that is
-/// awaited, so they never write it at once.
+/// Planner ⇄ module: the rest of a motion planned again (at another feed override) joins it
+/// inside the old plan's records still to run: at the end of a group (`at_sample` is
+/// [`AT_RECORD_END`]), or cutting into record `after` at motion sample `at_sample`, where the
+/// new plan's first record starts from that very sample (a change of feed from the sample's
+/// feed and acceleration, [`nurbs_rtcore::block_stop::ramp_record`]). There the module drops
+/// the old plan's records queued after `after`, up to `drop_to`, and runs on with what follows.
+/// The planner writes the fields, then the state [`SPLICE_REQUESTED`], and pushes nothing
+/// until the module answers: [`SPLICE_ACCEPTED`] (then it pushes the new plan, which lands at
+/// `drop_to`) or [`SPLICE_MISSED`] (too late, or not in a running segment motion: nothing
+/// changes). The module sets [`SPLICE_DONE`] once it has joined, or [`SPLICE_MISSED`] if its
+/// motion stops before. Each party writes the state only while it is the other's answer that
+/// is awaited, so they never write it at once. `samples` (module → planner) counts the motion
+/// samples of segment records output so far, the numbering of `at_sample`.
 #[repr(C)]
 pub struct Splice {
-    /// Count (in the ring's numbering) of the record whose end is the join: a group's last.
+    /// Count (in the ring's numbering) of the record the join is in or after.
     after: AtomicU32,
     /// Count of the new plan's first record: the old plan's records before it are dropped.
     drop_to: AtomicU32,
     state: AtomicU32,
+    _pad: u32,
+    at_sample: AtomicU64,
+    samples: AtomicU64,
 }
+
+/// A join asked for ([`Splice`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Join {
+    pub after: u32,
+    pub drop_to: u32,
+    /// The motion sample after which the new plan cuts into record `after`, or
+    /// [`AT_RECORD_END`]: at its end (a group's end).
+    pub at_sample: u64,
+}
+
+/// [`Join::at_sample`] of a join at the end of record `after`.
+pub const AT_RECORD_END: u64 = u64::MAX;
 
 pub const SPLICE_IDLE: u32 = 0;
 pub const SPLICE_REQUESTED: u32 = 1;
@@ -772,14 +792,14 @@ impl Splice {
         state == SPLICE_REQUESTED || state == SPLICE_ACCEPTED
     }
 
-    /// Planner side: asks for a join after record `after`, dropping up to `drop_to`; false
-    /// while an earlier request is open.
-    pub fn request(&self, after: u32, drop_to: u32) -> bool {
+    /// Planner side: asks for `join`; false while an earlier request is open.
+    pub fn request(&self, join: Join) -> bool {
         if Self::open(self.state()) {
             return false;
         }
-        self.after.store(after, Ordering::Relaxed);
-        self.drop_to.store(drop_to, Ordering::Relaxed);
+        self.after.store(join.after, Ordering::Relaxed);
+        self.drop_to.store(join.drop_to, Ordering::Relaxed);
+        self.at_sample.store(join.at_sample, Ordering::Relaxed);
         self.state.store(SPLICE_REQUESTED, Ordering::Release);
         true
     }
@@ -793,18 +813,22 @@ impl Splice {
         true
     }
 
-    /// Module side: the request waiting for an answer, as (after, drop_to).
-    pub fn requested(&self) -> Option<(u32, u32)> {
+    /// Module side: the request waiting for an answer.
+    pub fn requested(&self) -> Option<Join> {
         (self.state() == SPLICE_REQUESTED).then(|| self.fields())
     }
 
-    /// Module side: the request accepted and not yet carried out, as (after, drop_to).
-    pub fn accepted(&self) -> Option<(u32, u32)> {
+    /// Module side: the request accepted and not yet carried out.
+    pub fn accepted(&self) -> Option<Join> {
         (self.state() == SPLICE_ACCEPTED).then(|| self.fields())
     }
 
-    fn fields(&self) -> (u32, u32) {
-        (self.after.load(Ordering::Relaxed), self.drop_to.load(Ordering::Relaxed))
+    fn fields(&self) -> Join {
+        Join {
+            after: self.after.load(Ordering::Relaxed),
+            drop_to: self.drop_to.load(Ordering::Relaxed),
+            at_sample: self.at_sample.load(Ordering::Relaxed),
+        }
     }
 
     /// Module side: the answer to an open request ([`SPLICE_ACCEPTED`], [`SPLICE_MISSED`],
@@ -813,6 +837,16 @@ impl Splice {
         if Self::open(self.state()) {
             self.state.store(state, Ordering::Release);
         }
+    }
+
+    /// Module side: motion samples of segment records output so far in this motion.
+    pub fn report_samples(&self, samples: u64) {
+        self.samples.store(samples, Ordering::Relaxed);
+    }
+
+    /// Planner side: what the module last reported ([`Self::report_samples`]).
+    pub fn samples(&self) -> u64 {
+        self.samples.load(Ordering::Relaxed)
     }
 }
 
@@ -981,12 +1015,17 @@ mod tests {
         assert_eq!(splice.state(), SPLICE_IDLE);
         splice.answer(SPLICE_ACCEPTED); // nothing open: no effect
         assert_eq!(splice.state(), SPLICE_IDLE);
-        assert!(splice.request(3, 9));
-        assert!(!splice.request(4, 9), "one request at a time");
+        let join = Join {
+            after: 3,
+            drop_to: 9,
+            at_sample: AT_RECORD_END,
+        };
+        assert!(splice.request(join));
+        assert!(!splice.request(Join { after: 4, ..join }), "one request at a time");
         assert!(!splice.reset());
-        assert_eq!(splice.requested(), Some((3, 9)));
+        assert_eq!(splice.requested(), Some(join));
         splice.answer(SPLICE_ACCEPTED);
-        assert_eq!(splice.accepted(), Some((3, 9)));
+        assert_eq!(splice.accepted(), Some(join));
         splice.answer(SPLICE_DONE);
         assert_eq!(splice.state(), SPLICE_DONE);
         assert!(splice.reset());

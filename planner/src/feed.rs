@@ -17,10 +17,13 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::cut::{cut_into, CutFrom, CUT_RAMPS};
 use crate::hold_stops::HoldStops;
 use crate::say;
 use crate::writer::{GeometryWriter, Release, WriteError};
-use nurbs_hal::channel::{Channel, Slot, StopPoint, SEGMENT_SLOTS, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_REQUESTED};
+use nurbs_hal::channel::{
+    Channel, Join, Slot, StopPoint, AT_RECORD_END, SEGMENT_SLOTS, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_REQUESTED,
+};
 use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
@@ -61,6 +64,12 @@ pub struct SegmentGroup {
     /// Where the group leaves the motion (what a plan at another feed override continues
     /// from); `None` where it ends the path.
     pub end: Option<Box<GroupEnd>>,
+    /// The motion's state before the group's first record (where a plan at another feed
+    /// override that cuts into one of its records replays them from: [`crate::cut`]).
+    pub begin: Option<Box<SimState>>,
+    /// The first group of a plan that cuts into a running record: the motion time of that
+    /// record left after the cut, which the module drops (0 otherwise).
+    pub dropped_time: f64,
 }
 
 /// The end of a group of a streamed plan: its last record, the planner's state after it, and
@@ -104,13 +113,23 @@ impl SegmentGroup {
 pub struct Grouper {
     run: Vec<FinalRecord>,
     hold_stops: Vec<Vec<f64>>,
+    begin: Option<Box<SimState>>,
 }
 
 impl Grouper {
-    /// Takes the next final record, with the stops checked inside it; returns the group it
+    /// Whether the next record begins a group.
+    pub fn starts_group(&self) -> bool {
+        self.run.is_empty()
+    }
+
+    /// Takes the next final record, with the stops checked inside it and, where it begins a
+    /// group ([`Self::starts_group`]), the motion's state before it; returns the group it
     /// completes, if it does.
-    pub fn push(&mut self, r: FinalRecord, hold_stops: Vec<f64>) -> Option<SegmentGroup> {
+    pub fn push(&mut self, r: FinalRecord, hold_stops: Vec<f64>, begin: Option<SimState>) -> Option<SegmentGroup> {
         let ends = !r.stop.is_empty() || r.record.is_last();
+        if self.run.is_empty() {
+            self.begin = begin.map(Box::new);
+        }
         self.run.push(r);
         self.hold_stops.push(hold_stops);
         if !ends {
@@ -151,6 +170,8 @@ impl Grouper {
             first_curve: 0,
             hold_stops,
             end: None,
+            begin: self.begin.take(),
+            dropped_time: 0.0,
         })
     }
 }
@@ -182,6 +203,9 @@ pub enum StreamStart {
     /// After a group already sent, at another feed override (the motion goes on); the curves
     /// from `send_from` on are still to be sent.
     After { end: Box<GroupEnd>, send_from: usize },
+    /// Cutting into a record sent, at another feed override ([`crate::cut`]); the curves from
+    /// `send_from` on are still to be sent.
+    Cut { from: Box<CutFrom>, send_from: usize },
 }
 
 /// Runs the Erwinski planner as a stream ([`PlanOptions::stream`]) over `curves` (read as it
@@ -198,12 +222,14 @@ pub fn stream_plan(
     feed_override: f64,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) {
-    let shares: &[f64] = match start {
-        StreamStart::Rest(_) => &SLOW_DOWN_SHARES[..1],
-        StreamStart::After { .. } => &SLOW_DOWN_SHARES,
+    // (ramp share, which of the cut's ramps) of each try.
+    let tries: Vec<(f64, usize)> = match start {
+        StreamStart::Rest(_) => vec![(SLOW_DOWN_SHARES[0], 0)],
+        StreamStart::After { .. } => SLOW_DOWN_SHARES.iter().map(|&share| (share, 0)).collect(),
+        StreamStart::Cut { .. } => (0..CUT_RAMPS).map(|k| (SLOW_DOWN_SHARES[0], k)).collect(),
     };
     let mut refusals = Vec::new();
-    for (k, &share) in shares.iter().enumerate() {
+    for (k, &(share, ramp)) in tries.iter().enumerate() {
         let curves = match open() {
             Ok(c) => c,
             Err(e) => {
@@ -211,8 +237,8 @@ pub fn stream_plan(
                 return;
             }
         };
-        let last_try = k + 1 == shares.len();
-        match stream_plan_once(curves, limits, &start, (feed_override, share), last_try, emit) {
+        let last_try = k + 1 == tries.len();
+        match stream_plan_once(curves, limits, &start, (feed_override, share, ramp), last_try, emit) {
             Ok(()) => return,
             Err(e) => refusals.push(e),
         }
@@ -220,19 +246,40 @@ pub fn stream_plan(
     emit(PlanEvent::Failed(refusals.join("; ")));
 }
 
-/// One try of [`stream_plan`] (with ramp share `brake_share` after a group): `Err` where the
-/// plan is refused before its first group and another try may pass (`last_try`: none may).
+/// One try of [`stream_plan`] (with ramp share `brake_share` after a group, the cut's ramp
+/// `cut_ramp`): `Err` where the plan is refused before its first group and another try may
+/// pass (`last_try`: none may).
 fn stream_plan_once(
     mut curves: PathCurves,
     limits: &Limits,
     start: &StreamStart,
-    (feed_override, brake_share): (f64, f64),
+    (feed_override, brake_share, cut_ramp): (f64, f64, usize),
     last_try: bool,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) -> Result<(), String> {
-    let (plan_from, moving) = match start {
-        StreamStart::Rest(from) => (from.map(|p| plan_start(&mut curves, &p)), None),
-        StreamStart::After { end, .. } => (Some(end.start(&mut curves)), Some(end.moving(brake_share))),
+    let (plan_from, moving, cut) = match start {
+        StreamStart::Rest(from) => (from.map(|p| plan_start(&mut curves, &p)), None, None),
+        StreamStart::After { end, .. } => (Some(end.start(&mut curves)), Some(end.moving(brake_share)), None),
+        StreamStart::Cut { from, .. } => {
+            let cut = match cut_into(&mut curves, limits, from, feed_override, cut_ramp) {
+                Ok(cut) => cut,
+                Err(e) if last_try => {
+                    emit(PlanEvent::Failed(format!(
+                        "re-plan at feed override {feed_override}: {e}"
+                    )));
+                    return Ok(());
+                }
+                Err(e) => return Err(e),
+            };
+            let moving = MovingStart {
+                feed: cut.feed,
+                state: cut.after,
+                seq: cut.ramp.seq.wrapping_add(1),
+                feed_override: from.feed_override,
+                brake_share,
+            };
+            (Some(cut.start), Some(moving), Some(cut))
+        }
     };
     // A plan from a point on the path never needs the path before it.
     curves.release_before(plan_from.map_or(0, |s| s.curve));
@@ -246,7 +293,7 @@ fn stream_plan_once(
     let why = |e: String| match start {
         StreamStart::Rest(None) => e,
         StreamStart::Rest(Some(_)) => format!("re-plan from the stop point: {e}"),
-        StreamStart::After { .. } => format!("re-plan at feed override {feed_override}: {e}"),
+        StreamStart::After { .. } | StreamStart::Cut { .. } => format!("re-plan at feed override {feed_override}: {e}"),
     };
     let mut planner = match Planner::with_curves(curves, limits, &options) {
         Ok(p) => p,
@@ -256,15 +303,29 @@ fn stream_plan_once(
         }
     };
     let mut grouper = Grouper::default();
-    let mut hold_stops = match start {
-        StreamStart::After { end, .. } => HoldStops::continuing(limits, &end.state),
-        StreamStart::Rest(_) => HoldStops::new(limits),
+    let mut hold_stops = match (start, &cut) {
+        (_, Some(cut)) => HoldStops::continuing(limits, &cut.before),
+        (StreamStart::After { end, .. }, _) => HoldStops::continuing(limits, &end.state),
+        _ => HoldStops::new(limits),
     };
+    if let Some(cut) = &cut {
+        // The ramp is the new plan's first record (its group goes on with the plan's).
+        let begin = hold_stops.state();
+        let inside = hold_stops.after_cut(&cut.ramp, cut.accel_start, planner.curves());
+        let ramp = FinalRecord {
+            record: cut.ramp,
+            stop: Vec::new(),
+        };
+        if grouper.push(ramp, inside, Some(begin)).is_some() {
+            return Err("a ramp without a stop ended a group".into());
+        }
+    }
+    let mut dropped_time = cut.as_ref().map(|c| c.dropped_time);
     let (mut groups, mut longest) = (0usize, 0.0f64);
     // The curves of the group being collected, from `first_curve` on: after a group, those not
     // sent yet; from rest, a new geometry stream from the plan's first curve.
     let mut next_curve = match start {
-        StreamStart::After { send_from, .. } => *send_from,
+        StreamStart::After { send_from, .. } | StreamStart::Cut { send_from, .. } => *send_from,
         StreamStart::Rest(_) => plan_from.map_or(0, |s| s.curve),
     };
     let (mut first_curve, mut new_curves) = (next_curve as u32, Vec::new());
@@ -280,9 +341,11 @@ fn stream_plan_once(
                     new_curves.push(planner.curves().element(next_curve).curve.clone());
                     next_curve += 1;
                 }
+                let begin = grouper.starts_group().then(|| hold_stops.state());
                 let inside = hold_stops.after(&record.record, planner.curves());
                 let last = record.record;
-                if let Some(mut group) = grouper.push(record, inside) {
+                if let Some(mut group) = grouper.push(record, inside, begin) {
+                    group.dropped_time = dropped_time.take().unwrap_or(0.0);
                     groups += 1;
                     longest = longest.max(group.time);
                     group.first_curve = first_curve;
@@ -326,6 +389,10 @@ fn stream_plan_once(
     };
     let what = match start {
         StreamStart::After { .. } => format!("streamed plan at feed override {feed_override} complete"),
+        StreamStart::Cut { from, .. } => format!(
+            "streamed plan at feed override {feed_override} (cutting in after motion sample {}) complete",
+            from.at_sample
+        ),
         StreamStart::Rest(_) => "streamed plan complete".to_string(),
     };
     emit(PlanEvent::Done {
@@ -1148,6 +1215,30 @@ pub struct Group {
     hold_stops_written: usize,
     /// Segment records: where the group leaves the motion.
     end: Option<Box<GroupEnd>>,
+    /// Segment records: what a cut into them needs ([`RingGroup`]).
+    cut_data: Option<RingGroup>,
+}
+
+/// A group of segment records in the ring (or running), as a plan at another feed override
+/// that cuts into one of them needs it ([`crate::cut`]).
+#[derive(Clone)]
+struct RingGroup {
+    /// Slot number of its first record.
+    first: u64,
+    records: Vec<SegmentRecord>,
+    /// The motion's state before its first record.
+    begin: Box<SimState>,
+    /// Per record, the motion samples with a checked hold stop (where a cut may come).
+    hold_samples: Vec<Vec<u64>>,
+    /// The feed override of its plan.
+    feed_override: f64,
+}
+
+impl RingGroup {
+    /// Slot number after its last record.
+    fn end(&self) -> u64 {
+        self.first + self.records.len() as u64
+    }
 }
 
 /// Reads the path afresh, from its start (each plan of a motion reads it as it plans).
@@ -1166,6 +1257,12 @@ pub struct Replanner {
     feed_override: f64,
     asked: f64,
     pending: Option<Pending>,
+    /// The override a cut into a running record was refused for (it then joins at a group
+    /// end).
+    cut_refused: Option<f64>,
+    /// How far ahead of the module a cut comes (s of motion): [`CUT_LEAD`], doubled each time
+    /// the re-plan came too late for one.
+    cut_lead: f64,
 }
 
 /// A re-plan in progress: its events, the groups it has handed out, and how many slots had
@@ -1179,9 +1276,11 @@ struct Pending {
     pushed: u64,
     feed_override: f64,
     began: Instant,
-    /// Where it joins: after the slot of this number (a group end still queued, through the
-    /// module's [`nurbs_hal::channel::Splice`]), or `None`: at the end of the slots sent.
-    join: Option<u64>,
+    /// Where it joins: in or after the slot of this number, through the module's
+    /// [`nurbs_hal::channel::Splice`] (after motion sample `.1`, a cut into the record, or at
+    /// its end, [`AT_RECORD_END`], a group end still queued), or `None`: at the end of the
+    /// slots sent.
+    join: Option<(u64, u64)>,
     /// The join has been asked of the module (nothing is sent until it answers).
     requested: bool,
 }
@@ -1209,6 +1308,12 @@ const SPLICE_LEAD: f64 = 0.04;
 /// ... and asks the module only while at least this much is (s).
 const SPLICE_LAST_CALL: f64 = 0.005;
 
+/// A re-plan at another feed override cuts into a record at the first checked hold stop at
+/// least this far (s of motion) ahead of the module: time to plan the first group and ask.
+/// Where that comes too late, the lead doubles, up to [`CUT_LEAD_MAX`].
+const CUT_LEAD: f64 = 0.02;
+const CUT_LEAD_MAX: f64 = 0.32;
+
 impl Source {
     /// The Erwinski plan of the path `open` reads (from its start, or from rest at the stop
     /// point `from`) at `feed_override` as a stream, planned in a thread of its own that reads
@@ -1229,6 +1334,8 @@ impl Source {
                 feed_override,
                 asked: feed_override,
                 pending: None,
+                cut_refused: None,
+                cut_lead: CUT_LEAD,
             })),
         }
     }
@@ -1320,6 +1427,8 @@ pub struct Streamer<'a> {
     /// Slots (numbers) that end a group still in the ring or running, with where they leave
     /// the motion: where a re-plan at another feed override may join.
     group_ends: VecDeque<(u64, Box<GroupEnd>)>,
+    /// The segment groups still in the ring or running: where such a re-plan may cut in.
+    ring_groups: VecDeque<RingGroup>,
     pub pushed: u64,
     pub pushed_time: f64,
     /// Motion time planned (received from the planner) and when planning began.
@@ -1334,6 +1443,8 @@ pub struct Streamer<'a> {
     /// dropping the old plan's slots after it), and at the end of the slots sent.
     pub joins_in_ring: u32,
     pub joins_at_end: u32,
+    /// ... and cutting into a record the module runs or has queued ([`crate::cut`]).
+    pub cuts: u32,
     /// Where the last group sent leaves the motion (`None` before the first, and after the
     /// path's last).
     last_end: Option<Box<GroupEnd>>,
@@ -1367,6 +1478,7 @@ impl<'a> Streamer<'a> {
             in_ring: VecDeque::new(),
             ring_base: channel.segments.producer().pushed(),
             group_ends: VecDeque::new(),
+            ring_groups: VecDeque::new(),
             buffered: 0.0,
             pushed: 0,
             pushed_time: 0.0,
@@ -1376,6 +1488,7 @@ impl<'a> Streamer<'a> {
             longest_group: 0.0,
             joins_in_ring: 0,
             joins_at_end: 0,
+            cuts: 0,
             last_end: None,
         })
     }
@@ -1400,6 +1513,9 @@ impl<'a> Streamer<'a> {
         }
         while self.group_ends.front().is_some_and(|(k, _)| k + 1 < taken) {
             self.group_ends.pop_front();
+        }
+        while self.ring_groups.front().is_some_and(|g| g.end() < taken) {
+            self.ring_groups.pop_front();
         }
         self.buffered.max(0.0)
     }
@@ -1426,6 +1542,33 @@ impl<'a> Streamer<'a> {
             }
             if queued >= SPLICE_LEAD {
                 return Some((*k, end.clone()));
+            }
+        }
+        None
+    }
+
+    /// Where a re-plan at another feed override cuts in: the first checked hold stop at least
+    /// `lead` (s of motion) ahead of the module's last sample, in a record still to run or running
+    /// (its slot number and what the cut needs), or `None`.
+    fn cut_point(&mut self, period: f64, lead: f64) -> Option<(u64, Box<CutFrom>)> {
+        let taken = self.taken();
+        self.buffered();
+        let target = self.channel.splice.samples() + (lead / period).ceil() as u64;
+        for g in &self.ring_groups {
+            for (i, samples) in g.hold_samples.iter().enumerate() {
+                let k = g.first + i as u64;
+                if k + 1 < taken {
+                    continue; // run already
+                }
+                if let Some(&at_sample) = samples.iter().find(|&&n| n >= target) {
+                    let from = CutFrom {
+                        begin: *g.begin,
+                        records: g.records[..=i].to_vec(),
+                        at_sample,
+                        feed_override: g.feed_override,
+                    };
+                    return Some((k, Box::new(from)));
+                }
             }
         }
         None
@@ -1530,21 +1673,46 @@ impl<'a> Streamer<'a> {
         }
         let (pushed, next_queued) = (self.pushed, self.next_queued);
         let last_end = self.last_end.clone();
-        let join = self.join_point();
+        let (period, may_cut, lead) = match &self.source {
+            Source::Segments { replanner: Some(r), .. } => {
+                (r.limits.period, r.cut_refused != Some(feed_override), r.cut_lead)
+            }
+            _ => return,
+        };
+        let cut = if may_cut { self.cut_point(period, lead) } else { None };
+        let join = if cut.is_some() { None } else { self.join_point() };
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
             return;
         };
-        let (start, from) = match (&join, &last_end) {
-            (Some((_, end)), _) | (None, Some(end)) => (
+        let send_from = next_queued as usize;
+        let (start, from, place) = match (cut, &join, &last_end) {
+            (Some((k, cut)), _, _) => {
+                let (at_sample, seq) = (cut.at_sample, cut.records.last().map_or(0, |r| r.seq));
+                (
+                    StreamStart::Cut { from: cut, send_from },
+                    format!("motion sample {at_sample} (inside record {seq})"),
+                    Some((k, at_sample)),
+                )
+            }
+            (None, Some((k, end)), _) => (
                 StreamStart::After {
                     end: end.clone(),
-                    send_from: next_queued as usize,
+                    send_from,
                 },
                 format!("the end of record {}", end.record.seq),
+                Some((*k, AT_RECORD_END)),
+            ),
+            (None, None, Some(end)) => (
+                StreamStart::After {
+                    end: end.clone(),
+                    send_from,
+                },
+                format!("the end of record {}", end.record.seq),
+                None,
             ),
             // The path's last group has gone out: nothing left to plan.
-            (None, None) if pushed > 0 => return,
-            (None, None) => (StreamStart::Rest(r.from), "its start".to_string()),
+            (None, None, None) if pushed > 0 => return,
+            (None, None, None) => (StreamStart::Rest(r.from), "its start".to_string(), None),
         };
         say!("nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {from}");
         r.pending = Some(Pending {
@@ -1556,7 +1724,7 @@ impl<'a> Streamer<'a> {
             pushed,
             feed_override,
             began: Instant::now(),
-            join: join.map(|(k, _)| k),
+            join: place,
             requested: false,
         });
     }
@@ -1584,6 +1752,19 @@ impl<'a> Streamer<'a> {
                     say!("nurbs-planner: {line}");
                     p.total = Some(p.queued);
                     p.error = error;
+                }
+                Ok(PlanEvent::Failed(e)) if !p.requested && p.join.is_some_and(|(_, n)| n != AT_RECORD_END) => {
+                    // No cut there: join at a group end instead.
+                    say!(
+                        "nurbs-planner: feed override {}: no cut into the running record ({e}); joining at a group end",
+                        p.feed_override
+                    );
+                    let asked = p.feed_override;
+                    r.cut_refused = Some(asked);
+                    r.pending = None;
+                    r.asked = r.feed_override;
+                    self.set_feed_override(asked);
+                    return;
                 }
                 Ok(PlanEvent::Failed(e)) if !p.requested => {
                     say!(
@@ -1627,17 +1808,26 @@ impl<'a> Streamer<'a> {
                 return;
             }
             None => {}
-            Some(k) if !requested => {
+            Some((k, at_sample)) if !requested => {
                 // The module must still be far enough from the join to answer in time.
-                let (after, drop_to) = (
-                    self.ring_base.wrapping_add(k as u32),
-                    self.ring_base.wrapping_add(pushed as u32),
-                );
-                let ahead = self.queued_through(k);
+                let join = Join {
+                    after: self.ring_base.wrapping_add(k as u32),
+                    drop_to: self.ring_base.wrapping_add(pushed as u32),
+                    at_sample,
+                };
+                let period = r.limits.period;
+                let ahead = if at_sample == AT_RECORD_END {
+                    self.queued_through(k)
+                } else {
+                    at_sample.saturating_sub(self.channel.splice.samples()) as f64 * period
+                };
                 let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
                     return;
                 };
-                if ahead < SPLICE_LAST_CALL || !self.channel.splice.request(after, drop_to) {
+                if ahead < SPLICE_LAST_CALL || !self.channel.splice.request(join) {
+                    if at_sample != AT_RECORD_END && ahead < SPLICE_LAST_CALL {
+                        r.cut_lead = (2.0 * r.cut_lead).min(CUT_LEAD_MAX);
+                    }
                     r.pending = None;
                     r.asked = r.feed_override;
                     self.set_feed_override(asked);
@@ -1668,16 +1858,28 @@ impl<'a> Streamer<'a> {
         };
         r.feed_override = p.feed_override;
         let still_asked = r.asked;
-        if p.join.is_some() {
-            self.joins_in_ring += 1;
-        } else {
-            self.joins_at_end += 1;
+        match p.join {
+            Some((_, AT_RECORD_END)) => self.joins_in_ring += 1,
+            Some(_) => self.cuts += 1,
+            None => self.joins_at_end += 1,
         }
-        if let Some(k) = p.join {
-            // The module drops the old plan's slots after the join: they are not queued motion.
-            let dropped: f64 = self.in_ring.iter().filter(|&&(j, _)| j > k).map(|&(_, t)| t).sum();
+        if let Some((k, at_sample)) = p.join {
+            // The module drops the old plan's slots after the join: they are not queued motion;
+            // nor is the rest of the record a cut comes in.
+            let cut = at_sample != AT_RECORD_END;
+            let kept = |j: u64| j < k || (j == k && !cut);
+            let mut dropped: f64 = self.in_ring.iter().filter(|&&(j, _)| !kept(j)).map(|&(_, t)| t).sum();
+            let rest = p.groups.front().map_or(0.0, |g| g.dropped_time);
+            if let Some(entry) = self.in_ring.iter_mut().find(|(j, _)| *j == k).filter(|_| cut) {
+                // Still queued: the part before the cut stays.
+                entry.1 -= rest;
+                dropped -= entry.1;
+            } else {
+                dropped += rest;
+            }
             self.in_ring.retain(|&(j, _)| j <= k);
-            self.group_ends.retain(|&(j, _)| j <= k);
+            self.group_ends.retain(|&(j, _)| kept(j));
+            self.ring_groups.retain(|g| g.end() <= k || (g.end() == k + 1 && !cut));
             self.buffered -= dropped;
             self.pushed_time -= dropped;
             self.channel.set_planned_time(self.pushed_time);
@@ -1685,8 +1887,12 @@ impl<'a> Streamer<'a> {
         say!(
             "nurbs-planner: feed override {}: the motion runs into the new plan after slot {} ({}), re-planned in {:.1} ms",
             p.feed_override,
-            p.join.map_or(pushed, |k| k + 1),
-            if p.join.is_some() { "a join the module accepted" } else { "the end of the slots sent" },
+            p.join.map_or(pushed, |(k, _)| k + 1),
+            match p.join {
+                Some((_, AT_RECORD_END)) => "a group end the module accepted".to_string(),
+                Some((_, n)) => format!("cutting into the record before it after motion sample {n}"),
+                None => "the end of the slots sent".to_string(),
+            },
             p.began.elapsed().as_secs_f64() * 1e3
         );
         let Source::Segments {
@@ -1721,7 +1927,12 @@ impl<'a> Streamer<'a> {
     /// join the queue of curves to publish.
     fn next_group(&mut self) -> Result<Option<Group>, String> {
         match &mut self.source {
-            Source::Segments { queue, queued, .. } => {
+            Source::Segments {
+                queue,
+                queued,
+                replanner,
+                ..
+            } => {
                 let Some(g) = queue.pop_front() else {
                     return Ok(None);
                 };
@@ -1738,6 +1949,17 @@ impl<'a> Streamer<'a> {
                 let known = (self.next_queued.saturating_sub(g.first_curve) as usize).min(g.curves.len());
                 self.next_queued += (g.curves.len() - known) as u32;
                 self.curves.extend(g.curves.into_iter().skip(known));
+                let cut_data = g.begin.map(|begin| RingGroup {
+                    first: 0, // set as it goes into the ring
+                    records: g.slots.iter().map(|s| s.record).collect(),
+                    begin,
+                    hold_samples: g
+                        .hold_stops
+                        .iter()
+                        .map(|values| values.chunks_exact(3).map(|t| t[0] as u64).collect())
+                        .collect(),
+                    feed_override: replanner.as_ref().map_or(1.0, |r| r.feed_override),
+                });
                 Ok(Some(Group {
                     curve_needed,
                     times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
@@ -1748,6 +1970,7 @@ impl<'a> Streamer<'a> {
                     hold_stops: g.hold_stops,
                     hold_stops_written: 0,
                     end: g.end,
+                    cut_data,
                 }))
             }
             Source::Blocks { plan, next, .. } => {
@@ -1777,6 +2000,7 @@ impl<'a> Streamer<'a> {
                     hold_stops: Vec::new(),
                     hold_stops_written: 0,
                     end: None,
+                    cut_data: None,
                 }))
             }
         }
@@ -1951,6 +2175,10 @@ impl<'a> Streamer<'a> {
             }
             if let Some(end) = &group.end {
                 self.group_ends.push_back((self.pushed - 1, end.clone()));
+            }
+            if let Some(mut g) = group.cut_data.take() {
+                g.first = self.pushed - group.slots.len() as u64;
+                self.ring_groups.push_back(g);
             }
             self.longest_group = self.longest_group.max(group.times.iter().sum());
             self.last_end = group.end;

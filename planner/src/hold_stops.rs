@@ -32,13 +32,13 @@ pub const HOLD_STOP_SPACING: u64 = 20;
 
 /// Stops tried at a sample: from the tangential limits, each next one with the deceleration
 /// times [`SOFTER`] and the jerk times its square.
-const TRIES: usize = 6;
-const SOFTER: f64 = 0.6;
+pub(crate) const TRIES: usize = 6;
+pub(crate) const SOFTER: f64 = 0.6;
 
 /// The first try aims this far inside the tangential limits: at the limits themselves the
 /// rounding of a third difference of positions far from the origin (1e-6 relative at 1 m and
 /// 0.25 ms) decides the check.
-const INSIDE: f64 = 1.0 - 1e-3;
+pub(crate) const INSIDE: f64 = 1.0 - 1e-3;
 
 /// Below this feed (mm/s) the motion is as good as at rest: no stop is offered there.
 const MOVING: f64 = 1e-6;
@@ -53,6 +53,8 @@ pub struct HoldStops {
     limits: Limits,
     /// Arc length of the element the last stop was checked on.
     element_length: Option<ElementLength>,
+    /// The motion's last sample.
+    last: Option<Sample>,
 }
 
 impl HoldStops {
@@ -63,6 +65,7 @@ impl HoldStops {
             samples: 0,
             limits: limits.clone(),
             element_length: None,
+            last: None,
         }
     }
 
@@ -74,21 +77,49 @@ impl HoldStops {
             replica: state.interp,
             fd: state.check,
             samples: state.samples as u64,
+            last: state.last_sample,
             ..HoldStops::new(limits)
         }
+    }
+
+    /// The motion's state after the records run so far, as the planner's [`SimState`] (the
+    /// module's, sample for sample).
+    pub fn state(&self) -> SimState {
+        SimState {
+            interp: self.replica,
+            check: self.fd,
+            samples: self.samples as usize,
+            last_sample: self.last,
+        }
+    }
+
+    /// [`Self::after`] for a record that cuts into the motion at its last sample: started there
+    /// with tangential acceleration `accel_start` ([`nurbs_rtcore::block_stop::ramp_record`]).
+    pub fn after_cut(&mut self, record: &SegmentRecord, accel_start: f64, curves: &PathCurves) -> Vec<f64> {
+        let table = record.profile().table_from(accel_start);
+        if !self.replica.start_profile(curves, *record, table) {
+            return Vec::new();
+        }
+        self.run(record, None, curves)
     }
 
     /// Runs `record` (the motion's next) on the replica and returns the stops checked inside it,
     /// as arena values: triples (motion sample index, deceleration, jerk).
     pub fn after(&mut self, record: &SegmentRecord, curves: &PathCurves) -> Vec<f64> {
+        self.run(record, Some(*record), curves)
+    }
+
+    /// Runs the replica until it needs a record after `pending` (`record`, or `None` where it is
+    /// loaded already), checking stops inside `record`.
+    fn run(&mut self, record: &SegmentRecord, mut pending: Option<SegmentRecord>, curves: &PathCurves) -> Vec<f64> {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
-        let mut pending = Some(*record);
         let mut out = Vec::new();
         loop {
             match self.replica.step(curves, dt, &mut || pending.take()) {
                 Step::Sample(s) => {
                     let n = self.samples;
                     self.samples += 1;
+                    self.last = Some(s);
                     self.fd.push(&s.point[..tip], &self.limits);
                     // A record takes at most MAX_HOLD_STOPS (minutes of motion): a hold in the
                     // rest of such a record waits for its group's end.

@@ -7,6 +7,7 @@
 //! geometry ring and reuses what the module has passed, [`hal_user`] is the HAL userspace API
 //! (component, pins, signals, sampler streams). Nothing here runs on the servo thread.
 
+pub mod cut;
 pub mod feed;
 pub mod hal_user;
 pub mod hold_stops;

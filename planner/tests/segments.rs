@@ -582,6 +582,170 @@ fn a_new_stream_starts_a_new_motion_after_done_underrun_or_abort() {
     whole(&l);
 }
 
+/// The butterfly's plan in the ring and the plan at feed override 0.5 that cuts into one of
+/// its records ([`nurbs_planner::cut`]) at a checked hold stop two thirds into it: the old
+/// plan's samples up to the cut, then the interpolator from that very sample through the new
+/// plan's records (its ramp started with the sample's acceleration), to the path end.
+fn cut_case(job: &Job) -> (usize, u64, Vec<SegmentSlot>, Vec<nurbs_rtcore::interpolator::Sample>) {
+    use nurbs_planner::cut::CutFrom;
+    use nurbs_planner::feed::{stream_plan, PlanEvent, StreamStart};
+    use nurbs_rtcore::interpolator::{Interpolator, Step};
+    let (g, i) = (1..job.groups.len())
+        .find_map(|g| {
+            let i = job.groups[g].hold_stops.iter().position(|h| h.len() >= 3 * 6)?;
+            Some((g, i))
+        })
+        .expect("a record with hold stops past the first group");
+    let group = &job.groups[g];
+    let k = job.groups[..g].iter().map(|g| g.slots.len()).sum::<usize>() + i;
+    let triples = &group.hold_stops[i];
+    let at_sample = triples[3 * (2 * triples.len() / 9)] as u64;
+    let from = CutFrom {
+        begin: **group.begin.as_ref().expect("the group's begin state"),
+        records: group.slots[..=i].iter().map(|s| s.record).collect(),
+        at_sample,
+        feed_override: 1.0,
+    };
+    let mut new_slots = Vec::new();
+    let start = StreamStart::Cut {
+        from: Box::new(from),
+        send_from: job.toolpath.elements.len(),
+    };
+    let toolpath = job.toolpath.clone();
+    stream_plan(&|| Ok(PathCurves::new(&toolpath)), &job.limits, start, 0.5, &mut |e| {
+        match e {
+            PlanEvent::Group(g) => new_slots.extend(g.slots),
+            PlanEvent::Failed(e) => panic!("the cut's plan: {e}"),
+            PlanEvent::Done { .. } => {}
+        }
+        true
+    });
+    let curves = PathCurves::new(&job.toolpath);
+    let mut interp = Interpolator::new();
+    let mut old = slots_of(job).into_iter().map(|s| s.record);
+    let mut expected = Vec::new();
+    while expected.len() as u64 <= at_sample {
+        match interp.step(&curves, PERIOD, &mut || old.next()) {
+            Step::Sample(s) => expected.push(s),
+            other => panic!("the old plan before the cut: {other:?}"),
+        }
+    }
+    let at = *expected.last().unwrap();
+    let ramp = new_slots[0].record;
+    assert_eq!(
+        (ramp.curve(), ramp.u_start.to_bits(), ramp.feed_start.to_bits()),
+        (at.curve, at.u.to_bits(), at.feed.to_bits()),
+        "the ramp starts at the sample"
+    );
+    assert!(interp.start_profile(&curves, ramp, ramp.profile().table_from(at.accel)));
+    let mut rest = new_slots[1..].iter().map(|s| s.record);
+    loop {
+        match interp.step(&curves, PERIOD, &mut || rest.next()) {
+            Step::Sample(s) => expected.push(s),
+            Step::Finished => break,
+            other => panic!("the new plan: {other:?}"),
+        }
+    }
+    (k, at_sample, new_slots, expected)
+}
+
+/// A plan at another feed override cutting into a record the module runs (asked through the
+/// channel's [`nurbs_hal::channel::Splice`] with the motion sample): the module cuts in at
+/// exactly that sample and its samples are the old plan's up to there and the new plan's from
+/// there, bit for bit, within the limits, to the path end. And where the new plan is not in
+/// the ring by that sample (its planner came late), the module misses the join and stops there
+/// with the sample's checked hold stop, within the limits, as an underrun.
+#[test]
+fn the_module_cuts_a_new_plan_into_a_running_record_or_stops_at_the_cut() {
+    use nurbs_hal::channel::{Join, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_MISSED};
+    let _guard = lock_module();
+    let job = job("butterfly.json");
+    let (k, at_sample, new_slots, expected) = cut_case(&job);
+    assert!(
+        expected[..=at_sample as usize]
+            .iter()
+            .zip(&job.samples)
+            .all(|(a, b)| a.point == b.point),
+        "the replica up to the cut is the plan"
+    );
+    for late in [false, true] {
+        let l = load();
+        let ring = l.channel.segments.producer();
+        let base = ring.pushed();
+        // The old plan as the planner sends it (its hold stops in the arena), until the join
+        // is asked.
+        let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+        let mut got: Vec<Out> = Vec::new();
+        let step = |got: &mut Vec<Out>| {
+            assert!(!period(), "the update path allocated");
+            if bit("nurbs_interp.active") {
+                got.push(out());
+            }
+        };
+        while (got.len() as u64) + 100 < at_sample {
+            s.fill().unwrap();
+            step(&mut got);
+        }
+        assert!(l.channel.splice.request(Join {
+            after: base.wrapping_add(k as u32),
+            drop_to: ring.pushed(),
+            at_sample,
+        }));
+        step(&mut got);
+        assert_eq!(l.channel.splice.state(), SPLICE_ACCEPTED);
+        if !late {
+            for s in &new_slots {
+                ring.push(&Slot::segment(s)).unwrap();
+            }
+        }
+        for _ in 0..expected.len() + 20_000 {
+            step(&mut got);
+            if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
+                break;
+            }
+        }
+        assert!(
+            !bit("nurbs_interp.fault"),
+            "fault {}",
+            u32_pin("nurbs_interp.fault-code")
+        );
+        if late {
+            assert_eq!(l.channel.splice.state(), SPLICE_MISSED);
+            assert!(bit("nurbs_interp.held") && bit("nurbs_interp.underrun"));
+            assert_exact(
+                "butterfly up to the cut",
+                &got[..=at_sample as usize],
+                &job.samples[..=at_sample as usize],
+                2,
+            );
+            assert!(got.len() > at_sample as usize + 1, "a stop after the cut");
+            let mut held = got.clone();
+            hold_position(&mut held);
+            assert_eq!(violations(&job, &held, false), Vec::<String>::new());
+            println!(
+                "late: stopped {} samples after the cut",
+                got.len() - at_sample as usize - 1
+            );
+        } else {
+            assert!(bit("nurbs_interp.done"));
+            assert_eq!(l.channel.splice.state(), SPLICE_DONE);
+            assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+            assert_exact("butterfly cut at feed override 0.5", &got, &expected, 2);
+            assert_eq!(violations(&job, &got, true), Vec::<String>::new());
+            // From the ramp's end on, within the new override's feed.
+            let ramp_end = at_sample as usize + (new_slots[0].record.profile().total_time() / PERIOD).ceil() as usize;
+            let cap = 0.5 * job.limits.feed * (1.0 + 1e-9);
+            let fastest = got[ramp_end + 1..].iter().map(|o| o.feed).fold(0.0, f64::max);
+            assert!(fastest <= cap, "feed {fastest} after the ramp, over {cap}");
+            println!(
+                "cut after sample {at_sample} of {}: {} samples at 0.5",
+                job.samples.len(),
+                got.len()
+            );
+        }
+    }
+}
+
 /// A feed override change while a streamed plan of the trident (at F250) runs through the
 /// module (as `nurbs-planner` carries it out): the rest of the motion is planned again from a
 /// group end still in the ring, and the module, asked, drops the old plan's records after it
@@ -620,6 +784,7 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     let changes = [(1000, low), (3000, 1.0)];
     let mut got: Vec<Out> = Vec::new();
     let mut queued_at_change = Vec::new();
+    let mut next_period = 0.0;
     for k in 0..200_000 {
         s.fill().unwrap();
         if let Some(&(_, ov)) = changes.iter().find(|(at, _)| *at == got.len()) {
@@ -629,10 +794,11 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
                 eprintln!("override {ov} at sample {}: {:.3} s queued", got.len(), s.buffered());
             }
         }
-        // The module at twice the real pace.
-        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 2.0 {
-            std::thread::sleep(std::time::Duration::from_micros(200));
+        // The module at twice the real pace at most (never faster to catch up).
+        while began.elapsed().as_secs_f64() < next_period {
+            std::thread::sleep(std::time::Duration::from_micros(100));
         }
+        next_period = began.elapsed().as_secs_f64().max(next_period) + PERIOD / 2.0;
         assert!(!period(), "the update path allocated (period {k})");
         if bit("nurbs_interp.active") {
             got.push(out());
@@ -692,10 +858,10 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     );
     assert!(last_above + 1 < back, "the feed never came under the new cap");
     eprintln!(
-        "joins: {} at a group end in the ring, {} at the end of the slots sent",
-        s.joins_in_ring, s.joins_at_end
+        "joins: {} cutting into a record, {} at a group end in the ring, {} at the end of the slots sent",
+        s.cuts, s.joins_in_ring, s.joins_at_end
     );
-    assert!(s.joins_in_ring >= 1, "no join inside the ring");
+    assert!(s.cuts + s.joins_in_ring >= 1, "no join inside the ring");
     // Slower at 50 % for a while: the motion takes longer than the plan at 100 %.
     assert!(got.len() > unchanged.len());
 }
@@ -707,7 +873,7 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
 /// is the plan's bit for bit, and the join reports done.
 #[test]
 fn the_module_joins_a_new_plan_at_a_queued_group_end_and_drops_the_old_records() {
-    use nurbs_hal::channel::{SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_MISSED};
+    use nurbs_hal::channel::{Join, AT_RECORD_END, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_MISSED};
     let _guard = lock_module();
     let job = job("butterfly.json");
     let slots = slots_of(&job);
@@ -732,15 +898,17 @@ fn the_module_joins_a_new_plan_at_a_queued_group_end_and_drops_the_old_records()
     while taken() <= ends[0] + 1 {
         step(&mut got);
     }
-    assert!(l
-        .channel
-        .splice
-        .request(base.wrapping_add(ends[0] as u32), ring.pushed()));
+    let at_end = |k: usize| Join {
+        after: base.wrapping_add(k as u32),
+        drop_to: ring.pushed(),
+        at_sample: AT_RECORD_END,
+    };
+    assert!(l.channel.splice.request(at_end(ends[0])));
     step(&mut got);
     assert_eq!(l.channel.splice.state(), SPLICE_MISSED, "a join behind the module");
     // A group end still queued: accepted; the records after it again, as the new plan.
     let join = *ends.iter().find(|&&k| k > taken()).unwrap();
-    assert!(l.channel.splice.request(base.wrapping_add(join as u32), ring.pushed()));
+    assert!(l.channel.splice.request(at_end(join)));
     step(&mut got);
     assert_eq!(l.channel.splice.state(), SPLICE_ACCEPTED);
     for s in &slots[join + 1..] {

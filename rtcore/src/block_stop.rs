@@ -3,7 +3,7 @@
 //! check the stop from every block end.
 
 use crate::records::{PathBlock, SegmentRecord, FLAG_LAST};
-use crate::scurve::{stop_from, SCurveTable};
+use crate::scurve::{stop_from, SCurve, SCurveTable};
 
 /// Distance into a stop profile at which its (falling) feed has come down to `v` (a 60-step
 /// bisection).
@@ -131,4 +131,94 @@ pub fn stop_record(from: &StopStart, accel: f64, jerk: f64) -> (SegmentRecord, f
         jerks: p.jerks,
     };
     (record, if p.feed_start > 0.0 { a0 } else { 0.0 })
+}
+
+/// The change of feed from `from` (a sample of a running motion) to at most `feed`, ending with
+/// zero tangential acceleration, along its element: what a plan at another feed override starts
+/// with where it cuts into a record that is running (the module runs it from that sample with
+/// [`SCurve::table_from`]`(from.accel)`, the planner checked exactly that). Down to `feed` with
+/// deceleration `accel` and jerk `jerk` ([`stop_from`] of the difference) where that is below
+/// the feed reached by releasing the acceleration at once; otherwise that release alone (jerk
+/// `jerk` against the acceleration until it is zero; where that would reverse, the record
+/// fails its check). Returns the record and its start
+/// acceleration, as [`stop_record`] does.
+pub fn ramp_record(from: &StopStart, feed: f64, accel: f64, jerk: f64) -> (SegmentRecord, f64) {
+    let (v0, a0) = (from.feed.max(0.0), from.accel);
+    let released = v0 + a0 * libm::fabs(a0) / (2.0 * jerk);
+    let p = if feed < released && feed < v0 && feed >= 0.0 {
+        SCurve {
+            feed_start: v0,
+            ..stop_from(v0 - feed, a0, accel, jerk)
+        }
+    } else {
+        let mut p = SCurve {
+            feed_start: v0,
+            ..SCurve::default()
+        };
+        if a0 != 0.0 && jerk > 0.0 {
+            p.durations[0] = libm::fabs(a0) / jerk;
+            p.jerks[0] = if a0 > 0.0 { -jerk } else { jerk };
+        }
+        p
+    };
+    let record = SegmentRecord {
+        seq: from.seq,
+        flags: from.flags,
+        curve: from.curve,
+        reserved: 0,
+        u_start: from.u,
+        u_end: from.u,
+        s_start: from.s,
+        length: p.table_from(a0).length().max(0.0),
+        feed_start: p.feed_start,
+        durations: p.durations,
+        jerks: p.jerks,
+    };
+    (record, a0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ramp ends at the feed asked for (or, where releasing the acceleration already ends
+    /// below it, at that release's feed) with zero acceleration, and passes its own record check.
+    #[test]
+    fn a_ramp_ends_at_its_feed_with_zero_acceleration() {
+        let (a, j) = (1.0e4, 6.0e4);
+        for v0 in [1.0, 50.0, 400.0] {
+            for a0 in [-3.0e3, -100.0, 0.0, 100.0, 3.0e3] {
+                for feed in [0.0, 0.1 * v0, 0.5 * v0, v0, 2.0 * v0] {
+                    let from = StopStart {
+                        seq: 7,
+                        flags: 0,
+                        curve: 2,
+                        u: 0.25,
+                        s: 3.0,
+                        feed: v0,
+                        accel: a0,
+                    };
+                    let (r, a_start) = ramp_record(&from, feed, a, j);
+                    assert_eq!(a_start, a0);
+                    let end = r.profile().table_from(a0).end();
+                    let released = v0 + a0 * a0.abs() / (2.0 * j);
+                    if released < 0.0 {
+                        // Releasing at once reverses: no ramp (the planner's check refuses it).
+                        assert!(r.check_from(a0).is_err());
+                        continue;
+                    }
+                    let expected = if feed < released && feed < v0 { feed } else { released };
+                    let what = format!("v0 {v0} a0 {a0} feed {feed}");
+                    assert!(
+                        (end.v - expected).abs() < 1e-9 * (1.0 + v0),
+                        "{what}: end feed {}",
+                        end.v
+                    );
+                    assert!(end.a.abs() < 1e-6 * (1.0 + a0.abs()), "{what}: end accel {}", end.a);
+                    assert!(r.jerks.iter().all(|x| x.abs() <= j * (1.0 + 1e-12)), "{what}");
+                    assert_eq!(r.check_from(a0), Ok(()), "{what}");
+                }
+            }
+        }
+    }
 }

@@ -116,6 +116,12 @@ impl SegmentRecord {
     /// Structural checks that need no curve: finite numbers, ordered parameters, non-negative
     /// durations and feeds, and a profile whose distance matches `length`.
     pub fn check(&self) -> Result<(), RecordError> {
+        self.check_from(0.0)
+    }
+
+    /// [`Self::check`] of a record whose profile starts with tangential acceleration
+    /// `accel_start` (one that cuts into a running motion, [`crate::block_stop::ramp_record`]).
+    pub fn check_from(&self, accel_start: f64) -> Result<(), RecordError> {
         let values = [self.u_start, self.u_end, self.s_start, self.length, self.feed_start];
         if values
             .iter()
@@ -134,7 +140,10 @@ impl SegmentRecord {
         if self.u_end < self.u_start {
             return Err(RecordError::ParameterOrder);
         }
-        let end = self.profile().table().end();
+        if !accel_start.is_finite() {
+            return Err(RecordError::NotFinite);
+        }
+        let end = self.profile().table_from(accel_start).end();
         let scale = 1.0 + self.length;
         if (end.s - self.length).abs() > 1e-6 * scale || end.v < -1e-9 || end.a.abs() > 1e-6 * (1.0 + end.v) {
             return Err(RecordError::Inconsistent);

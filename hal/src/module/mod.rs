@@ -58,7 +58,7 @@ use nurbs_rtcore::{CurveView, StopRun};
 
 use crate::channel::{
     check_curve, stop_points, trusted_curve, validate_header, Channel, GeometryHeader, GeometryStream, Report,
-    StopPoint, ValueCursor, CHANNEL_KEY, SPLICE_ACCEPTED, SPLICE_MISSED,
+    StopPoint, ValueCursor, AT_RECORD_END, CHANNEL_KEY, SPLICE_ACCEPTED, SPLICE_MISSED,
 };
 use crate::pins::Pin;
 use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
@@ -376,11 +376,12 @@ impl Instance {
         self.hand_over(channel);
     }
 
-    /// The planner asks to join a plan at another feed override after a group end still ahead
-    /// ([`crate::channel::Splice`]): accepted while a segment motion runs on undisturbed (no
-    /// stop begun or asked for) and the record `after` is the one running or one queued, the
-    /// last of its group, with `drop_to` beyond it within the queue; otherwise missed. An
-    /// accepted join the motion stops before is missed too.
+    /// The planner asks to join a plan at another feed override ([`crate::channel::Splice`]):
+    /// accepted while a segment motion runs on undisturbed (no stop begun or asked for) and the
+    /// record `after` is the one running or one queued, with `drop_to` beyond it within the
+    /// queue, and the join is at its end where it ends a group, or cuts into it at a sample still
+    /// ahead that has a checked hold stop; otherwise missed. An accepted join the motion stops
+    /// before is missed too.
     fn answer_splice(&mut self, channel: &Channel, stop_asked: bool) {
         let running = self.mode == Mode::Segments
             && self.fault == FaultCode::None
@@ -391,23 +392,37 @@ impl Instance {
         if channel.splice.accepted().is_some() && !running {
             channel.splice.answer(SPLICE_MISSED);
         }
-        let Some((after, drop_to)) = channel.splice.requested() else {
+        let Some(join) = channel.splice.requested() else {
             return;
         };
         let ring = channel.segments.consumer();
         let (taken, queued) = (ring.taken(), ring.len() as u32);
         // Places after the oldest queued record: -1 is the record running.
-        let at = after.wrapping_sub(taken) as i32;
-        let drop_at = drop_to.wrapping_sub(taken) as i32;
-        let group_end = match at {
-            -1 => self.segment_player.slot.group_left == 1,
-            i if i >= 0 && (i as u32) < queued => matches!(
-                ring.peek_at(i as u32).map(|s| s.and_then(|s| s.decode())),
-                Ok(Some(Record::Segment(slot))) if slot.group_left == 1
-            ),
-            _ => false,
+        let at = join.after.wrapping_sub(taken) as i32;
+        let drop_at = join.drop_to.wrapping_sub(taken) as i32;
+        let slot = match at {
+            -1 => Some(self.segment_player.slot),
+            i if i >= 0 && (i as u32) < queued => match ring.peek_at(i as u32).map(|s| s.and_then(|s| s.decode())) {
+                Ok(Some(Record::Segment(slot))) => Some(slot),
+                _ => None,
+            },
+            _ => None,
         };
-        let ok = running && group_end && at < drop_at && drop_at >= 0 && drop_at as u32 <= queued;
+        let place_ok = slot.is_some_and(|slot| {
+            if join.at_sample == AT_RECORD_END {
+                slot.group_left == 1
+            } else {
+                // A cut at a sample still ahead that has a checked hold stop: the stop the
+                // motion takes there should the new plan not be in the ring by then.
+                let ahead = at >= 0 || self.segment_player.samples <= join.at_sample;
+                ahead
+                    && matches!(
+                        segments::hold_stop_at(&slot, self.geometry.values(), join.at_sample),
+                        Ok(Some(_))
+                    )
+            }
+        });
+        let ok = running && place_ok && at < drop_at && drop_at >= 0 && drop_at as u32 <= queued;
         channel.splice.answer(if ok { SPLICE_ACCEPTED } else { SPLICE_MISSED });
     }
 

@@ -3,7 +3,7 @@
 //! inside a record ([`hold_stop_at`]).
 
 use super::*;
-use crate::channel::{Consumer, Splice, SEGMENT_SLOTS, SPLICE_DONE};
+use crate::channel::{Consumer, Join, Splice, AT_RECORD_END, SEGMENT_SLOTS, SPLICE_DONE, SPLICE_MISSED};
 use crate::slot::Slot;
 
 /// Where a segment-record motion stands: the slot of the record it runs and what is left of a
@@ -44,7 +44,7 @@ impl ChainCursor {
         }
         let r = SegmentRecord::from_words(&bits).ok_or(FaultCode::Record)?;
         let last = self.left == 1;
-        if r.seq != self.seq || check_record(&r).is_err() || (last && !ends_at_rest(&r)) {
+        if r.seq != self.seq || check_record(&r, 0.0).is_err() || (last && !ends_at_rest(&r)) {
             return Err(FaultCode::Record);
         }
         self.next = end;
@@ -89,9 +89,9 @@ impl SegmentSource<'_> {
         if at_group_end {
             // A plan at another feed override joins here: the old plan's records after this
             // group are dropped.
-            if let Some((after, drop_to)) = self.splice.accepted() {
-                if self.ring.taken().wrapping_sub(1) == after {
-                    if self.ring.skip_to(drop_to).is_err() {
+            if let Some(join) = self.splice.accepted().filter(|j| j.at_sample == AT_RECORD_END) {
+                if self.ring.taken().wrapping_sub(1) == join.after {
+                    if self.ring.skip_to(join.drop_to).is_err() {
                         *self.pull = Pull::Fault(FaultCode::Channel);
                         return None;
                     }
@@ -146,30 +146,36 @@ impl SegmentSource<'_> {
         Some(r)
     }
 
-    /// A slot's checks before its record runs: sequence, the resume point, structure of the
-    /// record, its stop (a record ending at rest, next in sequence) and its group fields.
+    /// A slot's checks before its record runs ([`check_slot`]).
     pub(super) fn check(&self, next: &SegmentSlot) -> Result<(), FaultCode> {
-        let r = &next.record;
-        if r.seq != *self.next_seq {
-            return Err(FaultCode::Sequence);
-        }
-        if self.resume_from.is_some_and(|h| !starts_at(r, &h)) {
-            return Err(FaultCode::ResumePoint);
-        }
-        check_record(r).map_err(|_| FaultCode::Record)?;
-        if !next.is_consistent() {
+        check_slot(next, *self.next_seq, self.resume_from, 0.0)
+    }
+}
+
+/// A slot's checks before its record runs: sequence (`next_seq`), the resume point, structure
+/// of the record (its profile started with tangential acceleration `accel_start`), its stop (a
+/// record ending at rest, next in sequence) and its group fields.
+fn check_slot(next: &SegmentSlot, next_seq: u32, resume_from: Option<Held>, accel_start: f64) -> Result<(), FaultCode> {
+    let r = &next.record;
+    if r.seq != next_seq {
+        return Err(FaultCode::Sequence);
+    }
+    if resume_from.is_some_and(|h| !starts_at(r, &h)) {
+        return Err(FaultCode::ResumePoint);
+    }
+    check_record(r, accel_start).map_err(|_| FaultCode::Record)?;
+    if !next.is_consistent() {
+        return Err(FaultCode::Record);
+    }
+    if let Some(stop) = next.stop() {
+        // A one-record stop ends at rest; a chain's last record does (checked as it comes).
+        let at_rest = next.chain_len > 0 || ends_at_rest(stop);
+        let ok = stop.seq == r.seq.wrapping_add(1) && stop.curve <= next.curve_needed && at_rest;
+        if !ok || check_record(stop, 0.0).is_err() {
             return Err(FaultCode::Record);
         }
-        if let Some(stop) = next.stop() {
-            // A one-record stop ends at rest; a chain's last record does (checked as it comes).
-            let at_rest = next.chain_len > 0 || ends_at_rest(stop);
-            let ok = stop.seq == r.seq.wrapping_add(1) && stop.curve <= next.curve_needed && at_rest;
-            if !ok || check_record(stop).is_err() {
-                return Err(FaultCode::Record);
-            }
-        }
-        Ok(())
     }
+    Ok(())
 }
 
 /// What the record source saw while the interpolator pulled records.
@@ -243,7 +249,10 @@ impl Instance {
                         Ok(None) => {}
                         Err(code) => self.fault = code,
                     }
+                } else if let Some(join) = channel.splice.accepted().filter(|j| j.at_sample == n) {
+                    self.cut_in(channel, &s, join);
                 }
+                channel.splice.report_samples(self.segment_player.samples);
                 true
             }
             (Step::Finished, _) => false,
@@ -300,6 +309,62 @@ impl Instance {
         }
     }
 
+    /// A plan at another feed override cuts in after sample `s` (just output, motion sample
+    /// `join.at_sample` of record `join.after`; [`crate::channel::Splice`]): the old plan's
+    /// records are dropped up to `join.drop_to`, and the new plan's first record, which starts at
+    /// this very sample (its feed changing from the sample's feed and acceleration), runs from
+    /// here. Where the new plan's first group is not whole in the ring (its planner came late),
+    /// the join is missed and the motion stops with the checked hold stop at this sample (the
+    /// join was accepted only with one there), as an underrun.
+    fn cut_in(&mut self, channel: &Channel, s: &Sample, join: Join) {
+        let ring = channel.segments.consumer();
+        let skip = join.drop_to.wrapping_sub(ring.taken());
+        let queued = ring.len() as u32;
+        let in_record = ring.taken().wrapping_sub(1) == join.after;
+        let first = match ring.peek_at(skip) {
+            Ok(Some(slot)) if in_record && skip < queued => slot.decode(),
+            _ => None,
+        };
+        let next = match first {
+            Some(Record::Segment(next))
+                if queued - skip >= next.group_left
+                    && next.curve_needed < self.geometry.checked
+                    && starts_at_sample(&next.record, s) =>
+            {
+                next
+            }
+            _ => {
+                channel.splice.answer(SPLICE_MISSED);
+                match hold_stop_at(&self.segment_player.slot, self.geometry.values(), join.at_sample) {
+                    Ok(Some((accel, jerk))) => self.stop_here(s, accel, jerk, false, false),
+                    Ok(None) | Err(_) => self.fault = FaultCode::Record,
+                }
+                return;
+            }
+        };
+        let seq = self.segment_player.slot.record.seq.wrapping_add(1);
+        if let Err(code) = check_slot(&next, seq, None, s.accel) {
+            self.fault = code;
+            return;
+        }
+        if ring.skip_to(join.drop_to).is_err() || !matches!(ring.pop(), Ok(Some(_))) {
+            self.fault = FaultCode::Channel;
+            return;
+        }
+        let r = next.record;
+        let table = r.profile().table_from(s.accel);
+        if !self.interp.start_profile(&self.geometry, r, table) {
+            self.fault = FaultCode::BadRecord;
+            return;
+        }
+        self.next_seq = r.seq.wrapping_add(1);
+        self.segment_player.slot = next;
+        self.records = self.records.wrapping_add(1);
+        self.taken_time += table.total_time();
+        self.pins.seq.set(r.seq);
+        channel.splice.answer(SPLICE_DONE);
+    }
+
     /// Stops from sample `s` (just output) with the checked deceleration and jerk of a hold stop
     /// inside the current record ([`SegmentSlot::hold_stops_offset`]): the record the planner
     /// simulated, started from that sample; nothing is taken from the ring any more.
@@ -331,7 +396,7 @@ impl Instance {
 /// The triples are in increasing sample order: a binary search, at most 17 probes (their count
 /// is at most [`crate::slot::MAX_HOLD_STOPS`], checked when the slot was taken), so a period
 /// under hold costs the same whatever the record's length.
-fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
+pub(super) fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
     if slot.hold_stops_len == 0 {
         return Ok(None);
     }
@@ -367,6 +432,15 @@ fn ends_at_rest(r: &SegmentRecord) -> bool {
     r.profile().table().end().v <= FEED_ROUNDING
 }
 
+/// True if `r` starts exactly at sample `s`: its element, parameter, arc length and feed (a
+/// record that cuts into a running one, [`nurbs_rtcore::block_stop::ramp_record`]).
+fn starts_at_sample(r: &SegmentRecord, s: &Sample) -> bool {
+    r.curve() == s.curve
+        && r.u_start.to_bits() == s.u.to_bits()
+        && r.s_start.to_bits() == s.s.to_bits()
+        && r.feed_start.to_bits() == s.feed.to_bits()
+}
+
 /// True if `r` starts at rest exactly at `held` (element, parameter and arc length as held).
 fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
     held.is_at(r.curve(), r.u_start, r.s_start) && r.feed_start == 0.0
@@ -376,13 +450,13 @@ fn starts_at(r: &SegmentRecord, held: &Held) -> bool {
 /// can come out a few ulps below zero where the path stops (seen: -2.8e-14 mm/s).
 const FEED_ROUNDING: f64 = 1e-9;
 
-/// `SegmentRecord::check`, except that a start feed within [`FEED_ROUNDING`] below zero counts
-/// as zero. Only the check sees the adjusted copy: the record runs as sent, so the motion stays
-/// the one the planner simulated.
-fn check_record(r: &SegmentRecord) -> Result<(), nurbs_rtcore::RecordError> {
+/// `SegmentRecord::check_from(accel_start)`, except that a start feed within
+/// [`FEED_ROUNDING`] below zero counts as zero. Only the check sees the adjusted copy: the record
+/// runs as sent, so the motion stays the one the planner simulated.
+fn check_record(r: &SegmentRecord, accel_start: f64) -> Result<(), nurbs_rtcore::RecordError> {
     let mut checked = *r;
     if (-FEED_ROUNDING..0.0).contains(&checked.feed_start) {
         checked.feed_start = 0.0;
     }
-    checked.check()
+    checked.check_from(accel_start)
 }

@@ -52,7 +52,7 @@ def ini_limits(path, joints):
 
 def read(path, joints):
     """Recorder lines: sample number, drive commands, following errors and motion's pos-cmd of
-    each joint, our x y z, engaged, active, u, feed, curve."""
+    each joint, our x y z, engaged, active, u, feed, curve, the operator's feed override."""
     rows = []
     J = joints
     with open(path) as f:
@@ -64,6 +64,7 @@ def read(path, joints):
                 "n": int(x[0]), "drive": f_[0:J], "ferror": f_[J : 2 * J], "pos_cmd": f_[2 * J : 3 * J],
                 "ours": f_[3 * J : 3 * J + 3], "engaged": x[b] == "1", "active": x[b + 1] == "1",
                 "u": float(x[b + 2]), "feed": float(x[b + 3]), "curve": int(x[b + 4]),
+                "override": float(x[b + 5]),
             })
     return rows
 
@@ -219,9 +220,14 @@ def check_window(rows, e0, e1, offline, recorded, offset, vmax, amax, jmax, T, w
             fail(f"{offline}: {len(ours)} setpoints at 10 %, {len(plan)} planned at 100 %: not slower")
         if settled >= len(ours) - 1:
             fail(f"{offline}: the feed never came under the override's {cap:g} mm/s")
-        override_text = (f", override 10 % at setpoint {k0}: the new plan from setpoint {same} "
-                         f"({(same - k0) * T * 1e3:.1f} ms after the knob), the feed under {cap:g} mm/s from "
-                         f"setpoint {settled} to the end")
+        # Where the override pin (halui.feed-override.value, non-realtime) changed.
+        k1 = next((k for k, r in enumerate(ours) if k >= k0 and r["override"] < 0.5), len(ours))
+        if same < k1:
+            fail(f"{offline}: the plan changed at setpoint {same}, before the override pin did ({k1})")
+        override_text = (f", override 10 % at setpoint {k0}, on the pin at {k1} "
+                         f"({(k1 - k0) * T * 1e3:.1f} ms later): the new plan from setpoint {same} "
+                         f"({(same - k1) * T * 1e3:.1f} ms after the pin, {(same - k0) * T * 1e3:.1f} ms after "
+                         f"the knob), the feed under {cap:g} mm/s from setpoint {settled} to the end")
     if action == "pause":
         if same < int(0.25 / T) or same == len(ours):
             fail(f"{offline}: {same} setpoints as planned, {len(ours)} in all: not a hold after 0.25 s")
