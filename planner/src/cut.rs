@@ -11,7 +11,7 @@
 //! is checked the same way, continuing the ramp's. Should the new plan not be in the ring by
 //! the sample, the module takes the hold stop there instead (an underrun).
 
-use crate::hold_stops::{tangential_limits, INSIDE, SOFTER, TRIES};
+use crate::hold_stops::{tangential_limits, INSIDE, STOP_SCALES};
 use nurbs_motion::geometry::ArcLengthTable;
 use nurbs_motion::planner::erwinski::PlanStart;
 use nurbs_motion::planner::simulate::SimState;
@@ -21,23 +21,36 @@ use nurbs_rtcore::block_stop::{ramp_record, StopStart};
 use nurbs_rtcore::interpolator::{Sample, Step};
 use nurbs_rtcore::SegmentRecord;
 
-/// Where a cut comes, as the streamer knows it: the records of the group it comes in.
+/// Where a cut may come, as the streamer knows it: the records of the group it comes in and
+/// their checked hold stops ahead of the module.
 #[derive(Clone, Debug)]
 pub struct CutFrom {
     /// The motion's state before the first of `records` (the module's, sample for sample).
     pub begin: SimState,
-    /// The old plan's records from there, the last the one cut into.
+    /// The old plan's records from there (a group).
     pub records: Vec<SegmentRecord>,
-    /// The motion sample after which the cut comes (one with a checked hold stop inside the
-    /// last record).
-    pub at_sample: u64,
+    /// The samples a cut may come after, in order: (index in `records`, motion sample), each
+    /// with a checked hold stop inside that record (the stop the module takes should the new
+    /// plan come late).
+    pub candidates: Vec<(usize, u64)>,
     /// The feed override of the old plan.
     pub feed_override: f64,
 }
 
-/// A cut, checked: the new plan's first record and where the plan after it starts.
+/// Where a cut comes: the record cut into (index in [`CutFrom::records`]), the motion sample
+/// after which, and the motion time of that record left after it (the module drops it).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CutPlace {
+    pub record: usize,
+    pub at_sample: u64,
+    pub dropped_time: f64,
+}
+
+/// A cut, checked: where it comes, the new plan's first record and where the plan after it
+/// starts.
 #[derive(Clone, Debug)]
 pub struct Cut {
+    pub place: CutPlace,
     /// The change of feed from the sample cut at, and its start acceleration.
     pub ramp: SegmentRecord,
     pub accel_start: f64,
@@ -47,21 +60,20 @@ pub struct Cut {
     /// Where the plan after the ramp starts, and its feed there.
     pub start: PlanStart,
     pub feed: f64,
-    /// Motion time of the record cut into that is left after the cut (the module drops it).
-    pub dropped_time: f64,
 }
 
 /// Ramps a cut may try, in order ([`cut_into`]): the plan after one may be refused where the
 /// next passes (from a lower feed it can still slow down for what lies ahead).
 pub const CUT_RAMPS: usize = 3;
 
-/// The cut described by `from` at feed override `feed_override` with its ramp number `choice`
-/// (of [`CUT_RAMPS`]): the module's motion up to the sample, then a ramp that passes the
-/// finite-difference check and stays on its element. Where the override goes down, the ramps
-/// aim at the sample's feed scaled by the change, at half that, and at the feed reached by only
-/// releasing the acceleration; where it goes up, at that release (the plan after it speeds up),
-/// at half the sample's feed and at a fifth. Each with the tangential deceleration and jerk the
-/// axes allow there, softened up to [`TRIES`] times.
+/// The first cut of `from`'s candidates at feed override `feed_override` with ramp number
+/// `choice` (of [`CUT_RAMPS`]): the module's motion up to the sample, then a ramp that passes
+/// the finite-difference check and stays on its element. Where the override goes down, the
+/// ramps aim at the sample's feed scaled by the change, at half that, and at the feed reached
+/// by only releasing the acceleration; where it goes up, at that release (the plan after it
+/// speeds up), at half the sample's feed and at a fifth. Each with the tangential deceleration
+/// and jerk the axes allow there, softened in turn ([`STOP_SCALES`]). Where the plan brakes
+/// hard into sharp curvature no ramp passes: the next candidate is tried.
 pub fn cut_into(
     curves: &mut PathCurves,
     limits: &Limits,
@@ -69,7 +81,9 @@ pub fn cut_into(
     feed_override: f64,
     choice: usize,
 ) -> Result<Cut, String> {
-    let last = *from.records.last().ok_or("a cut into no record")?;
+    if choice >= CUT_RAMPS {
+        return Err("no more ramps to try".into());
+    }
     for r in &from.records {
         if !curves.load(r.curve()) {
             return Err(format!("the path has no element {}", r.curve()));
@@ -78,58 +92,75 @@ pub fn cut_into(
     let (tip, dt) = (limits.velocity.len(), limits.period);
     let mut state = from.begin;
     let mut queue = from.records.iter().copied();
-    let sample = loop {
-        match state.interp.step(curves, dt, &mut || queue.next()) {
-            Step::Sample(s) => {
-                let n = state.samples as u64;
-                state.samples += 1;
-                state.check.push(&s.point[..tip], limits);
-                state.last_sample = Some(s);
-                if n >= from.at_sample {
-                    break s;
+    let mut tried = 0;
+    for &(record, at_sample) in &from.candidates {
+        // The motion up to the candidate's sample.
+        let sample = loop {
+            match state.interp.step(curves, dt, &mut || queue.next()) {
+                Step::Sample(s) => {
+                    let n = state.samples as u64;
+                    state.samples += 1;
+                    state.check.push(&s.point[..tip], limits);
+                    state.last_sample = Some(s);
+                    if n >= at_sample {
+                        break s;
+                    }
                 }
+                _ => return Err(format!("motion sample {at_sample} is not in the records given")),
             }
-            _ => return Err(format!("motion sample {} is not in the records given", from.at_sample)),
+        };
+        let seq = from.records.get(record).map(|r| r.seq);
+        if state.interp.record().map(|r| r.seq) != seq || state.samples as u64 != at_sample + 1 {
+            return Err(format!("motion sample {at_sample} is not in record {seq:?}"));
         }
-    };
-    if state.interp.record().map(|r| r.seq) != Some(last.seq) || state.samples as u64 != from.at_sample + 1 {
-        return Err(format!(
-            "motion sample {} is not in record {}",
-            from.at_sample, last.seq
-        ));
-    }
-    let dropped_time = state.interp.time_left_in_segment();
-    let element = &curves.element(sample.curve).curve;
-    let table = ArcLengthTable::new(element);
-    let length = table.total();
-    let scaled = sample.feed * feed_override / from.feed_override;
-    let targets = if feed_override < from.feed_override {
-        [scaled, 0.5 * scaled, f64::INFINITY]
-    } else {
-        [f64::INFINITY, 0.5 * sample.feed, 0.2 * sample.feed]
-    };
-    let target = *targets.get(choice).ok_or("no more ramps to try")?;
-    let (accel, jerk) = tangential_limits(curves, limits, sample.curve, sample.u);
-    let (mut a, mut j) = (accel * INSIDE, jerk * INSIDE);
-    for _ in 0..TRIES {
-        if let Some(cut) = ramp(
+        tried += 1;
+        if let Some(cut) = ramp_from(
             curves,
             limits,
             &state,
             &sample,
-            last.seq,
-            (target, a, j),
-            (&table, length),
+            feed_override / from.feed_override,
+            choice,
         ) {
-            return Ok(Cut { dropped_time, ..cut });
+            let place = CutPlace {
+                record,
+                at_sample,
+                dropped_time: state.interp.time_left_in_segment(),
+            };
+            return Ok(Cut { place, ..cut });
         }
-        a *= SOFTER;
-        j *= SOFTER * SOFTER;
     }
     Err(format!(
-        "no change of feed from motion sample {} (element {}, feed {:.3} mm/s) towards {target:.3} mm/s passes the limits on its element",
-        from.at_sample, sample.curve, sample.feed
+        "no change of feed (ramp {choice}) passes the limits on its element from any of {tried} checked samples"
     ))
+}
+
+/// The first ramp of [`STOP_SCALES`] of choice `choice` ([`cut_into`]) from `sample` (the
+/// motion's state `before`) for an override `ratio` times the old one.
+fn ramp_from(
+    curves: &PathCurves,
+    limits: &Limits,
+    before: &SimState,
+    sample: &Sample,
+    ratio: f64,
+    choice: usize,
+) -> Option<Cut> {
+    let targets = if ratio < 1.0 {
+        let scaled = sample.feed * ratio;
+        [scaled, 0.5 * scaled, f64::INFINITY]
+    } else {
+        [f64::INFINITY, 0.5 * sample.feed, 0.2 * sample.feed]
+    };
+    let target = *targets.get(choice)?;
+    let element = &curves.element(sample.curve).curve;
+    let table = ArcLengthTable::new(element);
+    let length = table.total();
+    let seq = before.interp.record()?.seq;
+    let (accel, jerk) = tangential_limits(curves, limits, sample.curve, sample.u);
+    STOP_SCALES.iter().find_map(|&(sa, sj)| {
+        let tried = (target, accel * INSIDE * sa, jerk * INSIDE * sj);
+        ramp(curves, limits, before, sample, seq, tried, (&table, length))
+    })
 }
 
 /// The ramp from `sample` (the motion's state `before`) towards `target` with deceleration
@@ -191,6 +222,7 @@ fn ramp(
         }
     }
     Some(Cut {
+        place: CutPlace::default(),
         ramp: record,
         accel_start: a0,
         before: *before,
@@ -201,6 +233,5 @@ fn ramp(
             s: end,
         },
         feed: profile.end().v.max(0.0),
-        dropped_time: 0.0,
     })
 }

@@ -17,7 +17,7 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::sync::Arc;
 use std::time::Instant;
 
-use crate::cut::{cut_into, CutFrom, CUT_RAMPS};
+use crate::cut::{cut_into, CutFrom, CutPlace, CUT_RAMPS};
 use crate::hold_stops::HoldStops;
 use crate::say;
 use crate::writer::{GeometryWriter, Release, WriteError};
@@ -67,9 +67,8 @@ pub struct SegmentGroup {
     /// The motion's state before the group's first record (where a plan at another feed
     /// override that cuts into one of its records replays them from: [`crate::cut`]).
     pub begin: Option<Box<SimState>>,
-    /// The first group of a plan that cuts into a running record: the motion time of that
-    /// record left after the cut, which the module drops (0 otherwise).
-    pub dropped_time: f64,
+    /// The first group of a plan that cuts into a running record: where.
+    pub cut: Option<CutPlace>,
 }
 
 /// The end of a group of a streamed plan: its last record, the planner's state after it, and
@@ -171,7 +170,7 @@ impl Grouper {
             hold_stops,
             end: None,
             begin: self.begin.take(),
-            dropped_time: 0.0,
+            cut: None,
         })
     }
 }
@@ -320,7 +319,7 @@ fn stream_plan_once(
             return Err("a ramp without a stop ended a group".into());
         }
     }
-    let mut dropped_time = cut.as_ref().map(|c| c.dropped_time);
+    let mut cut_place = cut.as_ref().map(|c| c.place);
     let (mut groups, mut longest) = (0usize, 0.0f64);
     // The curves of the group being collected, from `first_curve` on: after a group, those not
     // sent yet; from rest, a new geometry stream from the plan's first curve.
@@ -342,10 +341,10 @@ fn stream_plan_once(
                     next_curve += 1;
                 }
                 let begin = grouper.starts_group().then(|| hold_stops.state());
-                let inside = hold_stops.after(&record.record, planner.curves());
                 let last = record.record;
+                let inside = hold_stops.after(&record.record, planner.curves());
                 if let Some(mut group) = grouper.push(record, inside, begin) {
-                    group.dropped_time = dropped_time.take().unwrap_or(0.0);
+                    group.cut = cut_place.take();
                     groups += 1;
                     longest = longest.max(group.time);
                     group.first_curve = first_curve;
@@ -389,10 +388,7 @@ fn stream_plan_once(
     };
     let what = match start {
         StreamStart::After { .. } => format!("streamed plan at feed override {feed_override} complete"),
-        StreamStart::Cut { from, .. } => format!(
-            "streamed plan at feed override {feed_override} (cutting in after motion sample {}) complete",
-            from.at_sample
-        ),
+        StreamStart::Cut { .. } => format!("streamed plan at feed override {feed_override} (cutting in) complete"),
         StreamStart::Rest(_) => "streamed plan complete".to_string(),
     };
     emit(PlanEvent::Done {
@@ -1260,9 +1256,9 @@ pub struct Replanner {
     /// The override a cut into a running record was refused for (it then joins at a group
     /// end).
     cut_refused: Option<f64>,
-    /// How far ahead of the module a cut comes (s of motion): [`CUT_LEAD`], doubled each time
-    /// the re-plan came too late for one.
-    cut_lead: f64,
+    /// How far ahead of the module it joins (s of motion): [`JOIN_LEAD`], doubled each time
+    /// the re-plan came too late.
+    lead: f64,
 }
 
 /// A re-plan in progress: its events, the groups it has handed out, and how many slots had
@@ -1281,6 +1277,9 @@ struct Pending {
     /// its end, [`AT_RECORD_END`], a group end still queued), or `None`: at the end of the
     /// slots sent.
     join: Option<(u64, u64)>,
+    /// A cut: the slot number of the first record of the group it comes in, until the re-plan
+    /// says where in it ([`SegmentGroup::cut`]; `join` holds the first candidate till then).
+    cut_group: Option<u64>,
     /// The join has been asked of the module (nothing is sent until it answers).
     requested: bool,
 }
@@ -1301,18 +1300,15 @@ const OVERRIDE_STEP: f64 = 1e-3;
 /// re-plan then joins after it instead.
 const REPLAN_LOW_WATER: f64 = 0.05;
 
-/// A re-plan at another feed override joins at the first group end with at least this much
-/// motion queued before it (s): time to plan the first group and ask the module.
-const SPLICE_LEAD: f64 = 0.04;
+/// A re-plan at another feed override joins at least this far (s of motion) ahead of the
+/// module: at the first checked hold stop there (a cut into the record), else at the first
+/// group end with this much motion queued before it. Time to plan its first groups and ask the
+/// module; where that comes too late, the lead doubles, up to [`JOIN_LEAD_MAX`].
+const JOIN_LEAD: f64 = 0.03;
+const JOIN_LEAD_MAX: f64 = 0.32;
 
 /// ... and asks the module only while at least this much is (s).
 const SPLICE_LAST_CALL: f64 = 0.005;
-
-/// A re-plan at another feed override cuts into a record at the first checked hold stop at
-/// least this far (s of motion) ahead of the module: time to plan the first group and ask.
-/// Where that comes too late, the lead doubles, up to [`CUT_LEAD_MAX`].
-const CUT_LEAD: f64 = 0.02;
-const CUT_LEAD_MAX: f64 = 0.32;
 
 impl Source {
     /// The Erwinski plan of the path `open` reads (from its start, or from rest at the stop
@@ -1335,7 +1331,7 @@ impl Source {
                 asked: feed_override,
                 pending: None,
                 cut_refused: None,
-                cut_lead: CUT_LEAD,
+                lead: JOIN_LEAD,
             })),
         }
     }
@@ -1527,9 +1523,9 @@ impl<'a> Streamer<'a> {
     }
 
     /// Where a re-plan at another feed override joins: the first group end in the ring with
-    /// [`SPLICE_LEAD`] of motion queued before it (its slot number and end), or `None`: at the
-    /// end of the slots sent.
-    fn join_point(&mut self) -> Option<(u64, Box<GroupEnd>)> {
+    /// `lead` of motion queued before it (its slot number and end), or `None`: at the end of
+    /// the slots sent.
+    fn join_point(&mut self, lead: f64) -> Option<(u64, Box<GroupEnd>)> {
         let last = self.pushed.checked_sub(1)?;
         self.buffered();
         let (mut queued, mut slots) = (0.0, self.in_ring.iter().peekable());
@@ -1540,38 +1536,37 @@ impl<'a> Streamer<'a> {
             while let Some(&(_, t)) = slots.next_if(|(j, _)| j <= k) {
                 queued += t;
             }
-            if queued >= SPLICE_LEAD {
+            if queued >= lead {
                 return Some((*k, end.clone()));
             }
         }
         None
     }
 
-    /// Where a re-plan at another feed override cuts in: the first checked hold stop at least
-    /// `lead` (s of motion) ahead of the module's last sample, in a record still to run or running
-    /// (its slot number and what the cut needs), or `None`.
+    /// Where a re-plan at another feed override may cut in: the checked hold stops at least
+    /// `lead` (s of motion) ahead of the module's last sample in the first group that has one,
+    /// in records still to run or running (the group's first slot number and what the cut
+    /// needs), or `None`.
     fn cut_point(&mut self, period: f64, lead: f64) -> Option<(u64, Box<CutFrom>)> {
         let taken = self.taken();
         self.buffered();
         let target = self.channel.splice.samples() + (lead / period).ceil() as u64;
-        for g in &self.ring_groups {
-            for (i, samples) in g.hold_samples.iter().enumerate() {
-                let k = g.first + i as u64;
-                if k + 1 < taken {
-                    continue; // run already
-                }
-                if let Some(&at_sample) = samples.iter().find(|&&n| n >= target) {
-                    let from = CutFrom {
-                        begin: *g.begin,
-                        records: g.records[..=i].to_vec(),
-                        at_sample,
-                        feed_override: g.feed_override,
-                    };
-                    return Some((k, Box::new(from)));
-                }
-            }
-        }
-        None
+        self.ring_groups.iter().find_map(|g| {
+            let candidates: Vec<(usize, u64)> = g
+                .hold_samples
+                .iter()
+                .enumerate()
+                .filter(|&(i, _)| g.first + i as u64 + 1 >= taken) // not run already
+                .flat_map(|(i, samples)| samples.iter().filter(|&&n| n >= target).map(move |&n| (i, n)))
+                .collect();
+            let from = CutFrom {
+                begin: *g.begin,
+                records: g.records.clone(),
+                candidates,
+                feed_override: g.feed_override,
+            };
+            (!from.candidates.is_empty()).then(|| (g.first, Box::new(from)))
+        })
     }
 
     /// Every slot has gone into the ring.
@@ -1645,7 +1640,7 @@ impl<'a> Streamer<'a> {
 
     /// Asks for the motion at feed override `feed_override` (the operator's, clamped to what
     /// the machine allows): a streamed plan is planned again at it from the first group end in
-    /// the ring with [`SPLICE_LEAD`] of motion before it (the module drops the old plan's slots
+    /// the ring with [`JOIN_LEAD`] of motion before it (the module drops the old plan's slots
     /// after it there: [`nurbs_hal::channel::Splice`]), else from the end of the last group
     /// sent (or from its start while nothing has been sent), and the motion runs into the new
     /// plan there. 0 (a hold, which the module carries out) and small changes keep the plan.
@@ -1675,23 +1670,24 @@ impl<'a> Streamer<'a> {
         let last_end = self.last_end.clone();
         let (period, may_cut, lead) = match &self.source {
             Source::Segments { replanner: Some(r), .. } => {
-                (r.limits.period, r.cut_refused != Some(feed_override), r.cut_lead)
+                (r.limits.period, r.cut_refused != Some(feed_override), r.lead)
             }
             _ => return,
         };
         let cut = if may_cut { self.cut_point(period, lead) } else { None };
-        let join = if cut.is_some() { None } else { self.join_point() };
+        let join = if cut.is_some() { None } else { self.join_point(lead) };
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
             return;
         };
         let send_from = next_queued as usize;
+        let cut_group = cut.is_some();
         let (start, from, place) = match (cut, &join, &last_end) {
-            (Some((k, cut)), _, _) => {
-                let (at_sample, seq) = (cut.at_sample, cut.records.last().map_or(0, |r| r.seq));
+            (Some((first, cut)), _, _) => {
+                let (at_sample, seq) = (cut.candidates[0].1, cut.records[cut.candidates[0].0].seq);
                 (
                     StreamStart::Cut { from: cut, send_from },
-                    format!("motion sample {at_sample} (inside record {seq})"),
-                    Some((k, at_sample)),
+                    format!("motion sample {at_sample} (inside record {seq}) or a later one"),
+                    Some((first, at_sample)),
                 )
             }
             (None, Some((k, end)), _) => (
@@ -1725,6 +1721,7 @@ impl<'a> Streamer<'a> {
             feed_override,
             began: Instant::now(),
             join: place,
+            cut_group: cut_group.then_some(place.map_or(0, |(k, _)| k)),
             requested: false,
         });
     }
@@ -1798,6 +1795,17 @@ impl<'a> Streamer<'a> {
             }
             return;
         }
+        if let (Some(first), Some(place)) = (p.cut_group, p.groups.front().and_then(|g| g.cut)) {
+            // Where in the group the cut comes.
+            p.join = Some((first + place.record as u64, place.at_sample));
+            p.cut_group = None;
+        }
+        // The motion runs into the new plan only once it could start on it: as much planned
+        // ahead, at the pace, as a motion from rest waits for ([`START_AHEAD`]).
+        let rate = p.queued / p.began.elapsed().as_secs_f64().max(1e-9);
+        if !p.requested && !far_enough_ahead(p.queued, p.total.unwrap_or(f64::INFINITY), rate, START_AHEAD) {
+            return;
+        }
         let (join, requested, asked) = (p.join, p.requested, p.feed_override);
         match join {
             None if p.pushed != pushed => {
@@ -1825,8 +1833,8 @@ impl<'a> Streamer<'a> {
                     return;
                 };
                 if ahead < SPLICE_LAST_CALL || !self.channel.splice.request(join) {
-                    if at_sample != AT_RECORD_END && ahead < SPLICE_LAST_CALL {
-                        r.cut_lead = (2.0 * r.cut_lead).min(CUT_LEAD_MAX);
+                    if ahead < SPLICE_LAST_CALL {
+                        r.lead = (2.0 * r.lead).min(JOIN_LEAD_MAX);
                     }
                     r.pending = None;
                     r.asked = r.feed_override;
@@ -1842,7 +1850,9 @@ impl<'a> Streamer<'a> {
                 SPLICE_ACCEPTED | SPLICE_DONE => {}
                 SPLICE_REQUESTED => return,
                 _ => {
-                    // Missed (too late, or the motion stopped): plan again from a later join.
+                    // Missed (too late, or the motion stopped): plan again from a later join,
+                    // further ahead.
+                    r.lead = (2.0 * r.lead).min(JOIN_LEAD_MAX);
                     r.pending = None;
                     r.asked = r.feed_override;
                     self.set_feed_override(asked);
@@ -1869,7 +1879,7 @@ impl<'a> Streamer<'a> {
             let cut = at_sample != AT_RECORD_END;
             let kept = |j: u64| j < k || (j == k && !cut);
             let mut dropped: f64 = self.in_ring.iter().filter(|&&(j, _)| !kept(j)).map(|&(_, t)| t).sum();
-            let rest = p.groups.front().map_or(0.0, |g| g.dropped_time);
+            let rest = p.groups.front().and_then(|g| g.cut).map_or(0.0, |c| c.dropped_time);
             if let Some(entry) = self.in_ring.iter_mut().find(|(j, _)| *j == k).filter(|_| cut) {
                 // Still queued: the part before the cut stays.
                 entry.1 -= rest;

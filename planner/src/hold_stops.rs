@@ -11,7 +11,7 @@
 //! interpolator and checked by finite differences against the axis limits, continuing the
 //! motion's samples and holding at rest after it, as every stop of the plan is. The deceleration
 //! and jerk start just inside what the axes allow along the tangent there and are lowered
-//! until the stop passes, at most [`TRIES`] times (on a curve the centripetal terms leave less). A stop that would leave the
+//! until the stop passes ([`STOP_SCALES`]; on a curve the centripetal terms leave less). A stop that would leave the
 //! element, or that does not pass, is not offered: the hold waits for the next one (or the
 //! group's end). The module, holding, switches to the first offered stop at or after the
 //! hold's edge, at exactly that sample.
@@ -30,10 +30,20 @@ use nurbs_rtcore::SegmentRecord;
 /// 0.25 ms servo period), if the stop there passes.
 pub const HOLD_STOP_SPACING: u64 = 20;
 
-/// Stops tried at a sample: from the tangential limits, each next one with the deceleration
-/// times [`SOFTER`] and the jerk times its square.
-pub(crate) const TRIES: usize = 6;
-pub(crate) const SOFTER: f64 = 0.6;
+/// Stops tried at a sample, in turn: (deceleration, jerk) as shares of the tangential limits
+/// there. The first steps are small: near sharp curvature the centripetal terms take a few
+/// percent of an axis' jerk, and a much softer stop keeps the feed up for longer, into more
+/// curvature.
+pub(crate) const STOP_SCALES: [(f64, f64); 8] = [
+    (1.0, 1.0),
+    (0.95, 0.9),
+    (0.9, 0.8),
+    (0.8, 0.65),
+    (0.7, 0.5),
+    (0.6, 0.36),
+    (0.45, 0.2),
+    (0.3, 0.1),
+];
 
 /// The first try aims this far inside the tangential limits: at the limits themselves the
 /// rounding of a third difference of positions far from the origin (1e-6 relative at 1 m and
@@ -55,9 +65,20 @@ pub struct HoldStops {
     element_length: Option<ElementLength>,
     /// The motion's last sample.
     last: Option<Sample>,
+    /// Accept stops on straight elements by their profile alone ([`Self::passes_on_line`]);
+    /// off, every stop is simulated (to show that both agree).
+    line_shortcut: bool,
 }
 
 impl HoldStops {
+    /// Simulates every stop, on straight elements too (the check that the shortcut agrees).
+    pub fn simulating_lines(self) -> HoldStops {
+        HoldStops {
+            line_shortcut: false,
+            ..self
+        }
+    }
+
     pub fn new(limits: &Limits) -> HoldStops {
         HoldStops {
             replica: Interpolator::new(),
@@ -66,6 +87,7 @@ impl HoldStops {
             limits: limits.clone(),
             element_length: None,
             last: None,
+            line_shortcut: true,
         }
     }
 
@@ -136,12 +158,12 @@ impl HoldStops {
     }
 
     /// The deceleration and jerk of a stop from sample `s` that stays on its element and within
-    /// the axis limits, if one of [`TRIES`] does.
+    /// the axis limits, if one of [`STOP_SCALES`] does.
     fn check(&mut self, s: &Sample, record: &SegmentRecord, curves: &PathCurves) -> Option<(f64, f64)> {
         let dt = self.limits.period;
         let mut length = self.element_length(s.curve, curves)?;
-        let (accel, jerk) = tangential_limits(curves, &self.limits, s.curve, s.u);
-        let (mut accel, mut jerk) = (accel * INSIDE, jerk * INSIDE);
+        let tangential = tangential_limits(curves, &self.limits, s.curve, s.u);
+        let (accel0, jerk0) = (tangential.0 * INSIDE, tangential.1 * INSIDE);
         let from = StopStart {
             seq: record.seq.wrapping_add(1),
             flags: 0,
@@ -151,16 +173,20 @@ impl HoldStops {
             feed: s.feed,
             accel: s.accel,
         };
-        for _ in 0..TRIES {
+        let line = self.line_shortcut && curves.get(s.curve).is_some_and(|e| is_line(&e.curve));
+        for (sa, sj) in STOP_SCALES {
+            let (accel, jerk) = (accel0 * sa, jerk0 * sj);
             if let Some(landed) = landing_jerk(&from, accel, jerk, dt) {
-                let passed = self.passes(&from, accel, landed, &mut length, curves);
+                let passed = if line {
+                    self.passes_on_line(&from, (accel, landed), tangential, &mut length, curves)
+                } else {
+                    self.passes(&from, accel, landed, &mut length, curves)
+                };
                 self.element_length = Some(length);
                 if passed {
                     return Some((accel, landed));
                 }
             }
-            accel *= SOFTER;
-            jerk *= SOFTER * SOFTER;
         }
         None
     }
@@ -197,6 +223,55 @@ impl HoldStops {
         }
         f.finish(&self.limits);
         f.worst_ratio(&self.limits) <= 1.0 + SLACK
+    }
+
+    /// [`Self::passes`] on a straight element, from the stop's profile alone: on a line every
+    /// axis moves in proportion to the arc length, so a stop whose tangential deceleration and
+    /// jerk stay within `tangential` (the axes' limits along the line) and whose feed stays
+    /// within the axes' velocities keeps every axis within its limits, and so do the finite
+    /// differences of its samples (a third difference is the jerk averaged over three periods
+    /// with a non-negative kernel of unit mass, and the motion is continuous in acceleration
+    /// from the plan into the stop and from the stop, landing just after a sample, to rest).
+    /// What it checks beyond that: the stop stays on the element, and never runs faster than
+    /// the feed the plan may run there (unless it started faster).
+    fn passes_on_line(
+        &self,
+        from: &StopStart,
+        (accel, jerk): (f64, f64),
+        tangential: (f64, f64),
+        length: &mut ElementLength,
+        curves: &PathCurves,
+    ) -> bool {
+        let (stop, a0) = stop_record(from, accel, jerk);
+        let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
+        if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
+            return false;
+        }
+        let table = stop.profile().table_from(a0);
+        // Within the tangential limits (the profile's jerks, and its acceleration at every phase
+        // boundary: it is linear in between), at rest at the end.
+        let (max_accel, max_jerk) = tangential;
+        let jerks_ok = stop.jerks.iter().all(|j| j.abs() <= max_jerk);
+        let accels_ok = table.states.iter().all(|st| st.a.abs() <= max_accel.max(a0.abs()));
+        // The feed peaks where the acceleration crosses zero (a stop that starts accelerating).
+        let peak = if a0 > 0.0 && stop.jerks[0] < 0.0 {
+            table.state_at(a0 / -stop.jerks[0]).v
+        } else {
+            from.feed
+        };
+        let cap = curves
+            .programmed_feed(stop.curve())
+            .map_or(self.limits.feed, |f| f.min(self.limits.feed));
+        let d = curves.view(stop.curve()).derivatives(from.u, 1)[1];
+        let tip = self.limits.velocity.len();
+        let norm = d[..tip].iter().map(|x| x * x).sum::<f64>().sqrt();
+        let velocity_ok = norm > 0.0
+            && d[..tip]
+                .iter()
+                .zip(&self.limits.velocity)
+                .all(|(di, vmax)| peak * (di / norm).abs() <= *vmax);
+        let at_rest = table.end().v.abs() <= 1e-9 * (1.0 + from.feed);
+        jerks_ok && accels_ok && velocity_ok && at_rest && (peak <= cap || peak <= from.feed)
     }
 
     /// Arc length of element `e` (kept for the element the last check was on).
@@ -270,6 +345,13 @@ fn landing_jerk(from: &StopStart, accel: f64, jerk: f64, dt: f64) -> Option<f64>
         }
     }
     None
+}
+
+/// True if `curve` is a straight line through its tool-tip coordinates at a pace uniform in its
+/// parameter (degree 1, two control points, equal weights): its points are linear in the arc
+/// length, and the interpolator's are too, to rounding.
+fn is_line(curve: &nurbs_motion::geometry::Nurbs) -> bool {
+    curve.degree() == 1 && curve.control_point_count() == 2 && curve.weights().windows(2).all(|w| w[0] == w[1])
 }
 
 /// How long after its last sample a hold stop reaches rest (s).

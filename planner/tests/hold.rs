@@ -172,3 +172,31 @@ fn a_feed_override_of_zero_holds_as_hold_does() {
     let _l = load();
     assert_eq!(mock::pin("nurbs_interp.feed-override"), Some(mock::Value::Float(1.0)));
 }
+
+/// On straight elements the planner accepts a hold stop from its profile alone
+/// (`HoldStops::passes_on_line`); simulated through the interpolator and checked by finite
+/// differences instead, every one of them passes and no other does: the same stops, sample for
+/// sample, on a long line and on G1 programs (lines between rounded corners).
+#[test]
+fn stops_on_lines_accepted_by_their_profile_pass_the_simulation() {
+    use nurbs_motion::planner::PathCurves;
+    use nurbs_planner::hold_stops::HoldStops;
+    for (name, job) in [
+        ("2000 mm line", job_of(line(2000.0))),
+        ("star_g1", job("star_g1.ngc")),
+        ("G1 zigzag", job_of(g1_zigzag(40))),
+    ] {
+        let curves = PathCurves::new(&job.toolpath);
+        let mut shortcut = HoldStops::new(&job.limits);
+        let mut simulated = HoldStops::new(&job.limits).simulating_lines();
+        let mut stops = 0;
+        for slot in job.groups.iter().flat_map(|g| &g.slots) {
+            let a = shortcut.after(&slot.record, &curves);
+            let b = simulated.after(&slot.record, &curves);
+            assert_eq!(a, b, "{name}: record {}", slot.record.seq);
+            stops += a.len() / 3;
+        }
+        assert!(stops > 10, "{name}: {stops} stops");
+        println!("{name}: {stops} stops, the same either way");
+    }
+}

@@ -603,7 +603,7 @@ fn cut_case(job: &Job) -> (usize, u64, Vec<SegmentSlot>, Vec<nurbs_rtcore::inter
     let from = CutFrom {
         begin: **group.begin.as_ref().expect("the group's begin state"),
         records: group.slots[..=i].iter().map(|s| s.record).collect(),
-        at_sample,
+        candidates: vec![(i, at_sample)],
         feed_override: 1.0,
     };
     let mut new_slots = Vec::new();
