@@ -8,18 +8,10 @@
 
 mod common;
 
-use common::test_paths::g1_zigzag;
+use common::test_paths::{g1_zigzag, line};
 use common::*;
 use nurbs_hal::mock;
-use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_planner::hold_stops::HOLD_STOP_SPACING;
-
-/// A straight line of `length` mm along X (one element, one segment at lab set 1: the case a
-/// group-end hold ignored for its whole length).
-fn line(length: f64) -> Toolpath {
-    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![length, 0.0]], None).unwrap();
-    Toolpath::single(ElementKind::Polyline, curve)
-}
 
 /// Holds at sample `at`: the samples up to rest (with the machine holding after), and the
 /// latency in samples from the edge to the first sample that is not the plan's (`None` if
@@ -82,17 +74,14 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
         ("dense G1 (600 lines)", job_at(&dense_g1(600, &std::env::temp_dir()))),
         ("2000 mm line", job_of(line(2000.0))),
     ];
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut instants = Instants::new(0x2545_f491_4f6c_dd1d);
     let mut all = Vec::new();
     for (name, job) in &jobs {
         let n = job.samples.len();
         let mut latencies = Vec::new();
         let mut ended = 0;
         for _ in 0..per_path {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            let at = 1 + (seed % (n as u64 - 2)) as usize;
+            let at = instants.next(n - 2);
             let (got, latency) = hold_at(job, at);
             assert_eq!(
                 violations(job, &got, false),
@@ -105,12 +94,7 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
             }
         }
         latencies.sort_unstable();
-        let q = |p: f64| {
-            latencies
-                .get(((latencies.len() as f64 - 1.0) * p) as usize)
-                .copied()
-                .unwrap_or(0)
-        };
+        let q = |p: f64| quantile(&latencies, p);
         println!(
             "{name}: {} holds: latency (samples of {:.2} ms) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them; {ended} in the last group ended at C(1)",
             per_path,

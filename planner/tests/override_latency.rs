@@ -11,19 +11,12 @@
 mod common;
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use common::test_paths::g1_zigzag;
+use common::test_paths::{g1_zigzag, line};
 use common::*;
-use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{PathOpener, Source, Streamer};
-
-/// A straight line of `length` mm along X.
-fn line(length: f64) -> Toolpath {
-    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![length, 0.0]], None).unwrap();
-    Toolpath::single(ElementKind::Polyline, curve)
-}
 
 /// Runs `job`'s streamed plan through the module at the real pace, the override going to
 /// `low` at sample `at`, to the path end.
@@ -37,17 +30,13 @@ fn change_at(job: &Job, at: usize, low: f64) -> (Vec<Out>, Option<usize>, String
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.25, began).unwrap();
     let mut got: Vec<Out> = Vec::new();
-    let mut next = Duration::ZERO;
+    let mut pace = Pace::new(began, 1.0);
     for _ in 0..job.samples.len() + 200_000 {
         s.fill().unwrap();
         if got.len() == at {
             s.set_feed_override(low);
         }
-        // One servo period at a time, never faster to catch up.
-        if let Some(wait) = next.checked_sub(began.elapsed()) {
-            std::thread::sleep(wait);
-        }
-        next = began.elapsed().max(next) + Duration::from_secs_f64(PERIOD);
+        pace.wait();
         assert!(!period(), "the update path allocated");
         if bit("nurbs_interp.active") {
             got.push(out());
@@ -91,7 +80,7 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
         ("dense G1 (600 lines)", job_at(&dense_g1(600, &std::env::temp_dir()))),
         ("2000 mm line", job_of(line(2000.0))),
     ];
-    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut instants = Instants::new(0x9e37_79b9_7f4a_7c15);
     let mut all = Vec::new();
     // `OVERRIDE_PATHS`: only the paths whose names contain it.
     let only = std::env::var("OVERRIDE_PATHS").unwrap_or_default();
@@ -100,12 +89,9 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
         let mut latencies = Vec::new();
         let mut unchanged = 0;
         for _ in 0..per_path {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
             // In the first 90 % of the motion (a change in its last moments may find nothing
             // left to change).
-            let at = 1 + (seed % (n as u64 * 9 / 10)) as usize;
+            let at = instants.next(n * 9 / 10);
             let (got, latency, joins) = change_at(job, at, 0.5);
             assert_eq!(
                 violations(job, &got, true),
@@ -121,12 +107,7 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
             }
         }
         latencies.sort_unstable();
-        let q = |p: f64| {
-            latencies
-                .get(((latencies.len() as f64 - 1.0) * p) as usize)
-                .copied()
-                .unwrap_or(0)
-        };
+        let q = |p: f64| quantile(&latencies, p);
         println!(
             "{name}: {per_path} changes to 50 %: latency (ms) median {:.1}, 90 % {:.1}, worst {:.1}; within 50 ms: {} of them; {unchanged} left the plan unchanged",
             q(0.5) as f64 * PERIOD * 1e3,

@@ -542,11 +542,8 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.5, began).unwrap();
     // The module at 8 times the real pace (the planner is far faster than that here).
-    let mut pace = |k: usize| {
-        while began.elapsed().as_secs_f64() < k as f64 * PERIOD / 8.0 {
-            std::thread::sleep(std::time::Duration::from_micros(200));
-        }
-    };
+    let mut paced = Pace::new(began, 8.0);
+    let mut pace = |_: usize| paced.wait();
     let got = run(&mut s, job.samples.len() + 200_000, &mut pace, &mut |_| {
         bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held")
     });
@@ -784,7 +781,7 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     let changes = [(1000, low), (3000, 1.0)];
     let mut got: Vec<Out> = Vec::new();
     let mut queued_at_change = Vec::new();
-    let mut next_period = 0.0;
+    let mut pace = Pace::new(began, 2.0);
     for k in 0..200_000 {
         s.fill().unwrap();
         if let Some(&(_, ov)) = changes.iter().find(|(at, _)| *at == got.len()) {
@@ -794,11 +791,8 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
                 eprintln!("override {ov} at sample {}: {:.3} s queued", got.len(), s.buffered());
             }
         }
-        // The module at twice the real pace at most (never faster to catch up).
-        while began.elapsed().as_secs_f64() < next_period {
-            std::thread::sleep(std::time::Duration::from_micros(100));
-        }
-        next_period = began.elapsed().as_secs_f64().max(next_period) + PERIOD / 2.0;
+        // The module at twice the real pace at most.
+        pace.wait();
         assert!(!period(), "the update path allocated (period {k})");
         if bit("nurbs_interp.active") {
             got.push(out());

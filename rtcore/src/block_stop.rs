@@ -117,7 +117,13 @@ pub struct StopStart {
 pub fn stop_record(from: &StopStart, accel: f64, jerk: f64) -> (SegmentRecord, f64) {
     let a0 = from.accel;
     let p = stop_from(from.feed, a0, accel, jerk);
-    let record = SegmentRecord {
+    (record_from(from, p, a0), if p.feed_start > 0.0 { a0 } else { 0.0 })
+}
+
+/// The record of profile `p` run from `from` with start acceleration `a0`: on `from`'s element
+/// from its parameter and arc length, as long as the profile runs.
+fn record_from(from: &StopStart, p: SCurve, a0: f64) -> SegmentRecord {
+    SegmentRecord {
         seq: from.seq,
         flags: from.flags,
         curve: from.curve,
@@ -129,8 +135,7 @@ pub fn stop_record(from: &StopStart, accel: f64, jerk: f64) -> (SegmentRecord, f
         feed_start: p.feed_start,
         durations: p.durations,
         jerks: p.jerks,
-    };
-    (record, if p.feed_start > 0.0 { a0 } else { 0.0 })
+    }
 }
 
 /// The change of feed from `from` (a sample of a running motion) to at most `feed`, ending with
@@ -140,8 +145,7 @@ pub fn stop_record(from: &StopStart, accel: f64, jerk: f64) -> (SegmentRecord, f
 /// deceleration `accel` and jerk `jerk` ([`stop_from`] of the difference) where that is below
 /// the feed reached by releasing the acceleration at once; otherwise that release alone (jerk
 /// `jerk` against the acceleration until it is zero; where that would reverse, the record
-/// fails its check). Returns the record and its start
-/// acceleration, as [`stop_record`] does.
+/// fails its check). Returns the record and its start acceleration, as [`stop_record`] does.
 pub fn ramp_record(from: &StopStart, feed: f64, accel: f64, jerk: f64) -> (SegmentRecord, f64) {
     let (v0, a0) = (from.feed.max(0.0), from.accel);
     let released = v0 + a0 * libm::fabs(a0) / (2.0 * jerk);
@@ -161,20 +165,7 @@ pub fn ramp_record(from: &StopStart, feed: f64, accel: f64, jerk: f64) -> (Segme
         }
         p
     };
-    let record = SegmentRecord {
-        seq: from.seq,
-        flags: from.flags,
-        curve: from.curve,
-        reserved: 0,
-        u_start: from.u,
-        u_end: from.u,
-        s_start: from.s,
-        length: p.table_from(a0).length().max(0.0),
-        feed_start: p.feed_start,
-        durations: p.durations,
-        jerks: p.jerks,
-    };
-    (record, a0)
+    (record_from(from, p, a0), a0)
 }
 
 #[cfg(test)]

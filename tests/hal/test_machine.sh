@@ -23,7 +23,7 @@ source "$here/lib.sh"
 repo=$(cd "$here/../.." && pwd)
 work=$(mktemp -d /tmp/nurbs-machine.XXXXXX)
 chmod 755 "$work"
-trap 'hal_cleanup; [ -n "$KEEP_WORK" ] || rm -rf "$work"' EXIT
+trap 'hal_cleanup; [ -n "${KEEP_WORK:-}" ] || rm -rf "$work"' EXIT
 
 mkdir -p "$work/configs"
 cp -r "$repo/configs/nurbs-sim" "$work/configs/"

@@ -316,3 +316,55 @@ pub fn hold_position(run: &mut Vec<Out>) {
 pub fn stop_point(channel: &Channel) -> Option<StopPoint> {
     channel.stop.read()
 }
+
+/// Paces the mock module's periods: at most `speed` times the servo thread's real pace, and
+/// never faster to catch up after a slow period.
+pub struct Pace {
+    began: Instant,
+    next: f64,
+    step: f64,
+}
+
+impl Pace {
+    pub fn new(began: Instant, speed: f64) -> Pace {
+        Pace {
+            began,
+            next: 0.0,
+            step: PERIOD / speed,
+        }
+    }
+
+    /// Waits until the next period is due.
+    pub fn wait(&mut self) {
+        let now = self.began.elapsed().as_secs_f64();
+        if now < self.next {
+            std::thread::sleep(std::time::Duration::from_secs_f64(self.next - now));
+        }
+        self.next = self.began.elapsed().as_secs_f64().max(self.next) + self.step;
+    }
+}
+
+/// Instants at random samples of a motion (a seeded xorshift: the same run every time).
+pub struct Instants(u64);
+
+impl Instants {
+    pub fn new(seed: u64) -> Instants {
+        Instants(seed)
+    }
+
+    /// A sample in `1..=below`.
+    pub fn next(&mut self, below: usize) -> usize {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        1 + (self.0 % below as u64) as usize
+    }
+}
+
+/// The `p` quantile of sorted latencies (0 if there are none).
+pub fn quantile(sorted: &[usize], p: f64) -> usize {
+    sorted
+        .get(((sorted.len() as f64 - 1.0) * p) as usize)
+        .copied()
+        .unwrap_or(0)
+}

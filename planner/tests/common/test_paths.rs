@@ -18,6 +18,12 @@ pub fn g1_zigzag(lines: usize) -> Toolpath {
         .toolpath
 }
 
+/// A straight line of `length` mm along X (one element; one segment of the Erwinski plan).
+pub fn line(length: f64) -> Toolpath {
+    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![length, 0.0]], None).unwrap();
+    Toolpath::single(ElementKind::Polyline, curve)
+}
+
 /// One cubic B-spline of `points` control points 0.1 mm apart along x, waving in y
 /// (0.5 sin(0.05 k)): a single curve of some 4 `points` values.
 pub fn long_spline(points: usize) -> Toolpath {
