@@ -52,7 +52,8 @@ def ini_limits(path, joints):
 
 def read(path, joints):
     """Recorder lines: sample number, drive commands, following errors and motion's pos-cmd of
-    each joint, our x y z, engaged, active, u, feed, curve, the operator's feed override."""
+    each joint, our x y z, engaged, active, u, feed, curve and, where recorded, the operator's
+    feed override."""
     rows = []
     J = joints
     with open(path) as f:
@@ -64,7 +65,8 @@ def read(path, joints):
                 "n": int(x[0]), "drive": f_[0:J], "ferror": f_[J : 2 * J], "pos_cmd": f_[2 * J : 3 * J],
                 "ours": f_[3 * J : 3 * J + 3], "engaged": x[b] == "1", "active": x[b + 1] == "1",
                 "u": float(x[b + 2]), "feed": float(x[b + 3]), "curve": int(x[b + 4]),
-                "override": float(x[b + 5]),
+                # (Recorded by the nurbs-sim machine; the EtherCAT machine has no knob: 1.)
+                "override": float(x[b + 5]) if len(x) > b + 5 else 1.0,
             })
     return rows
 
