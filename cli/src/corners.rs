@@ -5,6 +5,7 @@
 use crate::limits::{LimitArgs, Travel};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
+use nurbs_motion::planner::fit::RunFitter;
 use nurbs_motion::readers::{open_toolpath, ElementStream, ReadError};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
@@ -20,6 +21,11 @@ pub enum RoundCorners {
     Auto,
     /// Round, and fail if the path is not one continuous polyline.
     On,
+    /// Round as `auto` does, then replace each run of short pieces (dense CAM output: lines
+    /// under 1 mm) by a cubic B-spline fitted to the programmed points within the chord
+    /// tolerance, continuous in tangent and curvature: the feed follows the surface the points
+    /// were sampled from instead of the corners between them.
+    Smooth,
     /// Plan the programmed path as is (exact stop at every corner).
     Off,
 }
@@ -33,6 +39,9 @@ pub struct Rounding {
     pub max_deviation: f64,
     /// 5-axis: the same for the top curve (tool axis).
     pub max_top_deviation: Option<f64>,
+    /// `--round-corners smooth`: runs replaced by a fitted spline, and the pieces they held.
+    pub fitted_runs: usize,
+    pub fitted_pieces: usize,
 }
 
 /// The path to plan or verify as a stream: the programmed elements, rounded as they come.
@@ -77,6 +86,12 @@ pub fn open(file: &Path, mode: RoundCorners, limits: &LimitArgs) -> Result<Prepa
                 .map_err(|e| format!("{name}: {e}"))?;
             let stats = rounder.stats();
             (Box::new(rounder), Some(stats))
+        }
+        RoundCorners::Smooth => {
+            let rounder = CornerRounder::new(&name, elements, tolerance, false).map_err(|e| format!("{name}: {e}"))?;
+            let stats = rounder.stats();
+            let fitter = RunFitter::new(rounder, tolerance, Arc::clone(&stats));
+            (Box::new(fitter), Some(stats))
         }
     };
     let elements = match limits.travel()? {
@@ -150,6 +165,8 @@ fn stream_rounding(stats: &Option<Arc<Mutex<RoundingStats>>>) -> Option<Rounding
         corners: stats.corners,
         max_deviation: stats.max_deviation,
         max_top_deviation: stats.top.then_some(stats.max_top_deviation),
+        fitted_runs: stats.fitted_runs,
+        fitted_pieces: stats.fitted_pieces,
     })
 }
 
@@ -159,6 +176,8 @@ pub fn summary_fields(rounding: Option<Rounding>, deviation: Option<f64>) -> ser
         "rounding_corners": rounding.map_or(0, |r| r.corners),
         "rounding_max_deviation_mm": rounding.map(|r| r.max_deviation),
         "rounding_max_top_deviation_mm": rounding.and_then(|r| r.max_top_deviation),
+        "fitted_runs": rounding.map_or(0, |r| r.fitted_runs),
+        "fitted_pieces": rounding.map_or(0, |r| r.fitted_pieces),
         "max_deviation_from_program_mm": deviation,
     })
 }
@@ -168,8 +187,13 @@ pub fn describe(rounding: Option<Rounding>, deviation: Option<f64>, tolerance: f
     let dev = deviation?;
     Some(match rounding {
         Some(r) => format!(
-            "corners: {} rounded within --chord-tol {tolerance} mm (rounding deviation {:.6} mm{}); setpoints within {:.6} mm of the programmed polyline",
+            "corners: {} rounded{} within --chord-tol {tolerance} mm (rounding deviation {:.6} mm{}); setpoints within {:.6} mm of the programmed polyline",
             r.corners,
+            if r.fitted_runs > 0 {
+                format!(", {} runs of {} short pieces fitted", r.fitted_runs, r.fitted_pieces)
+            } else {
+                String::new()
+            },
             r.max_deviation,
             r.max_top_deviation.map_or(String::new(), |t| format!(", top curve {t:.6} mm")),
             dev

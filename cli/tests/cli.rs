@@ -1000,18 +1000,12 @@ fn cli_plan_vpop_and_verify() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// A dense CAM-like G1 program (`scripts/dense-g1.py`, 7,000 lines of 0.02 mm) streamed as the
-/// machine runs it: where back-tracking reaches the records already handed out, the plan
-/// follows the stop chain they rest on only as far as it must, and runs on at the chain's
-/// slower feed, so the motion comes to rest nowhere but at the end; the setpoints pass
-/// `verify`.
-#[test]
-fn a_streamed_dense_program_rests_only_at_its_end() {
-    let dir = scratch_dir("dense-stream");
+/// `scripts/dense-g1.py --lines lines` written to `dir/dense.ngc`.
+fn dense_program(dir: &Path, lines: usize) -> PathBuf {
     let program = dir.join("dense.ngc");
     let generated = Command::new("python3")
         .arg(common::root().join("scripts/dense-g1.py"))
-        .args(["--lines", "7000"])
+        .args(["--lines", &lines.to_string()])
         .output()
         .expect("python3 runs scripts/dense-g1.py");
     assert!(
@@ -1020,6 +1014,48 @@ fn a_streamed_dense_program_rests_only_at_its_end() {
         String::from_utf8_lossy(&generated.stderr)
     );
     std::fs::write(&program, generated.stdout).unwrap();
+    program
+}
+
+/// `--round-corners smooth` on a dense CAM-like G1 program (2,000 lines of 0.02 mm): its runs
+/// of short pieces become fitted splines, the setpoints stay within the chord tolerance of the
+/// programmed polyline and pass `verify`, and the motion takes a fraction of the time it takes
+/// with the corners only rounded (measured: 1/10 on 5,000 lines).
+#[test]
+fn smoothing_a_dense_program_keeps_the_tolerance_and_shortens_the_motion() {
+    let dir = scratch_dir("dense-smooth");
+    let program = dense_program(&dir, 2000);
+    let limits = ["--limits", "lab1", "--feed", "500", "--stream"];
+    let (csv, summary) = (dir.join("smooth.csv"), dir.join("smooth.json"));
+    let smooth = plan_with_summary(
+        &program,
+        &[&limits[..], &["--round-corners", "smooth"]].concat(),
+        &csv,
+        &summary,
+    );
+    assert!(smooth["fitted_runs"].as_u64().unwrap() >= 2, "{smooth}");
+    let deviation = smooth["max_deviation_from_program_mm"].as_f64().unwrap();
+    assert!(deviation <= 0.001, "setpoints {deviation} mm from the program");
+    assert_verifies(&csv, &program, &[&limits[..4], &["--round-corners", "smooth"]].concat());
+    let (csv_auto, summary_auto) = (dir.join("auto.csv"), dir.join("auto.json"));
+    let rounded = plan_with_summary(&program, &limits, &csv_auto, &summary_auto);
+    let (fast, slow) = (
+        smooth["motion_time_s"].as_f64().unwrap(),
+        rounded["motion_time_s"].as_f64().unwrap(),
+    );
+    assert!(fast < 0.3 * slow, "smoothed {fast} s, rounded {slow} s");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A dense CAM-like G1 program (`scripts/dense-g1.py`, 7,000 lines of 0.02 mm) streamed as the
+/// machine runs it: where back-tracking reaches the records already handed out, the plan
+/// follows the stop chain they rest on only as far as it must, and runs on at the chain's
+/// slower feed, so the motion comes to rest nowhere but at the end; the setpoints pass
+/// `verify`.
+#[test]
+fn a_streamed_dense_program_rests_only_at_its_end() {
+    let dir = scratch_dir("dense-stream");
+    let program = dense_program(&dir, 7000);
     let (csv, summary) = (dir.join("dense.csv"), dir.join("dense.json"));
     let limits = ["--limits", "lab1", "--feed", "500"];
     let s = plan_with_summary(&program, &[&limits[..], &["--stream"]].concat(), &csv, &summary);

@@ -25,6 +25,12 @@ pub struct Rounded {
 
 const KNOTS: [f64; 9] = [0.0, 0.0, 0.0, 0.0, 0.5, 1.0, 1.0, 1.0, 1.0];
 
+/// Whether `curve` is a corner spline as [`CornerRounder`] makes them (degree 3, five control
+/// points, its knots).
+pub(super) fn is_corner_spline(curve: &Nurbs) -> bool {
+    curve.degree() == 3 && curve.control_point_count() == 5 && curve.knots() == KNOTS
+}
+
 fn sub(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| x - y).collect()
 }
@@ -138,6 +144,10 @@ pub struct RoundingStats {
     pub max_top_deviation: f64,
     /// A rounded polyline had a top curve.
     pub top: bool,
+    /// Runs of short pieces replaced by one fitted spline each ([`super::fit::RunFitter`]),
+    /// and the pieces they replaced.
+    pub fitted_runs: usize,
+    pub fitted_pieces: usize,
 }
 
 /// Rounds the corners of one polyline as its vertices come, handing out each straight piece

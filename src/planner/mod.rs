@@ -5,6 +5,7 @@
 pub mod axial;
 pub mod corner;
 pub mod erwinski;
+pub mod fit;
 mod limits;
 pub mod presets;
 pub mod simulate;

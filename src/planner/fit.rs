@@ -1,0 +1,874 @@
+//! Smoothing of dense G1 runs: a run of short straight pieces and corner splines (what
+//! [`super::corner::CornerRounder`] makes of CAM output that samples a smooth surface every
+//! few hundredths of a millimetre) is replaced by one cubic B-spline fitted to the programmed
+//! vertices by least squares, within the contour tolerance of the programmed polyline.
+//!
+//! Why: rounding each corner of a 0.02 mm polyline gives a path whose curvature jumps between
+//! zero (the lines) and the corners' peaks every hundredth of a millimetre; the axis jerk that
+//! such a path asks for at speed (the `v³ dκ/ds` term) holds the feed to a few mm/s, although
+//! the surface the points were sampled from allows hundreds. The fitted spline follows that
+//! surface: its curvature is the surface's, smoothed over a few points, and the quantisation of
+//! the coordinates (1e-4 mm in most CAM output) is averaged out instead of turned into
+//! corners. Commercial controls do the same ("compressors", "smoothing"); here the fit is
+//! checked against the programmed polyline both ways (no point of the spline farther than the
+//! tolerance from the polyline, no programmed vertex farther than it from the spline), and
+//! where it cannot be made to pass the run is split, down to the rounded pieces themselves.
+//!
+//! The spline starts and ends where the run does, along the run's first and last tangent and
+//! with zero curvature there (three collinear control points at each end), as the rounded
+//! pieces it replaces do: the path stays continuous in tangent and curvature at both joins.
+
+use super::corner::{is_corner_spline, RoundingStats};
+use crate::geometry::{ElementKind, Nurbs, PathElement};
+use crate::readers::ReadError;
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+
+/// Pieces longer than this (mm, control-polygon length) end a run: long lines and wide corners
+/// keep their rounding, which already lets the feed up.
+pub const SHORT_PIECE: f64 = 1.0;
+/// A run of fewer pieces is left as rounded.
+const MIN_RUN: usize = 8;
+/// Pieces in one fitted spline at most (about 20 mm of a 0.02 mm program). A run this long
+/// is fitted with a free end, and the next one continues it in tangent and curvature.
+const MAX_RUN: usize = 2000;
+/// The first run is cut this short, so that the planner gets its first element early (a run
+/// of `MAX_RUN` pieces takes some 0.1 s to read, round and fit).
+const FIRST_RUN: usize = 200;
+/// Programmed vertices per knot span of the first fit; fewer on each refinement (by half
+/// again as many spans) until the fit passes. The coarsest fit that passes is the smoothest:
+/// the quantisation of the coordinates (1e-4 mm, 5 % of a 0.02 mm step) would turn into
+/// curvature with a few points per span.
+const VERTICES_PER_SPAN: usize = 32;
+/// Share of the contour tolerance a fit may use (the rest covers the sampling of the check).
+const FIT_SHARE: f64 = 0.9;
+/// Extra knots at both ends, as shares of a uniform span ([`fit`]).
+const END_GRADING: [f64; 3] = [0.125, 0.25, 0.5];
+/// Spline points checked per data interval.
+const CHECK_SAMPLES: usize = 8;
+/// Neighbouring data intervals searched for the nearest (the chord-length parameter keeps a
+/// spline point near its interval; a larger distance found only makes the fit refine).
+const WINDOW: usize = 3;
+/// Weight of the control polygon's second differences against the data (keeps spans with
+/// little data from wandering, and the fit from following quantisation noise).
+const SMOOTHING: f64 = 1e-4;
+
+type P3 = [f64; 3];
+
+fn p3(x: &[f64]) -> P3 {
+    let mut p = [0.0; 3];
+    for (a, b) in p.iter_mut().zip(x) {
+        *a = *b;
+    }
+    p
+}
+fn sub3(a: &P3, b: &P3) -> P3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot3(a: &P3, b: &P3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn norm3(a: &P3) -> f64 {
+    dot3(a, a).sqrt()
+}
+fn axpy(p: &P3, d: f64, t: &P3) -> P3 {
+    [p[0] + d * t[0], p[1] + d * t[1], p[2] + d * t[2]]
+}
+fn unit3(a: &P3) -> Option<P3> {
+    let l = norm3(a);
+    (l > 1e-12).then(|| [a[0] / l, a[1] / l, a[2] / l])
+}
+
+/// Distance from `x` to the segment `a`-`b`.
+fn segment_distance3(x: &P3, a: &P3, b: &P3) -> f64 {
+    let ab = sub3(b, a);
+    let ax = sub3(x, a);
+    let l2 = dot3(&ab, &ab);
+    let t = if l2 > 0.0 {
+        (dot3(&ax, &ab) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    norm3(&axpy(&ax, -t, &ab))
+}
+
+/// How a fitted spline meets what comes before or after it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum EndCondition {
+    /// Along the unit tangent `t` with the curvature vector `k` (1/mm): the join of a rounded
+    /// piece (`k` zero) or of the fitted spline before.
+    Fixed { t: P3, k: P3 },
+    /// Only through the end point: the next spline continues this one's tangent and curvature.
+    Free,
+}
+
+/// A run's programmed polyline: vertices (tool tip) and how its ends join.
+struct RunData {
+    vertices: Vec<P3>,
+    chord: Vec<f64>,
+    start: EndCondition,
+    end: EndCondition,
+}
+
+/// The programmed polyline of rounded pieces: a line's end, a corner spline's vertex (its middle
+/// control point) and exit. `start`: how the first piece is joined, where not by its own
+/// tangent; `free_end`: the last piece is continued by another fitted spline.
+fn run_data(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool) -> Option<RunData> {
+    let first = &pieces.first()?.curve;
+    let last = &pieces.last()?.curve;
+    let mut vertices = vec![p3(first.control_point(0))];
+    let mut push = |p: &[f64]| {
+        let p = p3(p);
+        if vertices.last().is_some_and(|q| norm3(&sub3(&p, q)) > 1e-9) {
+            vertices.push(p);
+        }
+    };
+    for e in pieces {
+        let c = &e.curve;
+        if is_corner_spline(c) {
+            push(c.control_point(2));
+            push(c.control_point(4));
+        } else {
+            push(c.control_point(c.control_point_count() - 1));
+        }
+    }
+    if vertices.len() < 2 {
+        return None;
+    }
+    let mut chord = vec![0.0];
+    for w in vertices.windows(2) {
+        chord.push(chord[chord.len() - 1] + norm3(&sub3(&w[1], &w[0])));
+    }
+    let n = last.control_point_count();
+    let zero = [0.0; 3];
+    let start = match start {
+        Some(s) => s,
+        None => EndCondition::Fixed {
+            t: unit3(&sub3(&p3(first.control_point(1)), &p3(first.control_point(0))))?,
+            k: zero,
+        },
+    };
+    let end = if free_end {
+        EndCondition::Free
+    } else {
+        EndCondition::Fixed {
+            t: unit3(&sub3(&p3(last.control_point(n - 1)), &p3(last.control_point(n - 2))))?,
+            k: zero,
+        }
+    };
+    Some(RunData {
+        vertices,
+        chord,
+        start,
+        end,
+    })
+}
+
+/// Cubic B-spline basis functions at `t` on clamped `knots` of `n` control points: the index of
+/// the first of the four that can be non-zero, and their values.
+fn basis(knots: &[f64], n: usize, t: f64) -> (usize, [f64; 4]) {
+    // The span k (3 <= k < n) with knots[k] <= t < knots[k + 1] (the last one for t = 1).
+    let k = knots[4..n].partition_point(|&x| x <= t) + 3;
+    let mut nb = [0.0; 4];
+    nb[0] = 1.0;
+    let (mut left, mut right) = ([0.0; 4], [0.0; 4]);
+    for j in 1..=3 {
+        left[j] = t - knots[k + 1 - j];
+        right[j] = knots[k + j] - t;
+        let mut saved = 0.0;
+        for r in 0..j {
+            let denom = right[r + 1] + left[j - r];
+            let temp = if denom != 0.0 { nb[r] / denom } else { 0.0 };
+            nb[r] = saved + right[r + 1] * temp;
+            saved = left[j - r] * temp;
+        }
+        nb[j] = saved;
+    }
+    (k - 3, nb)
+}
+
+/// Solves `m x = rhs` for a symmetric positive definite band matrix given by its lower band
+/// (`band[i][d]` = m[i][i - d], d < 4), one right-hand side per coordinate; `None` where it is
+/// not positive definite.
+fn solve_band(mut band: Vec<[f64; 4]>, mut rhs: Vec<P3>) -> Option<Vec<P3>> {
+    let n = band.len();
+    // Cholesky in place: band[i][d] becomes L[i][i - d].
+    for i in 0..n {
+        for d in (0..4).rev() {
+            if d > i {
+                continue;
+            }
+            let j = i - d;
+            let mut s = band[i][d];
+            for k in 1..4 {
+                // L[i][j - k] L[j][j - k]
+                if k > j || d + k >= 4 {
+                    continue;
+                }
+                s -= band[i][d + k] * band[j][k];
+            }
+            if d == 0 {
+                if s.is_nan() || s <= 0.0 {
+                    return None;
+                }
+                band[i][0] = s.sqrt();
+            } else {
+                band[i][d] = s / band[j][0];
+            }
+        }
+    }
+    // L y = rhs, then L^T x = y.
+    for i in 0..n {
+        let mut s = rhs[i];
+        for d in 1..4.min(i + 1) {
+            s = axpy(&s, -band[i][d], &rhs[i - d]);
+        }
+        rhs[i] = [s[0] / band[i][0], s[1] / band[i][0], s[2] / band[i][0]];
+    }
+    for i in (0..n).rev() {
+        let mut s = rhs[i];
+        for d in 1..4 {
+            if i + d < n {
+                s = axpy(&s, -band[i + d][d], &rhs[i + d]);
+            }
+        }
+        rhs[i] = [s[0] / band[i][0], s[1] / band[i][0], s[2] / band[i][0]];
+    }
+    Some(rhs)
+}
+
+/// The spline fitted to a run with `spans` uniform knot spans (knots, control points), or
+/// `None` where the least squares have no solution.
+fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
+    let v = &data.vertices;
+    let chord = &data.chord;
+    let total = chord[chord.len() - 1];
+    if total.is_nan() || total <= 0.0 {
+        return None;
+    }
+    let spans = spans.max(3);
+    let h = 1.0 / spans as f64;
+    // Uniform spans, and at an end that meets a rounded piece spans of h/2, h/4 and h/8
+    // inside the first or last: there the spline ends with zero curvature, as the piece does,
+    // and bends into the data over that short distance instead of a whole span. (An end that
+    // meets another spline, or ends free, keeps the curvature of the data and whole spans:
+    // short ones there would follow the noise.)
+    let graded = |c: &EndCondition| matches!(c, EndCondition::Fixed { k, .. } if *k == [0.0; 3]);
+    let mut interior: Vec<f64> = (1..spans).map(|k| k as f64 * h).collect();
+    if graded(&data.start) {
+        interior.extend(END_GRADING.iter().map(|g| g * h));
+    }
+    if graded(&data.end) {
+        interior.extend(END_GRADING.iter().map(|g| 1.0 - g * h));
+    }
+    interior.sort_by(f64::total_cmp);
+    let mut knots = vec![0.0; 4];
+    knots.extend(interior);
+    knots.extend([1.0; 4]);
+    let n = knots.len() - 4;
+    // Data: the vertices at their chord-length parameters, with points added along long
+    // segments so that every span has some.
+    let finest = END_GRADING[0] * h;
+    let mut points: Vec<(f64, P3)> = Vec::with_capacity(2 * v.len());
+    for (i, p) in v.iter().enumerate() {
+        if i > 0 {
+            let gap = (chord[i] - chord[i - 1]) / total;
+            let inserts = (gap / (0.5 * finest)).ceil() as usize;
+            for k in 1..inserts {
+                let f = k as f64 / inserts as f64;
+                let q = axpy(&v[i - 1], f, &sub3(p, &v[i - 1]));
+                points.push(((chord[i - 1] + f * (chord[i] - chord[i - 1])) / total, q));
+            }
+        }
+        points.push((chord[i] / total, *p));
+    }
+    // Fixed control points. A clamped cubic with first interior knots a < b leaves with
+    // C'(0) = 3 / a (P1 - P0) and C''(0) = 6 / a ((P2 - P1) / b - (P1 - P0) / a). With
+    // P1 = P0 + (C a / 3) t it leaves at the speed C (the chord length per unit parameter)
+    // along t, and with P2 = P1 + (C b / 3) t + a b C^2 k / 6 with the curvature vector k and
+    // no tangential acceleration. The same at the end, mirrored.
+    let mut cps = vec![[0.0; 3]; n];
+    let mut fixed = vec![false; n];
+    cps[0] = v[0];
+    fixed[0] = true;
+    if let EndCondition::Fixed { t, k } = data.start {
+        let (a, b) = (knots[4], knots[5]);
+        cps[1] = axpy(&v[0], total * a / 3.0, &t);
+        cps[2] = axpy(&axpy(&cps[1], total * b / 3.0, &t), a * b * total * total / 6.0, &k);
+        fixed[1] = true;
+        fixed[2] = true;
+    }
+    let end = v[v.len() - 1];
+    cps[n - 1] = end;
+    fixed[n - 1] = true;
+    if let EndCondition::Fixed { t, k } = data.end {
+        let (a, b) = (1.0 - knots[n - 1], 1.0 - knots[n - 2]);
+        cps[n - 2] = axpy(&end, -total * a / 3.0, &t);
+        cps[n - 3] = axpy(
+            &axpy(&cps[n - 2], -total * b / 3.0, &t),
+            a * b * total * total / 6.0,
+            &k,
+        );
+        fixed[n - 2] = true;
+        fixed[n - 3] = true;
+    }
+    // Unknowns: the other control points, in order.
+    let index: Vec<Option<usize>> = fixed
+        .iter()
+        .scan(0usize, |next, &f| {
+            Some(if f {
+                None
+            } else {
+                *next += 1;
+                Some(*next - 1)
+            })
+        })
+        .collect();
+    let free = index.iter().flatten().count();
+    if free > 0 {
+        let mut band = vec![[0.0; 4]; free];
+        let mut rhs = vec![[0.0; 3]; free];
+        // Adds w_j w_k (and w_j times a fixed point's coordinates to the right) for the terms
+        // `terms` of one squared residual `sum w P - target`.
+        let mut add = |terms: &[(usize, f64)], target: &P3, weight: f64| {
+            let mut r = *target;
+            for &(c, w) in terms {
+                if index[c].is_none() {
+                    r = axpy(&r, -w, &cps[c]);
+                }
+            }
+            for &(cj, wj) in terms {
+                let Some(j) = index[cj] else { continue };
+                rhs[j] = axpy(&rhs[j], weight * wj, &r);
+                for &(ck, wk) in terms {
+                    if let Some(k) = index[ck] {
+                        if k <= j && j - k < 4 {
+                            band[j][j - k] += weight * wj * wk;
+                        }
+                    }
+                }
+            }
+        };
+        for (t, p) in &points {
+            let (first, nb) = basis(&knots, n, *t);
+            let terms: [(usize, f64); 4] = std::array::from_fn(|j| (first + j, nb[j]));
+            add(&terms, p, 1.0);
+        }
+        let lambda = SMOOTHING * points.len() as f64 / n as f64;
+        for c in 1..n - 1 {
+            add(&[(c - 1, 1.0), (c, -2.0), (c + 1, 1.0)], &[0.0; 3], lambda);
+        }
+        let solved = solve_band(band, rhs)?;
+        for (c, i) in index.iter().enumerate() {
+            if let Some(i) = i {
+                cps[c] = solved[*i];
+            }
+        }
+    }
+    cps.iter().flatten().all(|x| x.is_finite()).then_some((knots, cps))
+}
+
+/// Largest distance between the spline and the programmed polyline of `data`, both ways
+/// (spline points to the polyline, programmed vertices to the spline), sampled
+/// [`CHECK_SAMPLES`] times per data interval.
+fn deviation(data: &RunData, curve: &Nurbs) -> f64 {
+    let (v, chord) = (&data.vertices, &data.chord);
+    let total = chord[chord.len() - 1];
+    let intervals = v.len() - 1;
+    let mut samples: Vec<P3> = Vec::with_capacity(CHECK_SAMPLES * intervals + 1);
+    for i in 0..intervals {
+        for k in 0..CHECK_SAMPLES {
+            let t = (chord[i] + (chord[i + 1] - chord[i]) * k as f64 / CHECK_SAMPLES as f64) / total;
+            samples.push(p3(&curve.point(t.min(1.0))));
+        }
+    }
+    samples.push(p3(&curve.point(1.0)));
+    let mut worst: f64 = 0.0;
+    for (s, x) in samples.iter().enumerate() {
+        let i = (s / CHECK_SAMPLES).min(intervals - 1);
+        let d = (i.saturating_sub(WINDOW)..=(i + WINDOW).min(intervals - 1))
+            .map(|j| segment_distance3(x, &v[j], &v[j + 1]))
+            .fold(f64::INFINITY, f64::min);
+        worst = worst.max(d);
+    }
+    for (i, p) in v.iter().enumerate() {
+        let lo = i.saturating_sub(WINDOW) * CHECK_SAMPLES;
+        let hi = ((i + WINDOW) * CHECK_SAMPLES).min(samples.len() - 1);
+        let d = (lo..hi)
+            .map(|s| segment_distance3(p, &samples[s], &samples[s + 1]))
+            .fold(f64::INFINITY, f64::min);
+        worst = worst.max(d);
+    }
+    worst
+}
+
+/// The end of a fitted spline as the next one continues it: unit tangent and curvature vector.
+fn end_condition(knots: &[f64], cps: &[P3]) -> Option<EndCondition> {
+    let n = cps.len();
+    let (a, b) = (1.0 - knots[n - 1], 1.0 - knots[n - 2]);
+    let d1 = sub3(&cps[n - 1], &cps[n - 2]);
+    let d2 = sub3(&cps[n - 2], &cps[n - 3]);
+    // Clamped cubic at its end, last interior knots 1 - a > 1 - b: C'(1) = 3 / a (P[n-1] -
+    // P[n-2]), C''(1) = 6 / a ((P[n-1] - P[n-2]) / a - (P[n-2] - P[n-3]) / b).
+    let c1: P3 = std::array::from_fn(|i| 3.0 / a * d1[i]);
+    let c2: P3 = std::array::from_fn(|i| 6.0 / a * (d1[i] / a - d2[i] / b));
+    let t = unit3(&c1)?;
+    let speed2 = dot3(&c1, &c1);
+    let normal = axpy(&c2, -dot3(&c2, &t), &t);
+    Some(EndCondition::Fixed {
+        t,
+        k: [normal[0] / speed2, normal[1] / speed2, normal[2] / speed2],
+    })
+}
+
+/// A fitted spline: the element, how the next spline may continue it, its deviation.
+struct Fitted {
+    element: PathElement,
+    end: Option<EndCondition>,
+    deviation: f64,
+    /// Pieces it replaces.
+    pieces: usize,
+}
+
+/// The spline of a run of pieces within `budget` (mm) of their programmed polyline; `None`
+/// where no fit passes (the caller splits the run).
+fn fitted(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool, budget: f64) -> Option<Fitted> {
+    let data = run_data(pieces, start, free_end)?;
+    let intervals = data.vertices.len() - 1;
+    let most = intervals.max(3);
+    let mut spans = intervals.div_ceil(VERTICES_PER_SPAN).max(3);
+    let dim = pieces[0].curve.dim();
+    loop {
+        if let Some((knots, cps)) = fit(&data, spans) {
+            let rows: Vec<Vec<f64>> = cps.iter().map(|p| p[..dim].to_vec()).collect();
+            if let Ok(curve) = Nurbs::new(3, knots.clone(), &rows, None) {
+                let d = deviation(&data, &curve);
+                if d <= budget {
+                    let element = PathElement {
+                        kind: ElementKind::Nurbs,
+                        curve,
+                        feed: pieces[0].feed,
+                        source_line: pieces.iter().find_map(|p| p.source_line),
+                    };
+                    return Some(Fitted {
+                        element,
+                        end: end_condition(&knots, &cps),
+                        deviation: d,
+                        pieces: pieces.len(),
+                    });
+                }
+            }
+        }
+        if spans >= most {
+            return None;
+        }
+        spans = (spans + spans / 2 + 1).min(most);
+    }
+}
+
+/// One part of a run after fitting: a spline, or pieces left as rounded.
+enum Part {
+    Spline(Fitted),
+    Pieces(Vec<PathElement>),
+}
+
+/// Fits `pieces`, or splits them in two at the middle while a part does not pass; parts
+/// shorter than [`MIN_RUN`] stay as rounded. The first part starts as `start` says (its own
+/// tangent where `None`), the last one ends free where `free_end`.
+fn fit_or_split(
+    pieces: &[PathElement],
+    start: Option<EndCondition>,
+    free_end: bool,
+    budget: f64,
+    parts: &mut Vec<Part>,
+) {
+    if pieces.len() >= MIN_RUN {
+        if let Some(f) = fitted(pieces, start, free_end, budget) {
+            parts.push(Part::Spline(f));
+            return;
+        }
+        let mid = pieces.len() / 2;
+        fit_or_split(&pieces[..mid], start, false, budget, parts);
+        fit_or_split(&pieces[mid..], None, free_end, budget, parts);
+        return;
+    }
+    parts.push(Part::Pieces(pieces.to_vec()));
+}
+
+/// A spline fitted with a free end, held back until the next run shows it can continue it.
+struct Pending {
+    pieces: Vec<PathElement>,
+    start: Option<EndCondition>,
+    spline: Fitted,
+}
+
+/// Replaces, as they come, the runs of short rounded pieces of a stream of path elements (the
+/// output of [`super::corner::CornerRounder`]) by fitted splines within `tolerance` of the
+/// programmed polyline; every other element passes unchanged. What it did is added to the
+/// rounding's [`RoundingStats`].
+pub struct RunFitter<I> {
+    source: I,
+    budget: f64,
+    run: Vec<PathElement>,
+    /// The last spline of a run cut at [`MAX_RUN`] (fitted with a free end).
+    pending: Option<Pending>,
+    /// Pieces a run takes before it is cut: [`FIRST_RUN`], then [`MAX_RUN`].
+    cap: usize,
+    out: VecDeque<PathElement>,
+    error: Option<ReadError>,
+    stats: Arc<Mutex<RoundingStats>>,
+    done: bool,
+}
+
+impl<I: Iterator<Item = Result<PathElement, ReadError>>> RunFitter<I> {
+    /// Fits the runs of `source` within `tolerance` (mm, > 0), counting into `stats`.
+    pub fn new(source: I, tolerance: f64, stats: Arc<Mutex<RoundingStats>>) -> Self {
+        RunFitter {
+            source,
+            budget: FIT_SHARE * tolerance,
+            run: Vec::new(),
+            pending: None,
+            cap: FIRST_RUN,
+            out: VecDeque::new(),
+            error: None,
+            stats,
+            done: false,
+        }
+    }
+
+    /// Hands out a part.
+    fn emit(&mut self, part: Part) {
+        match part {
+            Part::Spline(f) => {
+                if let Ok(mut stats) = self.stats.lock() {
+                    stats.fitted_runs += 1;
+                    stats.fitted_pieces += f.pieces;
+                    stats.max_deviation = stats.max_deviation.max(f.deviation);
+                }
+                self.out.push_back(f.element);
+            }
+            Part::Pieces(pieces) => self.out.extend(pieces),
+        }
+    }
+
+    /// Fits the run gathered; `continued`: more pieces of it follow (a run at [`MAX_RUN`]), so
+    /// its last spline ends free and waits for the next run to continue it.
+    fn flush(&mut self, continued: bool) {
+        let run = std::mem::take(&mut self.run);
+        self.cap = MAX_RUN;
+        let pending = self.pending.take();
+        let carry = pending.as_ref().and_then(|p| p.spline.end);
+        let mut parts = Vec::new();
+        if !run.is_empty() {
+            fit_or_split(&run, carry, continued, self.budget, &mut parts);
+        }
+        if let Some(p) = pending {
+            // Continued by a spline: it stays as fitted. Otherwise it is fitted again to end
+            // as the rounded piece after it begins.
+            if carry.is_some() && matches!(parts.first(), Some(Part::Spline(_))) {
+                self.emit(Part::Spline(p.spline));
+            } else {
+                let mut again = Vec::new();
+                fit_or_split(&p.pieces, p.start, false, self.budget, &mut again);
+                for part in again {
+                    self.emit(part);
+                }
+            }
+        }
+        let last = if continued { parts.pop() } else { None };
+        for part in parts {
+            self.emit(part);
+        }
+        match last {
+            Some(Part::Spline(spline)) => {
+                let pieces = run.len() - spline.pieces;
+                self.pending = Some(Pending {
+                    start: if pieces == 0 { carry } else { None },
+                    pieces: run[pieces..].to_vec(),
+                    spline,
+                });
+            }
+            Some(part) => self.emit(part),
+            None => {}
+        }
+    }
+}
+
+/// Whether `e` may join a run whose pieces have the programmed feed `feed`: a tool-tip straight
+/// piece or corner spline, short.
+fn joins_run(e: &PathElement, feed: Option<Option<f64>>) -> bool {
+    let c = &e.curve;
+    let tip_only = c.dim() == c.tip_dim();
+    let kind = (c.degree() == 1 && c.control_point_count() == 2) || is_corner_spline(c);
+    let polygon: f64 = (1..c.control_point_count())
+        .map(|k| norm3(&sub3(&p3(c.control_point(k)), &p3(c.control_point(k - 1)))))
+        .sum();
+    tip_only && kind && polygon <= SHORT_PIECE && polygon > 0.0 && feed.is_none_or(|f| f == e.feed)
+}
+
+impl<I: Iterator<Item = Result<PathElement, ReadError>>> Iterator for RunFitter<I> {
+    type Item = Result<PathElement, ReadError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(e) = self.out.pop_front() {
+                return Some(Ok(e));
+            }
+            if let Some(e) = self.error.take() {
+                return Some(Err(e));
+            }
+            if self.done {
+                return None;
+            }
+            match self.source.next() {
+                Some(Ok(e)) => {
+                    let feed = self.run.first().map(|p| p.feed);
+                    // The rounder's pieces join end to start.
+                    let continues = self.run.last().is_none_or(|p| {
+                        let c = &p.curve;
+                        let end = p3(c.control_point(c.control_point_count() - 1));
+                        norm3(&sub3(&p3(e.curve.control_point(0)), &end)) <= 1e-9
+                    });
+                    if joins_run(&e, feed) && continues {
+                        self.run.push(e);
+                        if self.run.len() >= self.cap {
+                            self.flush(true);
+                        }
+                        continue;
+                    }
+                    self.flush(false);
+                    if joins_run(&e, None) {
+                        self.run.push(e);
+                    } else {
+                        self.out.push_back(e);
+                    }
+                }
+                Some(Err(e)) => {
+                    self.flush(false);
+                    self.error = Some(e);
+                    self.done = true;
+                }
+                None => {
+                    self.flush(false);
+                    self.done = true;
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planner::corner::CornerRounder;
+
+    const TOL: f64 = 0.001;
+
+    /// G1 lines of `step` mm along `f` (arc-length-ish parameter in mm), coordinates rounded to
+    /// 1e-4 mm as CAM output is.
+    fn g1(points: usize, step: f64, f: impl Fn(f64) -> [f64; 2]) -> Vec<PathElement> {
+        let q = |x: f64| (x * 1e4).round() / 1e4;
+        let v: Vec<Vec<f64>> = (0..=points)
+            .map(|k| {
+                let p = f(k as f64 * step);
+                vec![q(p[0]), q(p[1])]
+            })
+            .collect();
+        v.windows(2)
+            .map(|w| PathElement {
+                kind: ElementKind::Polyline,
+                curve: Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], w, None).unwrap(),
+                feed: Some(100.0),
+                source_line: None,
+            })
+            .collect()
+    }
+
+    fn smooth(program: &[PathElement]) -> (Vec<PathElement>, RoundingStats) {
+        let rounder = CornerRounder::new("t", program.iter().cloned().map(Ok), TOL, false).unwrap();
+        let stats = rounder.stats();
+        let out: Vec<PathElement> = RunFitter::new(rounder, TOL, Arc::clone(&stats))
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let stats = *stats.lock().unwrap();
+        (out, stats)
+    }
+
+    fn point(e: &PathElement, u: f64) -> P3 {
+        p3(&e.curve.point(u))
+    }
+
+    /// Unit tangent and curvature vector of `e` at `u`.
+    fn frame(e: &PathElement, u: f64) -> (P3, P3) {
+        let d = e.curve.view().derivatives(u, 2);
+        let (c1, c2) = (p3(&d[1]), p3(&d[2]));
+        let t = unit3(&c1).unwrap();
+        let s2 = dot3(&c1, &c1);
+        let n = axpy(&c2, -dot3(&c2, &t), &t);
+        (t, [n[0] / s2, n[1] / s2, n[2] / s2])
+    }
+
+    /// Checks, independently of the fitter's own check, that the path `out` and the programmed
+    /// polyline are within the tolerance of each other both ways (every segment searched), and
+    /// that consecutive elements join in position, tangent and curvature. Returns the largest
+    /// curvature of the fitted splines.
+    fn check(program: &[PathElement], out: &[PathElement]) -> f64 {
+        let verts: Vec<P3> = std::iter::once(p3(program[0].curve.control_point(0)))
+            .chain(program.iter().map(|e| p3(e.curve.control_point(1))))
+            .collect();
+        let mut path: Vec<P3> = Vec::new();
+        let mut kmax: f64 = 0.0;
+        for e in out {
+            let fitted = e.curve.control_point_count() > 5;
+            for k in 0..=400 {
+                let u = e.curve.u_min() + (e.curve.u_max() - e.curve.u_min()) * k as f64 / 400.0;
+                path.push(point(e, u));
+                if fitted {
+                    kmax = kmax.max(norm3(&frame(e, u).1));
+                }
+            }
+        }
+        for x in &path {
+            let d = verts
+                .windows(2)
+                .map(|w| segment_distance3(x, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(d <= TOL, "path point {x:?} {d} mm from the program");
+        }
+        // Programmed vertices to the path: where the polyline turns by less than 30 degrees (the
+        // rounding of a sharper corner keeps its path within the tolerance of the polyline, but
+        // cuts the vertex itself by more).
+        let turns = |i: usize| {
+            let (a, b) = (sub3(&verts[i], &verts[i - 1]), sub3(&verts[i + 1], &verts[i]));
+            dot3(&a, &b) < (30f64).to_radians().cos() * norm3(&a) * norm3(&b)
+        };
+        for (i, v) in verts.iter().enumerate() {
+            if i > 0 && i + 1 < verts.len() && turns(i) {
+                continue;
+            }
+            let d = path
+                .windows(2)
+                .map(|w| segment_distance3(v, &w[0], &w[1]))
+                .fold(f64::INFINITY, f64::min);
+            assert!(d <= TOL, "programmed vertex {v:?} {d} mm from the path");
+        }
+        for w in out.windows(2) {
+            let (a, b) = (&w[0], &w[1]);
+            let gap = norm3(&sub3(&point(a, a.curve.u_max()), &point(b, b.curve.u_min())));
+            assert!(gap <= 1e-9, "gap {gap}");
+            let (ta, ka) = frame(a, a.curve.u_max());
+            let (tb, kb) = frame(b, b.curve.u_min());
+            assert!(
+                norm3(&sub3(&ta, &tb)) <= 1e-9,
+                "tangent turns by {}",
+                norm3(&sub3(&ta, &tb))
+            );
+            let dk = norm3(&sub3(&ka, &kb));
+            assert!(
+                dk <= 1e-6 * (1.0 + norm3(&ka)),
+                "curvature jumps by {dk} ({ka:?} to {kb:?})"
+            );
+        }
+        kmax
+    }
+
+    /// A dense circle of 5 mm radius (4,000 lines, more than one run of pieces): a few splines, within
+    /// the tolerance both ways, continuous in tangent and curvature at every join (the runs cut
+    /// at `FIRST_RUN` and `MAX_RUN` continue each other), and their curvature near the circle's,
+    /// not that of the quantised corners (up to 20 times it).
+    #[test]
+    fn a_dense_circle_becomes_a_few_splines_with_its_curvature() {
+        let r = 5.0;
+        let program = g1(4000, 0.02, |s| [r * (s / r).sin(), r * (1.0 - (s / r).cos())]);
+        let rounded = CornerRounder::new("t", program.iter().cloned().map(Ok), TOL, false)
+            .unwrap()
+            .count();
+        let (out, stats) = smooth(&program);
+        // Every piece fitted, in runs of at most MAX_RUN that continue each other.
+        assert_eq!(stats.fitted_pieces, rounded, "{stats:?}");
+        assert_eq!(
+            stats.fitted_runs,
+            1 + (rounded - FIRST_RUN).div_ceil(MAX_RUN),
+            "{stats:?}"
+        );
+        assert_eq!(out.len(), stats.fitted_runs);
+        let kmax = check(&program, &out);
+        // Within a run the curvature is the circle's to a few percent; where a run ends free
+        // (cut at FIRST_RUN or MAX_RUN) the fit is less determined and bends up to 1.8 times
+        // as much here.
+        assert!(
+            kmax <= 2.0 / r,
+            "curvature up to {kmax} on a circle of 1/r = {}",
+            1.0 / r
+        );
+    }
+
+    /// Dense lines with a sharp corner (107 degrees), then a long line: the path stays within
+    /// the tolerance both ways and joined in tangent and curvature, the corner inside a fit or
+    /// left rounded, the long line as it was.
+    #[test]
+    fn a_sharp_corner_and_a_long_line_stay_within_the_tolerance() {
+        let mut program = g1(300, 0.02, |s| [s, 0.001 * (s * 3.0).sin()]);
+        let end = p3(program.last().unwrap().curve.control_point(1));
+        let turn = g1(300, 0.02, |s| [end[0] - 0.3 * s + 0.002 * (s * 2.0).sin(), end[1] + s]);
+        program.extend(turn);
+        let end = p3(program.last().unwrap().curve.control_point(1));
+        program.push(PathElement {
+            kind: ElementKind::Polyline,
+            curve: Nurbs::new(
+                1,
+                vec![0.0, 0.0, 1.0, 1.0],
+                &[end[..2].to_vec(), vec![end[0] + 10.0, end[1]]],
+                None,
+            )
+            .unwrap(),
+            feed: Some(100.0),
+            source_line: None,
+        });
+        let (out, stats) = smooth(&program);
+        assert!(stats.fitted_runs >= 2, "{stats:?}");
+        check(&program, &out);
+        // The long line passes as it was rounded.
+        assert!(out.last().unwrap().curve.degree() == 1);
+    }
+
+    /// Elements that are not short rounded pieces pass unchanged, and a run shorter than
+    /// `MIN_RUN` stays as rounded.
+    #[test]
+    fn other_elements_and_short_runs_pass_unchanged() {
+        let program = g1(3, 0.02, |s| [s, 0.01 * s * s]);
+        let rounder = CornerRounder::new("t", program.iter().cloned().map(Ok), TOL, false).unwrap();
+        let rounded: Vec<PathElement> = rounder.map(Result::unwrap).collect();
+        let (out, stats) = smooth(&program);
+        assert_eq!(out, rounded);
+        assert_eq!(stats.fitted_runs, 0);
+    }
+
+    /// The band solver agrees with a dense solve.
+    #[test]
+    fn band_cholesky_solves() {
+        let n = 9;
+        let mut band = vec![[0.0; 4]; n];
+        let mut dense = vec![vec![0.0; n]; n];
+        for i in 0..n {
+            for d in 0..4.min(i + 1) {
+                let v = if d == 0 {
+                    10.0 + i as f64
+                } else {
+                    1.0 / (1.0 + d as f64 + i as f64)
+                };
+                band[i][d] = v;
+                dense[i][i - d] = v;
+                dense[i - d][i] = v;
+            }
+        }
+        let x: Vec<P3> = (0..n).map(|i| [i as f64, 1.0, -(i as f64) * 0.5]).collect();
+        let rhs: Vec<P3> = (0..n)
+            .map(|i| std::array::from_fn(|c| (0..n).map(|j| dense[i][j] * x[j][c]).sum()))
+            .collect();
+        let got = solve_band(band, rhs).unwrap();
+        for (a, b) in got.iter().zip(&x) {
+            assert!(norm3(&sub3(a, b)) < 1e-12, "{a:?} {b:?}");
+        }
+    }
+}
