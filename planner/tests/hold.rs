@@ -73,6 +73,10 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
         ("G1 zigzag", job_of(g1_zigzag(150))),
         ("dense G1 (600 lines)", job_at(&dense_g1(600, &std::env::temp_dir()))),
         ("2000 mm line", job_of(line(2000.0))),
+        (
+            "dense G1 smoothed (2000 lines)",
+            job_smoothed(&dense_g1(2000, &std::env::temp_dir())),
+        ),
     ];
     let mut instants = Instants::new(0x2545_f491_4f6c_dd1d);
     let mut all = Vec::new();

@@ -29,9 +29,9 @@ use std::sync::{Arc, Mutex};
 pub const SHORT_PIECE: f64 = 1.0;
 /// A run of fewer pieces is left as rounded.
 const MIN_RUN: usize = 8;
-/// Pieces in one fitted spline at most (about 20 mm of a 0.02 mm program). A run this long
+/// Pieces in one fitted spline at most (about 5 mm of a 0.02 mm program). A run this long
 /// is fitted with a free end, and the next one continues it in tangent and curvature.
-const MAX_RUN: usize = 2000;
+const MAX_RUN: usize = 500;
 /// The first run is cut this short, so that the planner gets its first element early (a run
 /// of `MAX_RUN` pieces takes some 0.1 s to read, round and fit).
 const FIRST_RUN: usize = 200;

@@ -194,6 +194,12 @@ pub fn job_at(path: &Path) -> Job {
     job_of(prepared.toolpath)
 }
 
+/// [`job_at`] with the runs of short G1 pieces fitted (`--round-corners smooth`).
+pub fn job_smoothed(path: &Path) -> Job {
+    let prepared = prepare(path, RoundCorners::Smooth, &chord_tolerance(0.001)).unwrap();
+    job_of(prepared.toolpath)
+}
+
 /// A dense CAM-like G1 program of `lines` lines of 0.02 mm (`scripts/dense-g1.py`), written
 /// to `dir`.
 pub fn dense_g1(lines: usize, dir: &Path) -> PathBuf {
