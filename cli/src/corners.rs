@@ -72,10 +72,28 @@ impl PreparedStream {
     }
 }
 
-/// Opens `file` as a stream of elements and applies `mode` with the chord tolerance of `limits`;
-/// with `--ini`, an element that leaves the machine's travel ends the stream with an error
-/// ([`within_travel`]).
-pub fn open(file: &Path, mode: RoundCorners, limits: &LimitArgs) -> Result<PreparedStream, Box<dyn std::error::Error>> {
+/// The rounding mode: `flag` (`--round-corners`), else `[NURBS]ROUND_CORNERS` of the INI of
+/// `limits`, else `auto`.
+pub fn round_corners_mode(flag: Option<RoundCorners>, limits: &LimitArgs) -> Result<RoundCorners, String> {
+    if let Some(mode) = flag {
+        return Ok(mode);
+    }
+    match limits.ini_text("NURBS", "ROUND_CORNERS")? {
+        None => Ok(RoundCorners::Auto),
+        Some((value, file)) => <RoundCorners as clap::ValueEnum>::from_str(&value, true)
+            .map_err(|_| format!("{file}: [NURBS]ROUND_CORNERS = {value}: one of auto, on, off, smooth")),
+    }
+}
+
+/// Opens `file` as a stream of elements and applies `mode` ([`round_corners_mode`]) with the
+/// chord tolerance of `limits`; with `--ini`, an element that leaves the machine's travel ends
+/// the stream with an error ([`within_travel`]).
+pub fn open(
+    file: &Path,
+    mode: Option<RoundCorners>,
+    limits: &LimitArgs,
+) -> Result<PreparedStream, Box<dyn std::error::Error>> {
+    let mode = round_corners_mode(mode, limits)?;
     let tolerance = limits.chord_tolerance()?;
     let elements = open_toolpath(file)?;
     let name = file.display().to_string();
@@ -148,7 +166,11 @@ pub struct Prepared {
 }
 
 /// [`open`], read whole.
-pub fn prepare(file: &Path, mode: RoundCorners, limits: &LimitArgs) -> Result<Prepared, Box<dyn std::error::Error>> {
+pub fn prepare(
+    file: &Path,
+    mode: Option<RoundCorners>,
+    limits: &LimitArgs,
+) -> Result<Prepared, Box<dyn std::error::Error>> {
     let PreparedStream { elements, stats, .. } = open(file, mode, limits)?;
     let toolpath = Toolpath {
         elements: elements.collect::<Result<Vec<_>, _>>()?,

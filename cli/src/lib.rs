@@ -90,10 +90,11 @@ enum Command {
         /// as the segment lengths allow), and is planned as one motion without stopping at the
         /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
         /// not such a polyline.
-        /// `off`: follow the programmed polyline exactly (exact stop at every corner).
-        /// `verify` must be given the same mode to check against the same path.
-        #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
-        round_corners: RoundCorners,
+        /// `off`: follow the programmed polyline exactly (exact stop at every corner). `smooth`:
+        /// as `auto`, then runs of short pieces become fitted splines. Default: `[NURBS]ROUND_CORNERS`
+        /// of --ini, else `auto`. `verify` must be given the same mode to check against the same path.
+        #[arg(long, value_enum, value_name = "MODE")]
+        round_corners: Option<RoundCorners>,
         #[command(flatten)]
         machine: MachineArgs,
     },
@@ -114,8 +115,8 @@ enum Command {
         /// `off`: follow the programmed polyline exactly (exact stop at every corner).
         /// The same mode as `plan` (default `auto`): the setpoints are checked against the same
         /// rounded path, and their distance to the programmed polyline against --chord-tol.
-        #[arg(long, value_enum, default_value_t = RoundCorners::Auto, value_name = "MODE")]
-        round_corners: RoundCorners,
+        #[arg(long, value_enum, value_name = "MODE")]
+        round_corners: Option<RoundCorners>,
         #[command(flatten)]
         machine: MachineArgs,
     },

@@ -54,6 +54,16 @@ impl LimitArgs {
             .transpose()
     }
 
+    /// `[section]key` of the INI as text, with the INI's name, if it has one.
+    pub fn ini_text(&self, section: &str, key: &str) -> Result<Option<(String, String)>, String> {
+        Ok(self.ini()?.and_then(|i| {
+            i.entries
+                .iter()
+                .find(|(s, k, _)| s == section && k == key)
+                .map(|(_, _, v)| (v.clone(), i.file.display().to_string()))
+        }))
+    }
+
     /// `[DISPLAY]MAX_FEED_OVERRIDE` of the INI, if it has one.
     pub fn ini_max_feed_override(&self) -> Result<Option<f64>, String> {
         self.ini()?

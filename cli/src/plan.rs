@@ -21,7 +21,7 @@ pub struct PlanArgs<'a> {
     pub stream: bool,
     pub interp: Interpolation,
     pub plot: Option<&'a Path>,
-    pub round_corners: RoundCorners,
+    pub round_corners: Option<RoundCorners>,
     pub machine: &'a MachineArgs,
 }
 

@@ -38,9 +38,10 @@ pub struct PlannerArgs {
     pub planner: PlannerKind,
     /// G1 corners: `auto` rounds the corners of every run of straight lines within the chord
     /// tolerance (as `nurbs-plan plan` does), `on` requires the path to be one polyline, `off`
-    /// stops at every corner.
-    #[arg(long, value_enum, default_value_t = RoundCorners::Auto)]
-    pub round_corners: RoundCorners,
+    /// stops at every corner, `smooth` rounds and then fits runs of short pieces with splines.
+    /// Default: `[NURBS]ROUND_CORNERS` of --ini, else `auto`.
+    #[arg(long, value_enum)]
+    pub round_corners: Option<RoundCorners>,
     /// Exit (status 0) once the module has run the whole motion and no stop of it is left to
     /// re-plan: the motion finished, or was aborted or ended by the machine switched off. For
     /// G-code-triggered jobs (`M101` of the sim configuration); without it the planner keeps

@@ -287,7 +287,7 @@ pub fn run(
     setpoints: &Path,
     toolpath: &Path,
     limits: &LimitArgs,
-    round_corners: RoundCorners,
+    round_corners: Option<RoundCorners>,
     machine: &MachineArgs,
 ) -> Result<bool, Box<dyn std::error::Error>> {
     let file = toolpath;

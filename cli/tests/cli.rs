@@ -1044,6 +1044,30 @@ fn smoothing_a_dense_program_keeps_the_tolerance_and_shortens_the_motion() {
         rounded["motion_time_s"].as_f64().unwrap(),
     );
     assert!(fast < 0.3 * slow, "smoothed {fast} s, rounded {slow} s");
+    // The mode may come from the INI (as `M101` starts `nurbs-planner` with it): the same plan.
+    let ini = dir.join("smooth.ini");
+    std::fs::write(&ini, "[NURBS]\nROUND_CORNERS = smooth\n").unwrap();
+    let (csv_ini, summary_ini) = (dir.join("ini.csv"), dir.join("ini.json"));
+    plan_with_summary(
+        &program,
+        &[&limits[..], &["--ini", ini.to_str().unwrap()]].concat(),
+        &csv_ini,
+        &summary_ini,
+    );
+    assert_eq!(std::fs::read(&csv_ini).unwrap(), std::fs::read(&csv).unwrap());
+    std::fs::write(&ini, "[NURBS]\nROUND_CORNERS = smoothest\n").unwrap();
+    let refused = bin()
+        .arg("plan")
+        .arg(&program)
+        .args(["--limits", "lab1", "--ini", ini.to_str().unwrap(), "--out"])
+        .arg(dir.join("refused.csv"))
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && said.contains("[NURBS]ROUND_CORNERS = smoothest"),
+        "{said}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

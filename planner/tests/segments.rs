@@ -755,7 +755,7 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
     let _guard = lock_module();
     let toolpath = prepare(
         &examples().join("trident.json"),
-        RoundCorners::Auto,
+        Some(RoundCorners::Auto),
         &chord_tolerance(0.001),
     )
     .unwrap()

@@ -1,7 +1,7 @@
 #!/bin/bash
 # path_test.sh TOOLPATH [PLANNER [FLAGS]]: the product end to end in real LinuxCNC. nurbs-planner
 # plans TOOLPATH (with PLANNER, erwinski or vpop; default erwinski, compared with the offline
-# `nurbs-plan plan --stream`; FLAGS go to both nurbs-planner and the offline nurbs-plan plan)
+# `nurbs-plan plan --stream`; FLAGS go to nurbs-planner, the offline nurbs-plan plan and verify)
 # and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
 # thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full
 # precision. Checks (check_path.py, nurbs-plan verify): the samples are the offline
@@ -44,7 +44,7 @@ python3 -c "import sys; print(f'motion started {1e3 * (float(sys.argv[2]) - floa
     "$(cat "$work/t-loadusr")" "$(cat "$work/t-start")"
 python3 "$here/check_path.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
     --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv"
-nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD
+nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD $flags
 grep -q "nurbs-planner: stopped by signal, exiting cleanly" "$work/halrun.log" || {
     echo "nurbs-planner did not exit cleanly on SIGTERM"; exit 1; }
 rm -rf "$work"

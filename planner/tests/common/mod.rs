@@ -190,13 +190,13 @@ pub fn job(name: &str) -> Job {
 
 /// [`job`] of a file anywhere.
 pub fn job_at(path: &Path) -> Job {
-    let prepared = prepare(path, RoundCorners::Auto, &chord_tolerance(0.001)).unwrap();
+    let prepared = prepare(path, Some(RoundCorners::Auto), &chord_tolerance(0.001)).unwrap();
     job_of(prepared.toolpath)
 }
 
 /// [`job_at`] with the runs of short G1 pieces fitted (`--round-corners smooth`).
 pub fn job_smoothed(path: &Path) -> Job {
-    let prepared = prepare(path, RoundCorners::Smooth, &chord_tolerance(0.001)).unwrap();
+    let prepared = prepare(path, Some(RoundCorners::Smooth), &chord_tolerance(0.001)).unwrap();
     job_of(prepared.toolpath)
 }
 
