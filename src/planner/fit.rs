@@ -14,9 +14,11 @@
 //! tolerance from the polyline, no programmed vertex farther than it from the spline), and
 //! where it cannot be made to pass the run is split, down to the rounded pieces themselves.
 //!
-//! The spline starts and ends where the run does, along the run's first and last tangent and
-//! with zero curvature there (three collinear control points at each end), as the rounded
-//! pieces it replaces do: the path stays continuous in tangent and curvature at both joins.
+//! The spline starts and ends where the run does. Where it meets a rounded piece (or anything
+//! else) it runs along the piece's tangent with zero curvature there (three collinear control
+//! points), as the pieces it replaces do; where a long run is cut, the next spline starts with
+//! the tangent and curvature vector the last one ends with. So the path stays continuous in
+//! tangent and curvature at every join.
 
 use super::corner::{is_corner_spline, RoundingStats};
 use crate::geometry::{ElementKind, Nurbs, PathElement};
@@ -26,7 +28,7 @@ use std::sync::{Arc, Mutex};
 
 /// Pieces longer than this (mm, control-polygon length) end a run: long lines and wide corners
 /// keep their rounding, which already lets the feed up.
-pub const SHORT_PIECE: f64 = 1.0;
+const SHORT_PIECE: f64 = 1.0;
 /// A run of fewer pieces is left as rounded.
 const MIN_RUN: usize = 8;
 /// Pieces in one fitted spline at most (about 5 mm of a 0.02 mm program). A run this long
