@@ -10,13 +10,8 @@
 
 mod common;
 
-use std::sync::Arc;
-use std::time::Instant;
-
 use common::test_paths::{g1_zigzag, line};
 use common::*;
-use nurbs_motion::planner::PathCurves;
-use nurbs_planner::feed::{PathOpener, Source, Streamer};
 
 /// Runs `job`'s streamed plan through the module at the real pace, the override going to
 /// `low` at sample `at`, to the path end.
@@ -24,27 +19,12 @@ use nurbs_planner::feed::{PathOpener, Source, Streamer};
 /// plan at 100 % (`None`: none left it), and how the joins went.
 fn change_at(job: &Job, at: usize, low: f64) -> (Vec<Out>, Option<usize>, String) {
     let l = load();
-    let tp = job.toolpath.clone();
-    let open: PathOpener = Arc::new(move || Ok(PathCurves::new(&tp)));
-    let source = Source::streamed(open, job.limits.clone(), None, 1.0);
-    let began = Instant::now();
-    let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.25, began).unwrap();
-    let mut got: Vec<Out> = Vec::new();
-    let mut pace = Pace::new(began, 1.0);
-    for _ in 0..job.samples.len() + 200_000 {
-        s.fill().unwrap();
-        if got.len() == at {
+    let periods = job.samples.len() + 200_000;
+    let (got, s) = paced_run(&l, &job.toolpath, &job.limits, 1.0, periods, |s, samples| {
+        if samples == at {
             s.set_feed_override(low);
         }
-        pace.wait();
-        assert!(!period(), "the update path allocated");
-        if bit("nurbs_interp.active") {
-            got.push(out());
-        }
-        if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
-            break;
-        }
-    }
+    });
     assert!(
         !bit("nurbs_interp.fault"),
         "fault {}",

@@ -771,36 +771,20 @@ fn a_feed_override_change_is_planned_anew_and_the_module_runs_into_it() {
         setpoints(&PathCurves::new(&toolpath), &limits, &records)
     };
     let l = load();
-    let tp = toolpath.clone();
-    let open: PathOpener = Arc::new(move || Ok(PathCurves::new(&tp)));
-    let source = Source::streamed(open, limits.clone(), None, 1.0);
-    let began = Instant::now();
-    let mut s = Streamer::new(l.channel, 2, source, 0, 0.25, began).unwrap();
-    // Down to 20 % at 0.25 s of motion, back to 100 % at 0.75 s.
+    // Down to 20 % at 0.25 s of motion, back to 100 % at 0.75 s; the module at twice the real
+    // pace at most.
     let low = 0.2;
     let changes = [(1000, low), (3000, 1.0)];
-    let mut got: Vec<Out> = Vec::new();
     let mut queued_at_change = Vec::new();
-    let mut pace = Pace::new(began, 2.0);
-    for k in 0..200_000 {
-        s.fill().unwrap();
-        if let Some(&(_, ov)) = changes.iter().find(|(at, _)| *at == got.len()) {
-            if queued_at_change.len() < changes.len() && queued_at_change.last() != Some(&(got.len(), ov)) {
+    let (got, s) = paced_run(&l, &toolpath, &limits, 2.0, 200_000, |s, samples| {
+        if let Some(&(_, ov)) = changes.iter().find(|(at, _)| *at == samples) {
+            if queued_at_change.len() < changes.len() && queued_at_change.last() != Some(&(samples, ov)) {
                 s.set_feed_override(ov);
-                queued_at_change.push((got.len(), ov));
-                eprintln!("override {ov} at sample {}: {:.3} s queued", got.len(), s.buffered());
+                queued_at_change.push((samples, ov));
+                eprintln!("override {ov} at sample {samples}: {:.3} s queued", s.buffered());
             }
         }
-        // The module at twice the real pace at most.
-        pace.wait();
-        assert!(!period(), "the update path allocated (period {k})");
-        if bit("nurbs_interp.active") {
-            got.push(out());
-        }
-        if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
-            break;
-        }
-    }
+    });
     assert!(
         bit("nurbs_interp.done"),
         "the motion ends at the path end: {} samples ({} planned at 100 %; {} slots sent, done {}, {:?}), fault {}, held {}, underruns {}",

@@ -18,7 +18,7 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{plan_groups, SegmentGroup, Source, Streamer};
+use nurbs_planner::feed::{plan_groups, PathOpener, SegmentGroup, Source, Streamer};
 use nurbs_planner::hal_user::Component;
 use nurbs_rtcore::interpolator::Sample;
 
@@ -348,6 +348,41 @@ impl Pace {
         }
         self.next = self.began.elapsed().as_secs_f64().max(self.next) + self.step;
     }
+}
+
+/// Streams a plan of `toolpath` (the planner's own streaming source, as `nurbs-planner` runs
+/// it) into the loaded module `l`, whose periods run at most `speed` times the servo's real
+/// pace ([`Pace`]) for at most `periods`, until the motion is done, faults or holds.
+/// `control` is called before each period with the streamer and the samples so far (to change
+/// the feed override). Returns the module's samples while active, and the streamer.
+pub fn paced_run<'a>(
+    l: &'a Loaded,
+    toolpath: &Toolpath,
+    limits: &Limits,
+    speed: f64,
+    periods: usize,
+    mut control: impl FnMut(&mut Streamer<'a>, usize),
+) -> (Vec<Out>, Streamer<'a>) {
+    let tp = toolpath.clone();
+    let open: PathOpener = std::sync::Arc::new(move || Ok(PathCurves::new(&tp)));
+    let source = Source::streamed(open, limits.clone(), None, 1.0);
+    let began = Instant::now();
+    let mut s = Streamer::new(l.channel, toolpath.tip_dim(), source, 0, 0.25, began).unwrap();
+    let mut got: Vec<Out> = Vec::new();
+    let mut pace = Pace::new(began, speed);
+    for k in 0..periods {
+        s.fill().unwrap();
+        control(&mut s, got.len());
+        pace.wait();
+        assert!(!period(), "the update path allocated (period {k})");
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+        if bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
+            break;
+        }
+    }
+    (got, s)
 }
 
 /// Instants at random samples of a motion (a seeded xorshift: the same run every time).
