@@ -99,17 +99,16 @@ pub fn open(
     let name = file.display().to_string();
     let (elements, stats): (ElementStream, _) = match mode {
         RoundCorners::Off => (elements, None),
-        RoundCorners::Auto | RoundCorners::On => {
+        RoundCorners::Auto | RoundCorners::On | RoundCorners::Smooth => {
             let rounder = CornerRounder::new(&name, elements, tolerance, mode == RoundCorners::On)
                 .map_err(|e| format!("{name}: {e}"))?;
             let stats = rounder.stats();
-            (Box::new(rounder), Some(stats))
-        }
-        RoundCorners::Smooth => {
-            let rounder = CornerRounder::new(&name, elements, tolerance, false).map_err(|e| format!("{name}: {e}"))?;
-            let stats = rounder.stats();
-            let fitter = RunFitter::new(rounder, tolerance, Arc::clone(&stats));
-            (Box::new(fitter), Some(stats))
+            let elements: ElementStream = if mode == RoundCorners::Smooth {
+                Box::new(RunFitter::new(rounder, tolerance, Arc::clone(&stats)))
+            } else {
+                Box::new(rounder)
+            };
+            (elements, Some(stats))
         }
     };
     let elements = match limits.travel()? {

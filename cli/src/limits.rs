@@ -56,12 +56,9 @@ impl LimitArgs {
 
     /// `[section]key` of the INI as text, with the INI's name, if it has one.
     pub fn ini_text(&self, section: &str, key: &str) -> Result<Option<(String, String)>, String> {
-        Ok(self.ini()?.and_then(|i| {
-            i.entries
-                .iter()
-                .find(|(s, k, _)| s == section && k == key)
-                .map(|(_, _, v)| (v.clone(), i.file.display().to_string()))
-        }))
+        Ok(self
+            .ini()?
+            .and_then(|i| Some((i.text(section, key)?.to_owned(), i.file.display().to_string()))))
     }
 
     /// `[DISPLAY]MAX_FEED_OVERRIDE` of the INI, if it has one.
@@ -201,10 +198,17 @@ impl Ini {
         })
     }
 
+    fn text(&self, section: &str, key: &str) -> Option<&str> {
+        self.entries
+            .iter()
+            .find(|(s, k, _)| s == section && k == key)
+            .map(|(_, _, v)| v.as_str())
+    }
+
     fn number(&self, section: &str, key: &str) -> Result<Option<f64>, String> {
-        match self.entries.iter().find(|(s, k, _)| s == section && k == key) {
+        match self.text(section, key) {
             None => Ok(None),
-            Some((_, _, v)) => v
+            Some(v) => v
                 .parse()
                 .map(Some)
                 .map_err(|_| format!("{}: [{section}]{key} = {v} is not a number", self.file.display())),

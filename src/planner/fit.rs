@@ -23,6 +23,8 @@
 use super::corner::{is_corner_spline, RoundingStats};
 use crate::geometry::{ElementKind, Nurbs, PathElement};
 use crate::readers::ReadError;
+use nurbs_rtcore::math::{dot, norm, sub};
+use nurbs_rtcore::{basis_functions, Vector, MAX_DIM};
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
@@ -55,36 +57,39 @@ const WINDOW: usize = 3;
 /// little data from wandering, and the fit from following quantisation noise).
 const SMOOTHING: f64 = 1e-4;
 
-type P3 = [f64; 3];
+/// A tool-tip point or vector (the first three coordinates; the rest zero).
+type P3 = Vector;
 
 fn p3(x: &[f64]) -> P3 {
-    let mut p = [0.0; 3];
-    for (a, b) in p.iter_mut().zip(x) {
+    let mut p = [0.0; MAX_DIM];
+    for (a, b) in p.iter_mut().zip(x.iter().take(3)) {
         *a = *b;
     }
     p
 }
-fn sub3(a: &P3, b: &P3) -> P3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
 fn dot3(a: &P3, b: &P3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    dot(a, b, 3)
 }
 fn norm3(a: &P3) -> f64 {
-    dot3(a, a).sqrt()
+    norm(a, 3)
 }
+/// `p + d t`.
 fn axpy(p: &P3, d: f64, t: &P3) -> P3 {
-    [p[0] + d * t[0], p[1] + d * t[1], p[2] + d * t[2]]
+    std::array::from_fn(|i| p[i] + d * t[i])
+}
+/// `p / d`.
+fn scaled(p: &P3, d: f64) -> P3 {
+    std::array::from_fn(|i| p[i] / d)
 }
 fn unit3(a: &P3) -> Option<P3> {
     let l = norm3(a);
-    (l > 1e-12).then(|| [a[0] / l, a[1] / l, a[2] / l])
+    (l > 1e-12).then(|| scaled(a, l))
 }
 
 /// Distance from `x` to the segment `a`-`b`.
 fn segment_distance3(x: &P3, a: &P3, b: &P3) -> f64 {
-    let ab = sub3(b, a);
-    let ax = sub3(x, a);
+    let ab = sub(b, a);
+    let ax = sub(x, a);
     let l2 = dot3(&ab, &ab);
     let t = if l2 > 0.0 {
         (dot3(&ax, &ab) / l2).clamp(0.0, 1.0)
@@ -94,14 +99,14 @@ fn segment_distance3(x: &P3, a: &P3, b: &P3) -> f64 {
     norm3(&axpy(&ax, -t, &ab))
 }
 
-/// How a fitted spline meets what comes before or after it.
+/// How a fitted spline meets what comes before or after it: along the unit tangent `t` with
+/// the curvature vector `k` (1/mm), the join of a rounded piece (`k` zero) or of the fitted
+/// spline before. (An end without one is free: only through the end point, and the next
+/// spline continues this one's tangent and curvature.)
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum EndCondition {
-    /// Along the unit tangent `t` with the curvature vector `k` (1/mm): the join of a rounded
-    /// piece (`k` zero) or of the fitted spline before.
-    Fixed { t: P3, k: P3 },
-    /// Only through the end point: the next spline continues this one's tangent and curvature.
-    Free,
+struct EndCondition {
+    t: P3,
+    k: P3,
 }
 
 /// A run's programmed polyline: vertices (tool tip) and how its ends join.
@@ -109,7 +114,8 @@ struct RunData {
     vertices: Vec<P3>,
     chord: Vec<f64>,
     start: EndCondition,
-    end: EndCondition,
+    /// `None`: a free end.
+    end: Option<EndCondition>,
 }
 
 /// The programmed polyline of rounded pieces: a line's end, a corner spline's vertex (its middle
@@ -121,7 +127,7 @@ fn run_data(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool)
     let mut vertices = vec![p3(first.control_point(0))];
     let mut push = |p: &[f64]| {
         let p = p3(p);
-        if vertices.last().is_some_and(|q| norm3(&sub3(&p, q)) > 1e-9) {
+        if vertices.last().is_some_and(|q| norm3(&sub(&p, q)) > 1e-9) {
             vertices.push(p);
         }
     };
@@ -139,24 +145,24 @@ fn run_data(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool)
     }
     let mut chord = vec![0.0];
     for w in vertices.windows(2) {
-        chord.push(chord[chord.len() - 1] + norm3(&sub3(&w[1], &w[0])));
+        chord.push(chord[chord.len() - 1] + norm3(&sub(&w[1], &w[0])));
     }
     let n = last.control_point_count();
-    let zero = [0.0; 3];
+    let zero = [0.0; MAX_DIM];
     let start = match start {
         Some(s) => s,
-        None => EndCondition::Fixed {
-            t: unit3(&sub3(&p3(first.control_point(1)), &p3(first.control_point(0))))?,
+        None => EndCondition {
+            t: unit3(&sub(&p3(first.control_point(1)), &p3(first.control_point(0))))?,
             k: zero,
         },
     };
     let end = if free_end {
-        EndCondition::Free
+        None
     } else {
-        EndCondition::Fixed {
-            t: unit3(&sub3(&p3(last.control_point(n - 1)), &p3(last.control_point(n - 2))))?,
+        Some(EndCondition {
+            t: unit3(&sub(&p3(last.control_point(n - 1)), &p3(last.control_point(n - 2))))?,
             k: zero,
-        }
+        })
     };
     Some(RunData {
         vertices,
@@ -167,26 +173,13 @@ fn run_data(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool)
 }
 
 /// Cubic B-spline basis functions at `t` on clamped `knots` of `n` control points: the index of
-/// the first of the four that can be non-zero, and their values.
+/// the first of the four that can be non-zero, and their values
+/// ([`nurbs_rtcore::basis_functions`] on the span of `t`).
 fn basis(knots: &[f64], n: usize, t: f64) -> (usize, [f64; 4]) {
     // The span k (3 <= k < n) with knots[k] <= t < knots[k + 1] (the last one for t = 1).
     let k = knots[4..n].partition_point(|&x| x <= t) + 3;
-    let mut nb = [0.0; 4];
-    nb[0] = 1.0;
-    let (mut left, mut right) = ([0.0; 4], [0.0; 4]);
-    for j in 1..=3 {
-        left[j] = t - knots[k + 1 - j];
-        right[j] = knots[k + j] - t;
-        let mut saved = 0.0;
-        for r in 0..j {
-            let denom = right[r + 1] + left[j - r];
-            let temp = if denom != 0.0 { nb[r] / denom } else { 0.0 };
-            nb[r] = saved + right[r + 1] * temp;
-            saved = left[j - r] * temp;
-        }
-        nb[j] = saved;
-    }
-    (k - 3, nb)
+    let nb = basis_functions(knots, k, 3, t);
+    (k - 3, [nb[0], nb[1], nb[2], nb[3]])
 }
 
 /// Solves `m x = rhs` for a symmetric positive definite band matrix given by its lower band
@@ -225,7 +218,7 @@ fn solve_band(mut band: Vec<[f64; 4]>, mut rhs: Vec<P3>) -> Option<Vec<P3>> {
         for d in 1..4.min(i + 1) {
             s = axpy(&s, -band[i][d], &rhs[i - d]);
         }
-        rhs[i] = [s[0] / band[i][0], s[1] / band[i][0], s[2] / band[i][0]];
+        rhs[i] = scaled(&s, band[i][0]);
     }
     for i in (0..n).rev() {
         let mut s = rhs[i];
@@ -234,7 +227,7 @@ fn solve_band(mut band: Vec<[f64; 4]>, mut rhs: Vec<P3>) -> Option<Vec<P3>> {
                 s = axpy(&s, -band[i + d][d], &rhs[i + d]);
             }
         }
-        rhs[i] = [s[0] / band[i][0], s[1] / band[i][0], s[2] / band[i][0]];
+        rhs[i] = scaled(&s, band[i][0]);
     }
     Some(rhs)
 }
@@ -255,12 +248,12 @@ fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
     // and bends into the data over that short distance instead of a whole span. (An end that
     // meets another spline, or ends free, keeps the curvature of the data and whole spans:
     // short ones there would follow the noise.)
-    let graded = |c: &EndCondition| matches!(c, EndCondition::Fixed { k, .. } if *k == [0.0; 3]);
+    let graded = |c: &EndCondition| c.k == [0.0; MAX_DIM];
     let mut interior: Vec<f64> = (1..spans).map(|k| k as f64 * h).collect();
     if graded(&data.start) {
         interior.extend(END_GRADING.iter().map(|g| g * h));
     }
-    if graded(&data.end) {
+    if data.end.as_ref().is_some_and(graded) {
         interior.extend(END_GRADING.iter().map(|g| 1.0 - g * h));
     }
     interior.sort_by(f64::total_cmp);
@@ -278,7 +271,7 @@ fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
             let inserts = (gap / (0.5 * finest)).ceil() as usize;
             for k in 1..inserts {
                 let f = k as f64 / inserts as f64;
-                let q = axpy(&v[i - 1], f, &sub3(p, &v[i - 1]));
+                let q = axpy(&v[i - 1], f, &sub(p, &v[i - 1]));
                 points.push(((chord[i - 1] + f * (chord[i] - chord[i - 1])) / total, q));
             }
         }
@@ -289,21 +282,20 @@ fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
     // P1 = P0 + (C a / 3) t it leaves at the speed C (the chord length per unit parameter)
     // along t, and with P2 = P1 + (C b / 3) t + a b C^2 k / 6 with the curvature vector k and
     // no tangential acceleration. The same at the end, mirrored.
-    let mut cps = vec![[0.0; 3]; n];
+    let mut cps = vec![[0.0; MAX_DIM]; n];
     let mut fixed = vec![false; n];
     cps[0] = v[0];
     fixed[0] = true;
-    if let EndCondition::Fixed { t, k } = data.start {
-        let (a, b) = (knots[4], knots[5]);
-        cps[1] = axpy(&v[0], total * a / 3.0, &t);
-        cps[2] = axpy(&axpy(&cps[1], total * b / 3.0, &t), a * b * total * total / 6.0, &k);
-        fixed[1] = true;
-        fixed[2] = true;
-    }
+    let EndCondition { t, k } = data.start;
+    let (a, b) = (knots[4], knots[5]);
+    cps[1] = axpy(&v[0], total * a / 3.0, &t);
+    cps[2] = axpy(&axpy(&cps[1], total * b / 3.0, &t), a * b * total * total / 6.0, &k);
+    fixed[1] = true;
+    fixed[2] = true;
     let end = v[v.len() - 1];
     cps[n - 1] = end;
     fixed[n - 1] = true;
-    if let EndCondition::Fixed { t, k } = data.end {
+    if let Some(EndCondition { t, k }) = data.end {
         let (a, b) = (1.0 - knots[n - 1], 1.0 - knots[n - 2]);
         cps[n - 2] = axpy(&end, -total * a / 3.0, &t);
         cps[n - 3] = axpy(
@@ -329,7 +321,7 @@ fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
     let free = index.iter().flatten().count();
     if free > 0 {
         let mut band = vec![[0.0; 4]; free];
-        let mut rhs = vec![[0.0; 3]; free];
+        let mut rhs = vec![[0.0; MAX_DIM]; free];
         // Adds w_j w_k (and w_j times a fixed point's coordinates to the right) for the terms
         // `terms` of one squared residual `sum w P - target`.
         let mut add = |terms: &[(usize, f64)], target: &P3, weight: f64| {
@@ -358,7 +350,7 @@ fn fit(data: &RunData, spans: usize) -> Option<(Vec<f64>, Vec<P3>)> {
         }
         let lambda = SMOOTHING * points.len() as f64 / n as f64;
         for c in 1..n - 1 {
-            add(&[(c - 1, 1.0), (c, -2.0), (c + 1, 1.0)], &[0.0; 3], lambda);
+            add(&[(c - 1, 1.0), (c, -2.0), (c + 1, 1.0)], &[0.0; MAX_DIM], lambda);
         }
         let solved = solve_band(band, rhs)?;
         for (c, i) in index.iter().enumerate() {
@@ -408,8 +400,8 @@ fn deviation(data: &RunData, curve: &Nurbs) -> f64 {
 fn end_condition(knots: &[f64], cps: &[P3]) -> Option<EndCondition> {
     let n = cps.len();
     let (a, b) = (1.0 - knots[n - 1], 1.0 - knots[n - 2]);
-    let d1 = sub3(&cps[n - 1], &cps[n - 2]);
-    let d2 = sub3(&cps[n - 2], &cps[n - 3]);
+    let d1 = sub(&cps[n - 1], &cps[n - 2]);
+    let d2 = sub(&cps[n - 2], &cps[n - 3]);
     // Clamped cubic at its end, last interior knots 1 - a > 1 - b: C'(1) = 3 / a (P[n-1] -
     // P[n-2]), C''(1) = 6 / a ((P[n-1] - P[n-2]) / a - (P[n-2] - P[n-3]) / b).
     let c1: P3 = std::array::from_fn(|i| 3.0 / a * d1[i]);
@@ -417,9 +409,9 @@ fn end_condition(knots: &[f64], cps: &[P3]) -> Option<EndCondition> {
     let t = unit3(&c1)?;
     let speed2 = dot3(&c1, &c1);
     let normal = axpy(&c2, -dot3(&c2, &t), &t);
-    Some(EndCondition::Fixed {
+    Some(EndCondition {
         t,
-        k: [normal[0] / speed2, normal[1] / speed2, normal[2] / speed2],
+        k: scaled(&normal, speed2),
     })
 }
 
@@ -470,7 +462,7 @@ fn fitted(pieces: &[PathElement], start: Option<EndCondition>, free_end: bool, b
 
 /// One part of a run after fitting: a spline, or pieces left as rounded.
 enum Part {
-    Spline(Fitted),
+    Spline(Box<Fitted>),
     Pieces(Vec<PathElement>),
 }
 
@@ -486,7 +478,7 @@ fn fit_or_split(
 ) {
     if pieces.len() >= MIN_RUN {
         if let Some(f) = fitted(pieces, start, free_end, budget) {
-            parts.push(Part::Spline(f));
+            parts.push(Part::Spline(Box::new(f)));
             return;
         }
         let mid = pieces.len() / 2;
@@ -501,7 +493,7 @@ fn fit_or_split(
 struct Pending {
     pieces: Vec<PathElement>,
     start: Option<EndCondition>,
-    spline: Fitted,
+    spline: Box<Fitted>,
 }
 
 /// Replaces, as they come, the runs of short rounded pieces of a stream of path elements (the
@@ -603,7 +595,7 @@ fn joins_run(e: &PathElement, feed: Option<Option<f64>>) -> bool {
     let tip_only = c.dim() == c.tip_dim();
     let kind = (c.degree() == 1 && c.control_point_count() == 2) || is_corner_spline(c);
     let polygon: f64 = (1..c.control_point_count())
-        .map(|k| norm3(&sub3(&p3(c.control_point(k)), &p3(c.control_point(k - 1)))))
+        .map(|k| norm3(&sub(&p3(c.control_point(k)), &p3(c.control_point(k - 1)))))
         .sum();
     tip_only && kind && polygon <= SHORT_PIECE && polygon > 0.0 && feed.is_none_or(|f| f == e.feed)
 }
@@ -629,7 +621,7 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> Iterator for RunFitter<
                     let continues = self.run.last().is_none_or(|p| {
                         let c = &p.curve;
                         let end = p3(c.control_point(c.control_point_count() - 1));
-                        norm3(&sub3(&p3(e.curve.control_point(0)), &end)) <= 1e-9
+                        norm3(&sub(&p3(e.curve.control_point(0)), &end)) <= 1e-9
                     });
                     if joins_run(&e, feed) && continues {
                         self.run.push(e);
@@ -707,7 +699,7 @@ mod tests {
         let t = unit3(&c1).unwrap();
         let s2 = dot3(&c1, &c1);
         let n = axpy(&c2, -dot3(&c2, &t), &t);
-        (t, [n[0] / s2, n[1] / s2, n[2] / s2])
+        (t, scaled(&n, s2))
     }
 
     /// Checks, independently of the fitter's own check, that the path `out` and the programmed
@@ -741,7 +733,7 @@ mod tests {
         // rounding of a sharper corner keeps its path within the tolerance of the polyline, but
         // cuts the vertex itself by more).
         let turns = |i: usize| {
-            let (a, b) = (sub3(&verts[i], &verts[i - 1]), sub3(&verts[i + 1], &verts[i]));
+            let (a, b) = (sub(&verts[i], &verts[i - 1]), sub(&verts[i + 1], &verts[i]));
             dot3(&a, &b) < (30f64).to_radians().cos() * norm3(&a) * norm3(&b)
         };
         for (i, v) in verts.iter().enumerate() {
@@ -756,16 +748,16 @@ mod tests {
         }
         for w in out.windows(2) {
             let (a, b) = (&w[0], &w[1]);
-            let gap = norm3(&sub3(&point(a, a.curve.u_max()), &point(b, b.curve.u_min())));
+            let gap = norm3(&sub(&point(a, a.curve.u_max()), &point(b, b.curve.u_min())));
             assert!(gap <= 1e-9, "gap {gap}");
             let (ta, ka) = frame(a, a.curve.u_max());
             let (tb, kb) = frame(b, b.curve.u_min());
             assert!(
-                norm3(&sub3(&ta, &tb)) <= 1e-9,
+                norm3(&sub(&ta, &tb)) <= 1e-9,
                 "tangent turns by {}",
-                norm3(&sub3(&ta, &tb))
+                norm3(&sub(&ta, &tb))
             );
-            let dk = norm3(&sub3(&ka, &kb));
+            let dk = norm3(&sub(&ka, &kb));
             assert!(
                 dk <= 1e-6 * (1.0 + norm3(&ka)),
                 "curvature jumps by {dk} ({ka:?} to {kb:?})"
@@ -864,13 +856,13 @@ mod tests {
                 dense[i - d][i] = v;
             }
         }
-        let x: Vec<P3> = (0..n).map(|i| [i as f64, 1.0, -(i as f64) * 0.5]).collect();
+        let x: Vec<P3> = (0..n).map(|i| p3(&[i as f64, 1.0, -(i as f64) * 0.5])).collect();
         let rhs: Vec<P3> = (0..n)
             .map(|i| std::array::from_fn(|c| (0..n).map(|j| dense[i][j] * x[j][c]).sum()))
             .collect();
         let got = solve_band(band, rhs).unwrap();
         for (a, b) in got.iter().zip(&x) {
-            assert!(norm3(&sub3(a, b)) < 1e-12, "{a:?} {b:?}");
+            assert!(norm3(&sub(a, b)) < 1e-12, "{a:?} {b:?}");
         }
     }
 }
