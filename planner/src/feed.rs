@@ -1149,16 +1149,19 @@ pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>)
 }
 
 /// Whether a motion of `total` seconds (infinite while unknown) can start with its first
-/// `ready` seconds planned, planning at `rate` seconds of motion per second: the plan must stay
-/// `margin` ahead of the motion to its end, counted at half the measured rate (the planner
-/// shares the machine with the module and everything else, and later parts may cost more).
-/// Where planning is faster than the motion that is `margin`; where slower, enough more that
-/// the motion does not catch up with it (an underrun stop on the way).
-pub fn far_enough_ahead(ready: f64, total: f64, rate: f64, margin: f64) -> bool {
+/// `ready` seconds planned in `groups` groups, planning at `rate` seconds of motion per second:
+/// the plan must stay `margin` ahead of the motion to its end, counted at half the measured
+/// rate (the planner shares the machine with the module and everything else, and later parts
+/// may cost more). Where planning is faster than the motion that is `margin`; where slower,
+/// enough more that the motion does not catch up with it (an underrun stop on the way). The
+/// rate counts only once it spans the time between two groups: the first group can come far
+/// sooner than the pace (a smoothed dense program: its first group after 31 ms, the fourth
+/// 140 ms after the third, for 75 ms of motion).
+pub fn far_enough_ahead(ready: f64, groups: usize, total: f64, rate: f64, margin: f64) -> bool {
     if ready >= total {
         return true;
     }
-    if ready < margin {
+    if ready < margin || groups < 2 {
         return false;
     }
     let rate = 0.5 * rate;
@@ -1366,6 +1369,14 @@ impl Source {
             Source::Blocks { plan, .. } => plan.blocks.iter().map(|b| b.len() as f64 * plan.period).sum(),
         }
     }
+
+    /// Groups (path blocks) planned so far.
+    fn groups_planned(&self) -> usize {
+        match self {
+            Source::Segments { queue, .. } => queue.len(),
+            Source::Blocks { plan, .. } => plan.blocks.len(),
+        }
+    }
 }
 
 /// Motion time (s) planned before the motion starts, where the planner's pace lets the queue
@@ -1427,8 +1438,10 @@ pub struct Streamer<'a> {
     ring_groups: VecDeque<RingGroup>,
     pub pushed: u64,
     pub pushed_time: f64,
-    /// Motion time planned (received from the planner) and when planning began.
+    /// Motion time planned (received from the planner), in how many groups, and when
+    /// planning began.
     planned: f64,
+    groups_planned: usize,
     began: Instant,
     margin: f64,
     /// Records may go into the ring (the start rule has held once).
@@ -1469,6 +1482,7 @@ impl<'a> Streamer<'a> {
             curves: VecDeque::new(),
             next_queued: first,
             planned: source.planned(),
+            groups_planned: source.groups_planned(),
             source,
             current: None,
             in_ring: VecDeque::new(),
@@ -1614,6 +1628,7 @@ impl<'a> Streamer<'a> {
             match rx.try_recv() {
                 Ok(PlanEvent::Group(g)) => {
                     self.planned += g.time;
+                    self.groups_planned += 1;
                     *queued += g.time;
                     queue.push_back(g);
                 }
@@ -1803,7 +1818,8 @@ impl<'a> Streamer<'a> {
         // The motion runs into the new plan only once it could start on it: as much planned
         // ahead, at the pace, as a motion from rest waits for ([`START_AHEAD`]).
         let rate = p.queued / p.began.elapsed().as_secs_f64().max(1e-9);
-        if !p.requested && !far_enough_ahead(p.queued, p.total.unwrap_or(f64::INFINITY), rate, START_AHEAD) {
+        let total = p.total.unwrap_or(f64::INFINITY);
+        if !p.requested && !far_enough_ahead(p.queued, p.groups.len(), total, rate, START_AHEAD) {
             return;
         }
         let (join, requested, asked) = (p.join, p.requested, p.feed_override);
@@ -2230,7 +2246,8 @@ impl<'a> Streamer<'a> {
         };
         let rate = self.planned / self.began.elapsed().as_secs_f64().max(1e-9);
         // With the queue full the planner waits for the motion: it cannot get further ahead.
-        self.started = far_enough_ahead(self.planned, total, rate, START_AHEAD.min(self.margin)) || self.queue_full();
+        let ahead = START_AHEAD.min(self.margin);
+        self.started = far_enough_ahead(self.planned, self.groups_planned, total, rate, ahead) || self.queue_full();
         self.started
     }
 }
