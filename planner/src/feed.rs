@@ -14,12 +14,12 @@
 use std::cell::{OnceCell, RefCell};
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
-use std::sync::Arc;
 use std::time::Instant;
 
 use crate::cut::{cut_into, CutFrom, CutPlace, CUT_RAMPS};
 use crate::hold_stops::HoldStops;
 use crate::say;
+use crate::shared_path::SharedPath;
 use crate::writer::{GeometryWriter, Release, WriteError};
 use nurbs_hal::channel::{
     Channel, Join, Slot, StopPoint, AT_RECORD_END, SEGMENT_SLOTS, SPLICE_ACCEPTED, SPLICE_DONE, SPLICE_REQUESTED,
@@ -1149,19 +1149,16 @@ pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>)
 }
 
 /// Whether a motion of `total` seconds (infinite while unknown) can start with its first
-/// `ready` seconds planned in `groups` groups, planning at `rate` seconds of motion per second:
-/// the plan must stay `margin` ahead of the motion to its end, counted at half the measured
-/// rate (the planner shares the machine with the module and everything else, and later parts
-/// may cost more). Where planning is faster than the motion that is `margin`; where slower,
-/// enough more that the motion does not catch up with it (an underrun stop on the way). The
-/// rate counts only once it spans the time between two groups: the first group can come far
-/// sooner than the pace (a smoothed dense program: its first group after 31 ms, the fourth
-/// 140 ms after the third, for 75 ms of motion).
-pub fn far_enough_ahead(ready: f64, groups: usize, total: f64, rate: f64, margin: f64) -> bool {
+/// `ready` seconds planned, planning at `rate` seconds of motion per second: the plan must stay
+/// `margin` ahead of the motion to its end, counted at half the measured rate (the planner
+/// shares the machine with the module and everything else, and later parts may cost more).
+/// Where planning is faster than the motion that is `margin`; where slower, enough more that
+/// the motion does not catch up with it (an underrun stop on the way).
+pub fn far_enough_ahead(ready: f64, total: f64, rate: f64, margin: f64) -> bool {
     if ready >= total {
         return true;
     }
-    if ready < margin || groups < 2 {
+    if ready < margin {
         return false;
     }
     let rate = 0.5 * rate;
@@ -1240,14 +1237,11 @@ impl RingGroup {
     }
 }
 
-/// Reads the path afresh, from its start (each plan of a motion reads it as it plans).
-pub type PathOpener = Arc<dyn Fn() -> Result<PathCurves, String> + Send + Sync>;
-
 /// Plans a streamed motion again at another feed override, in a thread of its own, from the
 /// end of the last group sent: the module runs into the new plan's groups as it ran into the
 /// old ones, and the old ones not yet sent are dropped.
 pub struct Replanner {
-    open: PathOpener,
+    path: SharedPath,
     limits: Limits,
     /// Where the motion started (a new plan from there while nothing has been sent).
     from: Option<StopPoint>,
@@ -1262,6 +1256,9 @@ pub struct Replanner {
     /// How far ahead of the module it joins (s of motion): [`JOIN_LEAD`], doubled each time
     /// the re-plan came too late.
     lead: f64,
+    /// When the override the next re-plan is for was asked for, where earlier re-plans at it
+    /// came too late.
+    retry_since: Option<Instant>,
 }
 
 /// A re-plan in progress: its events, the groups it has handed out, and how many slots had
@@ -1274,7 +1271,10 @@ struct Pending {
     error: Option<String>,
     pushed: u64,
     feed_override: f64,
+    /// When it began, and when the override was asked for (earlier where re-plans before it
+    /// came too late).
     began: Instant,
+    since: Instant,
     /// Where it joins: in or after the slot of this number, through the module's
     /// [`nurbs_hal::channel::Splice`] (after motion sample `.1`, a cut into the record, or at
     /// its end, [`AT_RECORD_END`], a group end still queued), or `None`: at the end of the
@@ -1288,9 +1288,13 @@ struct Pending {
 }
 
 /// Runs [`stream_plan`] in a thread of its own; its events, at most [`EVENTS_AHEAD`] waiting.
-fn spawn_plan(open: PathOpener, limits: Limits, start: StreamStart, feed_override: f64) -> Receiver<PlanEvent> {
+fn spawn_plan(path: SharedPath, limits: Limits, start: StreamStart, feed_override: f64) -> Receiver<PlanEvent> {
     let (sender, receiver) = mpsc::sync_channel(EVENTS_AHEAD);
-    std::thread::spawn(move || stream_plan(&*open, &limits, start, feed_override, &mut |e| sender.send(e).is_ok()));
+    std::thread::spawn(move || {
+        stream_plan(&|| path.open(), &limits, start, feed_override, &mut |e| {
+            sender.send(e).is_ok()
+        })
+    });
     receiver
 }
 
@@ -1314,12 +1318,13 @@ const JOIN_LEAD_MAX: f64 = 0.32;
 const SPLICE_LAST_CALL: f64 = 0.005;
 
 impl Source {
-    /// The Erwinski plan of the path `open` reads (from its start, or from rest at the stop
-    /// point `from`) at `feed_override` as a stream, planned in a thread of its own that reads
-    /// the path as it plans and waits while [`QUEUED_AHEAD`] seconds of motion wait to be sent;
-    /// planned again when the override changes ([`Streamer::set_feed_override`]).
-    pub fn streamed(open: PathOpener, limits: Limits, from: Option<StopPoint>, feed_override: f64) -> Source {
-        let events = spawn_plan(open.clone(), limits.clone(), StreamStart::Rest(from), feed_override);
+    /// The Erwinski plan of `path` (from its start, or from rest at the stop point `from`) at
+    /// `feed_override` as a stream, planned in a thread of its own that reads the path as it
+    /// plans and waits while [`QUEUED_AHEAD`] seconds of motion wait to be sent; planned again
+    /// when the override changes ([`Streamer::set_feed_override`]). The streamer releases the
+    /// path behind the module ([`SharedPath::release_before`]).
+    pub fn streamed(path: SharedPath, limits: Limits, from: Option<StopPoint>, feed_override: f64) -> Source {
+        let events = spawn_plan(path.clone(), limits.clone(), StreamStart::Rest(from), feed_override);
         Source::Segments {
             events: Some(events),
             queue: VecDeque::new(),
@@ -1327,7 +1332,7 @@ impl Source {
             total: None,
             error: None,
             replanner: Some(Box::new(Replanner {
-                open,
+                path,
                 limits,
                 from,
                 feed_override,
@@ -1335,6 +1340,7 @@ impl Source {
                 pending: None,
                 cut_refused: None,
                 lead: JOIN_LEAD,
+                retry_since: None,
             })),
         }
     }
@@ -1727,7 +1733,7 @@ impl<'a> Streamer<'a> {
         };
         say!("nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {from}");
         r.pending = Some(Pending {
-            events: spawn_plan(r.open.clone(), r.limits.clone(), start, feed_override),
+            events: spawn_plan(r.path.clone(), r.limits.clone(), start, feed_override),
             groups: VecDeque::new(),
             queued: 0.0,
             total: None,
@@ -1735,10 +1741,24 @@ impl<'a> Streamer<'a> {
             pushed,
             feed_override,
             began: Instant::now(),
+            since: r.retry_since.take().unwrap_or_else(Instant::now),
             join: place,
             cut_group: cut_group.then_some(place.map_or(0, |(k, _)| k)),
             requested: false,
         });
+    }
+
+    /// Plans again at `feed_override` from a later place, a re-plan at it having failed to
+    /// join (`since`: when the override was asked for, for the log).
+    fn plan_again(&mut self, feed_override: f64, since: Instant) {
+        if let Source::Segments { replanner: Some(r), .. } = &mut self.source {
+            r.asked = r.feed_override;
+            r.retry_since = Some(since);
+        }
+        self.set_feed_override(feed_override);
+        if let Source::Segments { replanner: Some(r), .. } = &mut self.source {
+            r.retry_since = None;
+        }
     }
 
     /// Takes what a re-plan at another feed override has handed out; once it has a group, the
@@ -1773,9 +1793,8 @@ impl<'a> Streamer<'a> {
                     );
                     let asked = p.feed_override;
                     r.cut_refused = Some(asked);
-                    r.pending = None;
-                    r.asked = r.feed_override;
-                    self.set_feed_override(asked);
+                    let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
+                    self.plan_again(asked, since);
                     return;
                 }
                 Ok(PlanEvent::Failed(e)) if !p.requested => {
@@ -1818,17 +1837,22 @@ impl<'a> Streamer<'a> {
         // The motion runs into the new plan only once it could start on it: as much planned
         // ahead, at the pace, as a motion from rest waits for ([`START_AHEAD`]).
         let rate = p.queued / p.began.elapsed().as_secs_f64().max(1e-9);
-        let total = p.total.unwrap_or(f64::INFINITY);
-        if !p.requested && !far_enough_ahead(p.queued, p.groups.len(), total, rate, START_AHEAD) {
+        if !p.requested && !far_enough_ahead(p.queued, p.total.unwrap_or(f64::INFINITY), rate, START_AHEAD) {
             return;
+        }
+        if p.join.is_none() && p.pushed != pushed && p.pushed > 0 {
+            // The old plan's next group went out meanwhile: the group end the re-plan starts
+            // from is in the ring now, and the module may join there (dropping what went out
+            // after it) if it is still far enough from it. Planning again after each group
+            // that goes out would never catch up where a re-plan takes longer than a group.
+            p.join = Some((p.pushed - 1, AT_RECORD_END));
         }
         let (join, requested, asked) = (p.join, p.requested, p.feed_override);
         match join {
             None if p.pushed != pushed => {
-                // The old plan's next group went out meanwhile: plan again after it.
-                r.pending = None;
-                r.asked = r.feed_override;
-                self.set_feed_override(asked);
+                // The old plan's first group went out meanwhile: plan again after it.
+                let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
+                self.plan_again(asked, since);
                 return;
             }
             None => {}
@@ -1852,9 +1876,8 @@ impl<'a> Streamer<'a> {
                     if ahead < SPLICE_LAST_CALL {
                         r.lead = (2.0 * r.lead).min(JOIN_LEAD_MAX);
                     }
-                    r.pending = None;
-                    r.asked = r.feed_override;
-                    self.set_feed_override(asked);
+                    let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
+                    self.plan_again(asked, since);
                     return;
                 }
                 if let Some(p) = &mut r.pending {
@@ -1869,9 +1892,8 @@ impl<'a> Streamer<'a> {
                     // Missed (too late, or the motion stopped): plan again from a later join,
                     // further ahead.
                     r.lead = (2.0 * r.lead).min(JOIN_LEAD_MAX);
-                    r.pending = None;
-                    r.asked = r.feed_override;
-                    self.set_feed_override(asked);
+                    let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
+                    self.plan_again(asked, since);
                     return;
                 }
             },
@@ -1911,7 +1933,7 @@ impl<'a> Streamer<'a> {
             self.channel.set_planned_time(self.pushed_time);
         }
         say!(
-            "nurbs-planner: feed override {}: the motion runs into the new plan after slot {} ({}), re-planned in {:.1} ms",
+            "nurbs-planner: feed override {}: the motion runs into the new plan after slot {} ({}), re-planned in {:.1} ms ({:.1} ms after the override was asked for)",
             p.feed_override,
             p.join.map_or(pushed, |(k, _)| k + 1),
             match p.join {
@@ -1919,7 +1941,8 @@ impl<'a> Streamer<'a> {
                 Some((_, n)) => format!("cutting into the record before it after motion sample {n}"),
                 None => "the end of the slots sent".to_string(),
             },
-            p.began.elapsed().as_secs_f64() * 1e3
+            p.began.elapsed().as_secs_f64() * 1e3,
+            p.since.elapsed().as_secs_f64() * 1e3
         );
         let Source::Segments {
             events,
@@ -2160,6 +2183,7 @@ impl<'a> Streamer<'a> {
         loop {
             self.receive()?;
             self.writer.reclaim(self.taken());
+            self.release_path();
             if self.current.is_none() {
                 self.current = self.next_group()?;
                 if self.current.is_none() {
@@ -2213,6 +2237,24 @@ impl<'a> Streamer<'a> {
         }
     }
 
+    /// Lets the path shared by the plans forget what no plan can start at any more: the
+    /// elements before the module's, and before the first record of the oldest group a cut
+    /// may replay ([`Streamer::cut_point`]), less one (a plan from rest at the end of an
+    /// element, or a replay from the end of the record before, looks at it).
+    fn release_path(&mut self) {
+        self.buffered();
+        let module = self.writer.module_curve();
+        let replayed = self
+            .ring_groups
+            .front()
+            .and_then(|g| g.records.first())
+            .map(|r| r.curve);
+        let floor = replayed.map_or(module, |c| c.min(module)).saturating_sub(1);
+        if let Source::Segments { replanner: Some(r), .. } = &self.source {
+            r.path.release_before(floor as usize);
+        }
+    }
+
     /// Whether the old plan's next group waits for a re-plan at another feed override on its
     /// way (see [`REPLAN_LOW_WATER`]).
     fn replan_waits(&mut self) -> bool {
@@ -2246,8 +2288,12 @@ impl<'a> Streamer<'a> {
         };
         let rate = self.planned / self.began.elapsed().as_secs_f64().max(1e-9);
         // With the queue full the planner waits for the motion: it cannot get further ahead.
+        // The pace counts once it spans two groups: a plan's first group can come far sooner
+        // than its pace (a smoothed dense program's first after 31 ms, its fourth 140 ms after
+        // the third, for 75 ms of motion). A re-plan's first group comes at its pace.
+        let paced = self.groups_planned >= 2 || self.planned >= total;
         let ahead = START_AHEAD.min(self.margin);
-        self.started = far_enough_ahead(self.planned, self.groups_planned, total, rate, ahead) || self.queue_full();
+        self.started = (paced && far_enough_ahead(self.planned, total, rate, ahead)) || self.queue_full();
         self.started
     }
 }

@@ -106,6 +106,11 @@ impl<'a> GeometryWriter<'a> {
         self.next_curve
     }
 
+    /// The path element the module is on (the stream's first before its first report).
+    pub fn module_curve(&self) -> u32 {
+        self.report().curve
+    }
+
     /// The module's report on this stream (before its first report: at the first curve).
     fn report(&self) -> Report {
         let r = self.channel.progress.read();

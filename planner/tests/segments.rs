@@ -4,7 +4,6 @@
 
 mod common;
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use common::test_paths::{dense_arc, g1_zigzag};
@@ -17,7 +16,8 @@ use nurbs_hal::slot::{SegmentSlot, KIND_BLOCK};
 use nurbs_hal::sys;
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::PathCurves;
-use nurbs_planner::feed::{plan_groups, PathOpener, Source, Streamer};
+use nurbs_planner::feed::{plan_groups, Source, Streamer};
+use nurbs_planner::shared_path::SharedPath;
 use nurbs_planner::writer::GeometryWriter;
 
 #[test]
@@ -536,19 +536,36 @@ fn a_streamed_plan_runs_through_the_module_while_it_is_planned() {
     let _guard = lock_module();
     let job = job_of(g1_zigzag(60));
     let l = load();
-    let toolpath = job.toolpath.clone();
-    let open: PathOpener = Arc::new(move || Ok(PathCurves::new(&toolpath)));
-    let source = Source::streamed(open, job.limits.clone(), None, 1.0);
+    let path = SharedPath::whole(&job.toolpath);
+    let source = Source::streamed(path.clone(), job.limits.clone(), None, 1.0);
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, job.toolpath.tip_dim(), source, 0, 0.5, began).unwrap();
     // The module at 8 times the real pace (the planner is far faster than that here).
     let mut paced = Pace::new(began, 8.0);
     let mut pace = |_: usize| paced.wait();
+    // The path the plans share is forgotten behind the module as it goes.
+    let mut kept_behind = Vec::new();
     let got = run(&mut s, job.samples.len() + 200_000, &mut pace, &mut |_| {
+        let (first, _) = path.kept();
+        kept_behind.push((first, u32_pin("nurbs_interp.curve") as usize));
         bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held")
     });
     assert_exact("streamed zigzag", &got, &job.samples, 2);
     assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
+    let elements = job.toolpath.elements.len();
+    // Never past the module (a plan may start where it stands), trailing it by at most a few
+    // elements (those of the oldest group a cut may replay), to the path's end.
+    assert!(
+        kept_behind.iter().all(|&(first, curve)| first <= curve),
+        "released ahead of the module"
+    );
+    let lag = kept_behind.iter().map(|&(first, curve)| curve - first).max().unwrap();
+    assert!(lag <= 8, "the path kept {lag} elements behind the module");
+    assert!(
+        kept_behind.last().unwrap().0 + 8 >= elements,
+        "{:?} of {elements}",
+        kept_behind.last()
+    );
 }
 
 /// A new geometry stream starts a new motion after a motion that is done, stopped by an

@@ -54,11 +54,19 @@ impl PathCurves {
 
     /// A toolpath read as it is planned; its first element gives the tool-tip dimension (an
     /// element of another is an error when it comes).
-    pub fn streamed(mut source: ElementStream) -> Result<Self, ReadError> {
-        let first = source.next().transpose()?;
-        let tip = first.as_ref().map_or(2, |e| e.curve.tip_dim());
+    pub fn streamed(source: ElementStream) -> Result<Self, ReadError> {
+        Self::streamed_from(0, source)
+    }
+
+    /// The same from element `first` on: `source` begins there (a plan that starts further on
+    /// needs none of the elements before it).
+    pub fn streamed_from(first: usize, mut source: ElementStream) -> Result<Self, ReadError> {
+        let element = source.next().transpose()?;
+        let tip = element.as_ref().map_or(2, |e| e.curve.tip_dim());
+        let mut elements = Window::starting_at(first);
+        elements.extend(element);
         Ok(PathCurves {
-            elements: Window::from_vec(first.into_iter().collect()),
+            elements,
             source: Some(source),
             error: None,
             tip,

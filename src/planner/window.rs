@@ -47,6 +47,10 @@ impl<T> Window<T> {
         self.items.push_back(item);
     }
 
+    pub fn extend(&mut self, items: impl IntoIterator<Item = T>) {
+        self.items.extend(items);
+    }
+
     /// Inserts at absolute index `i` (not before the first held item).
     pub fn insert(&mut self, i: usize, item: T) {
         self.items.insert(self.slot(i), item);

@@ -56,21 +56,22 @@ use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::{HAL_IN, HAL_OUT};
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{self, PathOpener, Source, Streamer};
+use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
 use nurbs_planner::say;
+use nurbs_planner::shared_path::SharedPath;
 
 /// The toolpath file read as a stream, its G1 corners rounded as `nurbs-plan plan` does with
-/// the same tolerance (and `verify` checks), its first element read.
-fn open_path(args: &Args) -> Result<PathCurves, String> {
+/// the same tolerance (and `verify` checks), shared by the plans of the motion.
+fn open_path(args: &Args) -> Result<SharedPath, String> {
     let mut stream = open(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
-    PathCurves::streamed(stream.take_elements()).map_err(|e| e.to_string())
+    Ok(SharedPath::new(stream.take_elements()))
 }
 
-/// What a motion runs on: the file read as a stream by each plan (the Erwinski planner), or
-/// the whole path, read once (VPOp plans it whole).
+/// What a motion runs on: the file read as a stream, once, by the plans (the Erwinski
+/// planner), or the whole path, read before (VPOp plans it whole).
 enum PathSource {
-    Stream(PathOpener),
+    Stream(SharedPath),
     Whole(Arc<Toolpath>),
 }
 
@@ -102,11 +103,11 @@ fn start_motion<'a>(
     let (source, first_curve, tip) = match path {
         // The planner runs in a thread of its own, reading the file as it plans; its groups
         // wait until the stream has begun.
-        PathSource::Stream(open) => {
-            let mut curves = open()?;
+        PathSource::Stream(shared) => {
+            let mut curves = shared.open()?;
             let first = from.map_or(0, |p| feed::plan_start(&mut curves, p).curve);
             let tip = curves.tip_dim();
-            let source = Source::streamed(open.clone(), limits.clone(), from.copied(), feed_override);
+            let source = Source::streamed(shared.clone(), limits.clone(), from.copied(), feed_override);
             (source, first, tip)
         }
         PathSource::Whole(path) => {
@@ -206,10 +207,9 @@ fn run(args: &Args) -> Result<&'static str, String> {
     // half-started component.
     let (path, tip) = match args.planner {
         PlannerKind::Erwinski => {
-            let tip = open_path(args)?.tip_dim();
-            let for_plans = args.clone();
-            let open: PathOpener = Arc::new(move || open_path(&for_plans));
-            (PathSource::Stream(open), tip)
+            let shared = open_path(args)?;
+            let tip = shared.open()?.tip_dim();
+            (PathSource::Stream(shared), tip)
         }
         PlannerKind::Vpop => {
             let prepared = prepare(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;

@@ -18,8 +18,9 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::simulate::setpoints;
 use nurbs_motion::planner::verify::{verify, Row};
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{plan_groups, PathOpener, SegmentGroup, Source, Streamer};
+use nurbs_planner::feed::{plan_groups, SegmentGroup, Source, Streamer};
 use nurbs_planner::hal_user::Component;
+use nurbs_planner::shared_path::SharedPath;
 use nurbs_rtcore::interpolator::Sample;
 
 pub mod test_paths;
@@ -363,9 +364,7 @@ pub fn paced_run<'a>(
     periods: usize,
     mut control: impl FnMut(&mut Streamer<'a>, usize),
 ) -> (Vec<Out>, Streamer<'a>) {
-    let tp = toolpath.clone();
-    let open: PathOpener = std::sync::Arc::new(move || Ok(PathCurves::new(&tp)));
-    let source = Source::streamed(open, limits.clone(), None, 1.0);
+    let source = Source::streamed(SharedPath::whole(toolpath), limits.clone(), None, 1.0);
     let began = Instant::now();
     let mut s = Streamer::new(l.channel, toolpath.tip_dim(), source, 0, 0.25, began).unwrap();
     let mut got: Vec<Out> = Vec::new();
