@@ -1375,14 +1375,6 @@ impl Source {
             Source::Blocks { plan, .. } => plan.blocks.iter().map(|b| b.len() as f64 * plan.period).sum(),
         }
     }
-
-    /// Groups (path blocks) planned so far.
-    fn groups_planned(&self) -> usize {
-        match self {
-            Source::Segments { queue, .. } => queue.len(),
-            Source::Blocks { plan, .. } => plan.blocks.len(),
-        }
-    }
 }
 
 /// Motion time (s) planned before the motion starts, where the planner's pace lets the queue
@@ -1488,7 +1480,8 @@ impl<'a> Streamer<'a> {
             curves: VecDeque::new(),
             next_queued: first,
             planned: source.planned(),
-            groups_planned: source.groups_planned(),
+            // (A source planned whole counts as paced: it has all its motion.)
+            groups_planned: 0,
             source,
             current: None,
             in_ring: VecDeque::new(),

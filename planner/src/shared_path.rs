@@ -45,15 +45,16 @@ impl Shared {
         }
     }
 
-    fn move_reader(&mut self, from: usize, to: usize) {
-        if let Some(n) = self.readers.get_mut(&from) {
+    fn add_reader(&mut self, at: usize) {
+        *self.readers.entry(at).or_insert(0) += 1;
+    }
+
+    fn remove_reader(&mut self, at: usize) {
+        if let Some(n) = self.readers.get_mut(&at) {
             *n -= 1;
             if *n == 0 {
-                self.readers.remove(&from);
+                self.readers.remove(&at);
             }
-        }
-        if to != usize::MAX {
-            *self.readers.entry(to).or_insert(0) += 1;
         }
     }
 
@@ -113,7 +114,7 @@ impl SharedPath {
         let first = {
             let mut shared = self.lock();
             let first = shared.first;
-            shared.move_reader(usize::MAX, first);
+            shared.add_reader(first);
             first
         };
         let reader = Reader {
@@ -160,12 +161,13 @@ impl Iterator for Reader {
         let item = shared.element(self.next).or_else(|| shared.error.clone().map(Err));
         match &item {
             Some(Ok(_)) => {
-                shared.move_reader(self.next, self.next + 1);
+                shared.remove_reader(self.next);
                 self.next += 1;
+                shared.add_reader(self.next);
             }
             Some(Err(_)) | None => {
                 self.ended = true;
-                shared.move_reader(self.next, usize::MAX);
+                shared.remove_reader(self.next);
             }
         }
         shared.trim();
@@ -177,7 +179,7 @@ impl Drop for Reader {
     fn drop(&mut self) {
         if !self.ended {
             let mut shared = self.path.lock();
-            shared.move_reader(self.next, usize::MAX);
+            shared.remove_reader(self.next);
             shared.trim();
         }
     }
