@@ -38,17 +38,24 @@ fn norm(a: &[f64]) -> f64 {
     a.iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
-/// Distance from `x` to the segment `a`-`b`.
-fn segment_distance(x: &[f64], a: &[f64], b: &[f64]) -> f64 {
-    let ab = sub(b, a);
-    let ax = sub(x, a);
-    let l2: f64 = ab.iter().map(|v| v * v).sum();
-    let t = if l2 > 0.0 {
-        (ax.iter().zip(&ab).map(|(p, q)| p * q).sum::<f64>() / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    norm(&sub(&ax, &ab.iter().map(|v| t * v).collect::<Vec<_>>()))
+/// Distance from `x` to the segment `a`-`b`, over the coordinates all three have. Without
+/// allocation: the smoothing's two-way check calls it for every sample against every nearby
+/// vertex.
+pub(super) fn segment_distance(x: &[f64], a: &[f64], b: &[f64]) -> f64 {
+    let n = x.len().min(a.len()).min(b.len());
+    let (mut l2, mut along) = (0.0, 0.0);
+    for i in 0..n {
+        let (ab, ax) = (b[i] - a[i], x[i] - a[i]);
+        l2 += ab * ab;
+        along += ax * ab;
+    }
+    let t = if l2 > 0.0 { (along / l2).clamp(0.0, 1.0) } else { 0.0 };
+    let mut d2 = 0.0;
+    for i in 0..n {
+        let r = (x[i] - a[i]) - t * (b[i] - a[i]);
+        d2 += r * r;
+    }
+    d2.sqrt()
 }
 
 /// A polyline vertex: the tool tip, followed on 5-axis paths by the top point (a second point

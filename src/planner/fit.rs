@@ -20,7 +20,7 @@
 //! the tangent and curvature vector the last one ends with. So the path stays continuous in
 //! tangent and curvature at every join.
 
-use super::corner::{is_corner_spline, RoundingStats};
+use super::corner::{is_corner_spline, segment_distance, RoundingStats};
 use crate::geometry::{ElementKind, Nurbs, PathElement};
 use crate::readers::ReadError;
 use nurbs_rtcore::math::{dot, norm, sub};
@@ -84,19 +84,6 @@ fn scaled(p: &P3, d: f64) -> P3 {
 fn unit3(a: &P3) -> Option<P3> {
     let l = norm3(a);
     (l > 1e-12).then(|| scaled(a, l))
-}
-
-/// Distance from `x` to the segment `a`-`b`.
-fn segment_distance3(x: &P3, a: &P3, b: &P3) -> f64 {
-    let ab = sub(b, a);
-    let ax = sub(x, a);
-    let l2 = dot3(&ab, &ab);
-    let t = if l2 > 0.0 {
-        (dot3(&ax, &ab) / l2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    norm3(&axpy(&ax, -t, &ab))
 }
 
 /// How a fitted spline meets what comes before or after it: along the unit tangent `t` with
@@ -381,7 +368,7 @@ fn deviation(data: &RunData, curve: &Nurbs) -> f64 {
     for (s, x) in samples.iter().enumerate() {
         let i = (s / CHECK_SAMPLES).min(intervals - 1);
         let d = (i.saturating_sub(WINDOW)..=(i + WINDOW).min(intervals - 1))
-            .map(|j| segment_distance3(x, &v[j], &v[j + 1]))
+            .map(|j| segment_distance(&x[..3], &v[j][..3], &v[j + 1][..3]))
             .fold(f64::INFINITY, f64::min);
         worst = worst.max(d);
     }
@@ -389,7 +376,7 @@ fn deviation(data: &RunData, curve: &Nurbs) -> f64 {
         let lo = i.saturating_sub(WINDOW) * CHECK_SAMPLES;
         let hi = ((i + WINDOW) * CHECK_SAMPLES).min(samples.len() - 1);
         let d = (lo..hi)
-            .map(|s| segment_distance3(p, &samples[s], &samples[s + 1]))
+            .map(|s| segment_distance(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
             .fold(f64::INFINITY, f64::min);
         worst = worst.max(d);
     }
@@ -725,7 +712,7 @@ mod tests {
         for x in &path {
             let d = verts
                 .windows(2)
-                .map(|w| segment_distance3(x, &w[0], &w[1]))
+                .map(|w| segment_distance(&x[..3], &w[0][..3], &w[1][..3]))
                 .fold(f64::INFINITY, f64::min);
             assert!(d <= TOL, "path point {x:?} {d} mm from the program");
         }
@@ -742,7 +729,7 @@ mod tests {
             }
             let d = path
                 .windows(2)
-                .map(|w| segment_distance3(v, &w[0], &w[1]))
+                .map(|w| segment_distance(&v[..3], &w[0][..3], &w[1][..3]))
                 .fold(f64::INFINITY, f64::min);
             assert!(d <= TOL, "programmed vertex {v:?} {d} mm from the path");
         }
