@@ -24,3 +24,21 @@ bench_cases=(
   "butterfly|F300 A2500 J5e4|--limits table3-f300"
   "trident|VPOp limits|$vpop_limits"
 )
+
+# plan_verified PLANNER CURVE "LIMIT FLAGS": `nurbs-plan plan` of examples/CURVE.json, checked by
+# `nurbs-plan verify`; prints "motion s|plan ms|pass or FAIL" ("refused|-|-" where no plan).
+plan_verified() {
+  local planner=$1 curve=$2 lim=$3 ok
+  # shellcheck disable=SC2086
+  if ! $bin plan "examples/$curve.json" --planner "$planner" $lim --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
+    echo "refused|-|-"
+    return
+  fi
+  # shellcheck disable=SC2086
+  if $bin verify "$dir/o.csv" "examples/$curve.json" $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
+  python3 - "$dir/s.json" "$ok" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+print(f"{s['motion_time_s']:.4f}|{s['plan_time_s'] * 1e3:.1f}|{sys.argv[2]}")
+PY
+}

@@ -11,29 +11,14 @@ cases=("trident|VPOp limits|$vpop_limits")
 for curve in trident butterfly fan open_pocket fan_5axis; do
   cases+=("$curve|lab set 1|$lab1" "$curve|lab set 2|$lab2")
 done
-run() { # planner curve limits -> "time|plan ms|verify"
-  local planner=$1 curve=$2 lim=$3
-  # shellcheck disable=SC2086
-  if ! $bin plan examples/$curve.json --planner "$planner" $lim --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
-    echo "refused|-|-"
-    return
-  fi
-  # shellcheck disable=SC2086
-  if $bin verify "$dir/o.csv" examples/$curve.json $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
-  python3 - "$dir/s.json" "$ok" <<'PY'
-import json, sys
-s = json.load(open(sys.argv[1]))
-print(f"{s['motion_time_s']:.4f}|{s['plan_time_s'] * 1e3:.1f}|{sys.argv[2]}")
-PY
-}
 echo "| curve | limits | Erwinski motion (s) | plan (ms) | verify | VPOp motion (s) | plan (ms) | verify |"
 echo "|---|---|---|---|---|---|---|---|"
 for c in "${cases[@]}"; do
   IFS='|' read -r curve name lim <<<"$c"
-  IFS='|' read -r et ep ev <<<"$(run erwinski "$curve" "$lim")"
-  IFS='|' read -r vt vp vv <<<"$(run vpop "$curve" "$lim")"
+  IFS='|' read -r et ep ev <<<"$(plan_verified erwinski "$curve" "$lim")"
+  IFS='|' read -r vt vp vv <<<"$(plan_verified vpop "$curve" "$lim")"
   echo "| $curve | $name | $et | $ep | $ev | $vt | $vp | $vv |"
 done
-IFS='|' read -r vt vp vv <<<"$(run vpop open_pocket "$table1")"
+IFS='|' read -r vt vp vv <<<"$(plan_verified vpop open_pocket "$table1")"
 echo
 echo "open_pocket, XYZAC joints, Table 1 limits, VPOp: motion $vt s, plan $vp ms, verify $vv"

@@ -14,23 +14,12 @@ source "$(dirname "$0")/common.sh"
 cargo build --release -q --bin nurbs-plan
 cargo build --release -q --manifest-path tools/copp-compare/Cargo.toml
 copp=tools/copp-compare/target/release/copp-compare
-summary() { # summary.json verdict -> "motion|plan ms|verdict"
+summary() { # copp's summary.json, the margin that passed -> "motion|solve ms|margin"
   python3 - "$1" "$2" <<'PY'
 import json, sys
 s = json.load(open(sys.argv[1]))
 print(f"{s['motion_time_s']:.4f}|{s['plan_time_s'] * 1e3:.0f}|{sys.argv[2]}")
 PY
-}
-ours() { # planner curve limits
-  local planner=$1 curve=$2 lim=$3
-  # shellcheck disable=SC2086
-  if ! $bin plan "examples/$curve.json" --planner "$planner" $lim --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
-    echo "refused|-|-"
-    return
-  fi
-  # shellcheck disable=SC2086
-  if $bin verify "$dir/o.csv" "examples/$curve.json" $lim >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
-  summary "$dir/s.json" "$ok"
 }
 theirs() { # curve limits -> "motion|solve ms|margin that passed"
   local curve=$1 lim=$2 margin failed=""
@@ -55,8 +44,8 @@ for c in "${bench_cases[@]}"; do
   IFS='|' read -r curve name lim <<<"$c"
   # One smooth curve only: the 5-axis G1 path has corners, which copp's path model has no place for.
   [ "$curve" = fan_5axis ] && continue
-  IFS='|' read -r et ep ev <<<"$(ours erwinski "$curve" "$lim")"
-  IFS='|' read -r vt vp vv <<<"$(ours vpop "$curve" "$lim")"
+  IFS='|' read -r et ep ev <<<"$(plan_verified erwinski "$curve" "$lim")"
+  IFS='|' read -r vt vp vv <<<"$(plan_verified vpop "$curve" "$lim")"
   IFS='|' read -r ct cp cm <<<"$(theirs "$curve" "$lim")"
   echo "| $curve | $name | $et | $ep | $ev | $vt | $vp | $vv | $ct | $cp | $cm |"
 done
