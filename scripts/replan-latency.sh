@@ -35,6 +35,9 @@ setp nurbs-planner.feed-override 1.0
 loadusr -w sleep 3
 stop
 EOF
-HAL_TIMEOUT=$((hold_at + 80)) hal_session "$work/replan.hal" "$work/halrun.log"
-trap 'rm -rf "$work"; hal_cleanup' EXIT
-grep -E "nurbs-planner: (first .* records|the module stopped|feed override .* runs into)" "$work/halrun.log"
+# (hal_session sets its own EXIT trap: the scratch directory is removed here, whatever happened.)
+status=0
+HAL_TIMEOUT=$((hold_at + 80)) hal_session "$work/replan.hal" "$work/halrun.log" || status=$?
+grep -E "nurbs-planner: (first .* records|the module stopped|feed override .* runs into)" "$work/halrun.log" || true
+rm -rf "$work"
+exit "$status"

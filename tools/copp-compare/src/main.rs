@@ -6,9 +6,9 @@
 //!
 //! What goes in: the tool-tip curve parameterised by arc length on a station grid (uniform,
 //! refined where the curve turns: at most `--turn` radians per interval), its derivatives up to
-//! the third by the chain rule from the NURBS derivatives, the axis velocity, acceleration and
-//! jerk limits, and the feed and chord-error caps as a bound on the path speed at every station
-//! (`sqrt(8 eps / kappa) / T`, the step at period T whose chord error is eps). copp enforces the
+//! the third by arc length (the FLF scan's `arc_derivatives`), the axis velocity, acceleration
+//! and jerk limits, and the FLF's feed, axis-velocity and chord-error caps (eq. 10 of Erwinski
+//! et al.) as a bound on the path speed at every station. copp enforces the
 //! limits at the stations only; between them the sampled motion may exceed them, which is what
 //! the verifier measures. `--margin m` scales the axis limits and the speed cap by (1 - m)
 //! before solving.
@@ -27,11 +27,14 @@ use copp::solver::topp2_ra::{topp2_ra, ReachSet2OptionsBuilder, Topp2ProblemBuil
 use copp::solver::{topp3_lp, topp3_socp};
 use copp::InterpolationMode;
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs};
+use nurbs_motion::planner::erwinski::flf::{arc_derivatives, flf_of};
 use nurbs_motion::planner::presets::preset;
 use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
+use nurbs_rtcore::Vector;
 use std::error::Error;
 use std::io::Write;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// The tool-tip curve by arc length: position and derivatives with respect to s.
@@ -60,28 +63,9 @@ impl ArcLengthCurve {
         self.curve.curvature(self.parameter(s))
     }
 
-    /// q, dq/ds, d2q/ds2, d3q/ds3 at arc length `s`, from C(u) and its u-derivatives:
-    /// with sigma = |C'|, u' = 1/sigma, u'' = -sigma_u / sigma^3,
-    /// u''' = -sigma_uu / sigma^4 + 3 sigma_u^2 / sigma^5.
-    fn jet(&self, s: f64) -> [[f64; 3]; 4] {
-        let d = self.curve.view().derivatives(self.parameter(s), 3);
-        let n = self.dim;
-        let dot = |a: &[f64], b: &[f64]| (0..n).map(|i| a[i] * b[i]).sum::<f64>();
-        let (c1, c2, c3) = (&d[1][..n], &d[2][..n], &d[3][..n]);
-        let sigma = dot(c1, c1).sqrt();
-        let sigma_u = dot(c1, c2) / sigma;
-        let sigma_uu = (dot(c2, c2) + dot(c1, c3) - sigma_u * sigma_u) / sigma;
-        let u1 = 1.0 / sigma;
-        let u2 = -sigma_u / sigma.powi(3);
-        let u3 = -sigma_uu / sigma.powi(4) + 3.0 * sigma_u * sigma_u / sigma.powi(5);
-        let mut out = [[0.0; 3]; 4];
-        for i in 0..n {
-            out[0][i] = d[0][i];
-            out[1][i] = c1[i] * u1;
-            out[2][i] = c2[i] * u1 * u1 + c1[i] * u2;
-            out[3][i] = c3[i] * u1.powi(3) + 3.0 * c2[i] * u1 * u2 + c1[i] * u3;
-        }
-        out
+    /// q and its first three derivatives by arc length at `s` (the FLF scan's own).
+    fn jet(&self, s: f64) -> [Vector; 4] {
+        arc_derivatives(&self.curve.view(), self.dim, self.parameter(s))
     }
 
     fn fill(&self, s: &[f64], bufs: &mut [&mut [f64]]) {
@@ -200,7 +184,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         .into());
     }
     let curve = toolpath.elements[0].curve.clone();
-    let path = ArcLengthCurve::new(curve);
+    let path = Arc::new(ArcLengthCurve::new(curve));
     let dim = path.dim;
     let limits = args.limits.for_axes(dim).map_err(|e| e.0)?;
     let scale = 1.0 - args.margin;
@@ -208,17 +192,17 @@ fn main() -> Result<(), Box<dyn Error>> {
 
     let s = stations(&path, args.intervals, args.turn);
     let n = s.len();
-    // Feed and chord error: a bound on the path speed at every station.
+    // Feed, axis velocity and chord error (the FLF's own caps, eq. 10 of Erwinski et al.): a
+    // bound on the path speed at every station.
     let speed_cap: Vec<f64> = s
         .iter()
         .map(|&sk| {
-            let kappa = path.curvature(sk);
-            let chord = (8.0 * limits.chord_tolerance / kappa.max(1e-12)).sqrt() / limits.period;
-            let v = scale * limits.feed.min(chord);
+            let caps = flf_of(&path.jet(sk), dim, &limits);
+            let v = scale * caps.feed.min(caps.chord);
             v * v
         })
         .collect();
-    let copp_path = CoppPath::from_evaluator_3rd(ArcLengthCurve::new(path.curve.clone()), 0.0, path.length())?;
+    let copp_path = CoppPath::from_shared_evaluator_3rd(path.clone(), 0.0, path.length())?;
     let per_axis = |v: &[f64], sign: f64| -> Vec<f64> { v.iter().map(|x| sign * x * scale).collect() };
     let (v_max, v_min) = (per_axis(&limits.velocity, 1.0), per_axis(&limits.velocity, -1.0));
     let (a_max, a_min) = (
