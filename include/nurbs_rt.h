@@ -21,7 +21,7 @@
 /**
  * Layout version; bump on any change to [`Channel`] or the record types.
  */
-#define CHANNEL_VERSION 13
+#define CHANNEL_VERSION 14
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into
@@ -254,9 +254,16 @@ typedef struct SegmentSlot {
   uint32_t chain_len;
   /**
    * Checked stops inside this record, for a hold or abort that should not wait for the
-   * group's end: `hold_stops_len` triples (motion sample index, deceleration, jerk) in the
-   * arena from value `hold_stops_offset`. At that sample the module may switch to the stop
-   * [`nurbs_rtcore::block_stop::stop_record`] builds from it; the planner checked exactly that.
+   * group's end: `hold_stops_len` triples in the arena from value `hold_stops_offset`, in
+   * increasing sample order. A triple (motion sample index, deceleration, jerk) with both
+   * positive: at that sample the module may switch to the stop
+   * [`nurbs_rtcore::block_stop::stop_record`] builds from it. A triple (motion sample index,
+   * -count, offset): a stored stop sequence of `count` positions in [`StopRun`]s from arena
+   * value `hold_stops_offset + offset` (after the triples), output one per period from the
+   * sample after it (the planner's per-period deceleration, where no S-curve stop passes).
+   * The planner checked exactly what the module then runs.
+   *
+   * [`StopRun`]: nurbs_rtcore::StopRun
    */
   uint32_t hold_stops_offset;
   uint32_t hold_stops_len;

@@ -17,7 +17,7 @@ use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Instant;
 
 use crate::cut::{cut_into, CutFrom, CutPlace, CUT_RAMPS};
-use crate::hold_stops::HoldStops;
+use crate::hold_stops::{HoldStops, RecordStops};
 use crate::say;
 use crate::shared_path::SharedPath;
 use crate::writer::{GeometryWriter, Release, WriteError};
@@ -57,10 +57,9 @@ pub struct SegmentGroup {
     /// `first_curve`: they go into the geometry stream before the group into the ring.
     pub curves: Vec<Nurbs>,
     pub first_curve: u32,
-    /// Per slot, the checked stops inside its record ([`crate::hold_stops`]), as arena values:
-    /// they go into the arena before the group into the ring
-    /// ([`SegmentSlot::hold_stops_offset`]).
-    pub hold_stops: Vec<Vec<f64>>,
+    /// Per slot, the checked stops inside its record ([`crate::hold_stops`]): they go into the
+    /// arena before the group into the ring ([`SegmentSlot::hold_stops_offset`]).
+    pub hold_stops: Vec<RecordStops>,
     /// Where the group leaves the motion (what a plan at another feed override continues
     /// from); `None` where it ends the path.
     pub end: Option<Box<GroupEnd>>,
@@ -111,7 +110,7 @@ impl SegmentGroup {
 #[derive(Default)]
 pub struct Grouper {
     run: Vec<FinalRecord>,
-    hold_stops: Vec<Vec<f64>>,
+    hold_stops: Vec<RecordStops>,
     begin: Option<Box<SimState>>,
 }
 
@@ -124,7 +123,7 @@ impl Grouper {
     /// Takes the next final record, with the stops checked inside it and, where it begins a
     /// group ([`Self::starts_group`]), the motion's state before it; returns the group it
     /// completes, if it does.
-    pub fn push(&mut self, r: FinalRecord, hold_stops: Vec<f64>, begin: Option<SimState>) -> Option<SegmentGroup> {
+    pub fn push(&mut self, r: FinalRecord, hold_stops: RecordStops, begin: Option<SimState>) -> Option<SegmentGroup> {
         let ends = !r.stop.is_empty() || r.record.is_last();
         if self.run.is_empty() {
             self.begin = begin.map(Box::new);
@@ -146,7 +145,8 @@ impl Grouper {
             .collect();
         let mut slots = vec![SegmentSlot::default(); n];
         for (k, r) in run.iter().enumerate().rev() {
-            needed = needed.max(r.record.curve);
+            // A stored hold stop may run on into later elements.
+            needed = needed.max(r.record.curve).max(hold_stops[k].last_curve.unwrap_or(0));
             slots[k] = SegmentSlot {
                 record: r.record,
                 stop: r.stop.first().copied().unwrap_or_default(),
@@ -156,7 +156,7 @@ impl Grouper {
                 chain_offset: 0,
                 chain_len: r.stop.len().saturating_sub(1) as u32,
                 hold_stops_offset: 0,
-                hold_stops_len: (hold_stops[k].len() / 3) as u32,
+                hold_stops_len: hold_stops[k].count as u32,
                 reserved: 0,
             };
         }
@@ -302,6 +302,8 @@ fn stream_plan_once(
         }
     };
     let mut grouper = Grouper::default();
+    // The highest element a stored hold stop so far runs on.
+    let mut hold_needed = 0;
     let mut hold_stops = match (start, &cut) {
         (_, Some(cut)) => HoldStops::continuing(limits, &cut.before),
         (StreamStart::After { end, .. }, _) => HoldStops::continuing(limits, &end.state),
@@ -311,6 +313,7 @@ fn stream_plan_once(
         // The ramp is the new plan's first record (its group goes on with the plan's).
         let begin = hold_stops.state();
         let inside = hold_stops.after_cut(&cut.ramp, cut.accel_start, planner.curves());
+        hold_needed = inside.last_curve.unwrap_or(0);
         let ramp = FinalRecord {
             record: cut.ramp,
             stop: Vec::new(),
@@ -333,16 +336,18 @@ fn stream_plan_once(
             Ok(record) => {
                 // The critical points are not sent: drop them as they come.
                 drop(planner.take_critical_points());
+                let begin = grouper.starts_group().then(|| hold_stops.state());
+                let last = record.record;
+                let inside = hold_stops.after(&record.record, !record.stop.is_empty(), planner.curves());
                 // The record's curves are still held (its own until the next call, its stop's
-                // ahead of the planning front), and every curve before them has been sent.
-                let needed = curve_needed(&record) as usize;
+                // and its stored hold stops' ahead of the planning front), and every curve
+                // before them has been sent.
+                hold_needed = hold_needed.max(inside.last_curve.unwrap_or(0));
+                let needed = curve_needed(&record).max(hold_needed) as usize;
                 while next_curve <= needed {
                     new_curves.push(planner.curves().element(next_curve).curve.clone());
                     next_curve += 1;
                 }
-                let begin = grouper.starts_group().then(|| hold_stops.state());
-                let last = record.record;
-                let inside = hold_stops.after(&record.record, planner.curves());
                 if let Some(mut group) = grouper.push(record, inside, begin) {
                     group.cut = cut_place.take();
                     groups += 1;
@@ -1207,7 +1212,7 @@ pub struct Group {
     chain: Option<Vec<f64>>,
     /// Segment records: per slot, the checked stops inside it, and how many slots have theirs
     /// written to the arena.
-    hold_stops: Vec<Vec<f64>>,
+    hold_stops: Vec<RecordStops>,
     hold_stops_written: usize,
     /// Segment records: where the group leaves the motion.
     end: Option<Box<GroupEnd>>,
@@ -1975,11 +1980,21 @@ impl<'a> Streamer<'a> {
                 replanner,
                 ..
             } => {
-                let Some(g) = queue.pop_front() else {
+                let Some(mut g) = queue.pop_front() else {
                     return Ok(None);
                 };
                 *queued -= g.time;
                 let curve_needed = g.curve_needed();
+                // A record's stored hold stops go into the arena with it in one piece: where
+                // they would take more than an eighth of the arena the writer may use, the
+                // record keeps its S-curve stops only.
+                let most = self.writer.arena_capacity() / 8;
+                for (slot, stops) in g.slots.iter_mut().zip(&mut g.hold_stops) {
+                    if stops.values.len() > most {
+                        *stops = stops.without_stored();
+                        slot.hold_stops_len = stops.count as u32;
+                    }
+                }
                 if !g.curves.is_empty() && g.first_curve > self.next_queued {
                     return Err(format!(
                         "a group brings curves from {}, but curve {} comes next",
@@ -1995,11 +2010,7 @@ impl<'a> Streamer<'a> {
                     first: 0, // set as it goes into the ring
                     records: g.slots.iter().map(|s| s.record).collect(),
                     begin,
-                    hold_samples: g
-                        .hold_stops
-                        .iter()
-                        .map(|values| values.chunks_exact(3).map(|t| t[0] as u64).collect())
-                        .collect(),
+                    hold_samples: g.hold_stops.iter().map(|stops| stops.samples().collect()).collect(),
                     feed_override: replanner.as_ref().map_or(1.0, |r| r.feed_override),
                 });
                 Ok(Some(Group {
@@ -2093,10 +2104,10 @@ impl<'a> Streamer<'a> {
     fn write_hold_stops(&mut self, group: &mut Group) -> Result<bool, String> {
         while group.hold_stops_written < group.hold_stops.len() {
             let k = group.hold_stops_written;
-            let values = std::mem::take(&mut group.hold_stops[k]);
+            let values = std::mem::take(&mut group.hold_stops[k].values);
             // Needed while the module runs this record.
             if !values.is_empty() && !self.put_for_slot(&values, group, k, |s, offset| s.hold_stops_offset = offset)? {
-                group.hold_stops[k] = values;
+                group.hold_stops[k].values = values;
                 return Ok(false);
             }
             group.hold_stops_written += 1;

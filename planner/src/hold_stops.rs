@@ -11,20 +11,28 @@
 //! interpolator and checked by finite differences against the axis limits, continuing the
 //! motion's samples and holding at rest after it, as every stop of the plan is. The deceleration
 //! and jerk start just inside what the axes allow along the tangent there and are lowered
-//! until the stop passes ([`STOP_SCALES`]; on a curve the centripetal terms leave less). A stop that would leave the
-//! element, or that does not pass, is not offered: the hold waits for the next one (or the
-//! group's end). The module, holding, switches to the first offered stop at or after the
-//! hold's edge, at exactly that sample.
+//! until the stop passes ([`STOP_SCALES`]; on a curve the centripetal terms leave less). Where
+//! none passes (near sharp curvature the plan rides an axis limit, and any change of its
+//! tangential profile exceeds it; on short elements the S-curve leaves the element), VPOp's
+//! per-period deceleration (Beudaert, Lavernhe, Tournier 2012) from the last three samples is
+//! tried: it chooses each period's step within every axis' limits and may cross element joins;
+//! its positions are stored with the stop and checked the same way, through the module's own
+//! curve evaluator ([`StoredStop`]). A stop that does not pass is not offered: the hold waits
+//! for the next one (or the group's end). The module, holding, switches to the first offered
+//! stop at or after the hold's edge, at exactly that sample.
 
+use nurbs_hal::channel::ARENA_VALUES;
 use nurbs_hal::slot::MAX_HOLD_STOPS;
-use nurbs_motion::geometry::ArcLengthTable;
+use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
+use nurbs_motion::planner::vpop::{self, JointPath, PathPoint, SearchOptions};
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_rtcore::block_stop::{stop_record, StopStart};
+use nurbs_rtcore::block_stop::{step_fits, stop_record, StopStart};
 use nurbs_rtcore::interpolator::{Interpolator, Sample, Step};
-use nurbs_rtcore::SegmentRecord;
+use nurbs_rtcore::scurve::stop_from;
+use nurbs_rtcore::{SegmentRecord, StopRun};
 
 /// Samples of motion between two checked hold stops: the longest a hold waits (5 ms at the
 /// 0.25 ms servo period), if the stop there passes.
@@ -53,6 +61,136 @@ pub(crate) const INSIDE: f64 = 1.0 - 1e-3;
 /// Below this feed (mm/s) the motion is as good as at rest: no stop is offered there.
 const MOVING: f64 = 1e-6;
 
+/// A stored stop's path looks this many times the braking distance ahead (at the tangential
+/// limits, from the sample's feed) and at most [`STORED_ELEMENTS`] elements: VPOp's own
+/// deceleration is softer where the curvature asks, and it must come to rest within the
+/// elements it is given.
+const STORED_REACH: f64 = 4.0;
+const STORED_ELEMENTS: usize = 64;
+
+/// Values of stored stops one record carries at most (a sixty-fourth of the arena): a long
+/// record near sharp curvature stores no more beyond that.
+const MAX_STORED_VALUES: usize = ARENA_VALUES / 64;
+
+/// The checked stops inside one record, as the arena carries them
+/// ([`nurbs_hal::slot::SegmentSlot::hold_stops_offset`]): `count` triples in sample order, then
+/// the stored sequences the stored ones point to.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RecordStops {
+    pub values: Vec<f64>,
+    pub count: usize,
+    /// Highest path element a stored sequence runs on: the group carrying the record needs it
+    /// published and checked before it starts.
+    pub last_curve: Option<u32>,
+}
+
+impl RecordStops {
+    /// Motion sample indices of the stops, in order.
+    pub fn samples(&self) -> impl Iterator<Item = u64> + '_ {
+        self.values[..3 * self.count].chunks_exact(3).map(|t| t[0] as u64)
+    }
+
+    /// How many of them are stored sequences.
+    pub fn stored(&self) -> usize {
+        self.values[..3 * self.count]
+            .chunks_exact(3)
+            .filter(|t| t[1] < 0.0)
+            .count()
+    }
+
+    /// The S-curve stops alone.
+    pub fn without_stored(&self) -> RecordStops {
+        let values: Vec<f64> = self.values[..3 * self.count]
+            .chunks_exact(3)
+            .filter(|t| t[1] > 0.0)
+            .flatten()
+            .copied()
+            .collect();
+        RecordStops {
+            count: values.len() / 3,
+            values,
+            last_curve: None,
+        }
+    }
+}
+
+/// When a stored stop is worth its cost (VPOp's deceleration simulates the whole stop, some
+/// hundreds of periods, where the S-curve check takes a few): only where the candidate before
+/// had no stop either (so a hold waits at most two spacings where stored stops pass), and after
+/// one that did not pass, only after [`STORED_BACKOFF`] times as many candidates as the last
+/// wait (up to [`STORED_BACKOFF_MAX`]): where the plan's state is one VPOp cannot brake from,
+/// the next samples mostly are too.
+#[derive(Clone, Copy, Debug, Default)]
+struct StoredPace {
+    /// Candidates since the last one with a stop.
+    without: u32,
+    /// Candidates still to skip, and the last wait.
+    skip: u32,
+    wait: u32,
+}
+
+const STORED_BACKOFF: u32 = 2;
+const STORED_BACKOFF_MAX: u32 = 8;
+
+impl StoredPace {
+    fn offered(&mut self) {
+        *self = StoredPace::default();
+    }
+
+    /// Called at a candidate whose S-curve stop did not pass.
+    fn may_try(&mut self) -> bool {
+        self.without += 1;
+        if self.skip > 0 {
+            self.skip -= 1;
+            return false;
+        }
+        self.without >= 2
+    }
+
+    fn failed(&mut self) {
+        self.wait = (self.wait * STORED_BACKOFF).clamp(1, STORED_BACKOFF_MAX);
+        self.skip = self.wait;
+    }
+}
+
+/// A record's stops as they are found: the triples, the stored sequences after them.
+#[derive(Default)]
+struct StopsBuilder {
+    triples: Vec<f64>,
+    stored: Vec<f64>,
+    last_curve: Option<u32>,
+}
+
+impl StopsBuilder {
+    /// The arena values: the triples with the stored sequences' offsets counted from the first
+    /// triple, then the sequences.
+    fn finish(self) -> RecordStops {
+        let StopsBuilder {
+            mut triples,
+            stored,
+            last_curve,
+        } = self;
+        let count = triples.len() / 3;
+        for t in triples.chunks_exact_mut(3).filter(|t| t[1] < 0.0) {
+            t[2] += (3 * count) as f64;
+        }
+        triples.extend(stored);
+        RecordStops {
+            values: triples,
+            count,
+            last_curve,
+        }
+    }
+}
+
+/// A stored stop: VPOp's deceleration from a sample, as arena values ([`StopRun`]s, each
+/// position as (u, s) in its element's measure), and the highest element it runs on.
+struct StoredStop {
+    values: Vec<f64>,
+    positions: usize,
+    last_curve: usize,
+}
+
 /// The replica of the module's motion and the stops checked along it.
 pub struct HoldStops {
     replica: Interpolator,
@@ -68,6 +206,10 @@ pub struct HoldStops {
     /// Accept stops on straight elements by their profile alone ([`Self::passes_on_line`]);
     /// off, every stop is simulated (to show that both agree).
     line_shortcut: bool,
+    /// The motion's last three samples (oldest first) and how many of them are real: a stored
+    /// stop starts from their finite differences.
+    recent: [Option<Sample>; 3],
+    stored_pace: StoredPace,
 }
 
 impl HoldStops {
@@ -88,6 +230,8 @@ impl HoldStops {
             element_length: None,
             last: None,
             line_shortcut: true,
+            recent: [None; 3],
+            stored_pace: StoredPace::default(),
         }
     }
 
@@ -100,6 +244,7 @@ impl HoldStops {
             fd: state.check,
             samples: state.samples as u64,
             last: state.last_sample,
+            recent: [None, None, state.last_sample],
             ..HoldStops::new(limits)
         }
     }
@@ -117,42 +262,76 @@ impl HoldStops {
 
     /// [`Self::after`] for a record that cuts into the motion at its last sample: started there
     /// with tangential acceleration `accel_start` ([`nurbs_rtcore::block_stop::ramp_record`]).
-    pub fn after_cut(&mut self, record: &SegmentRecord, accel_start: f64, curves: &PathCurves) -> Vec<f64> {
+    pub fn after_cut(&mut self, record: &SegmentRecord, accel_start: f64, curves: &PathCurves) -> RecordStops {
         let table = record.profile().table_from(accel_start);
         if !self.replica.start_profile(curves, *record, table) {
-            return Vec::new();
+            return RecordStops::default();
         }
-        self.run(record, None, curves)
+        self.run(record, None, false, curves)
     }
 
-    /// Runs `record` (the motion's next) on the replica and returns the stops checked inside it,
-    /// as arena values: triples (motion sample index, deceleration, jerk).
-    pub fn after(&mut self, record: &SegmentRecord, curves: &PathCurves) -> Vec<f64> {
-        self.run(record, Some(*record), curves)
+    /// Runs `record` (the motion's next) on the replica and returns the stops checked inside it.
+    /// Where it ends a group (`ends_group`), its last sample is a candidate too: the group's own
+    /// stop is the next segment re-planned to rest at its end, which on a long segment runs on
+    /// along the plan (a hold 18 samples before the end of such a group on `star_g1` followed
+    /// the plan for 430 ms, accelerating from 4 to 100 mm/s, before it braked).
+    pub fn after(&mut self, record: &SegmentRecord, ends_group: bool, curves: &PathCurves) -> RecordStops {
+        self.run(record, Some(*record), ends_group, curves)
     }
 
     /// Runs the replica until it needs a record after `pending` (`record`, or `None` where it is
     /// loaded already), checking stops inside `record`.
-    fn run(&mut self, record: &SegmentRecord, mut pending: Option<SegmentRecord>, curves: &PathCurves) -> Vec<f64> {
+    fn run(
+        &mut self,
+        record: &SegmentRecord,
+        mut pending: Option<SegmentRecord>,
+        ends_group: bool,
+        curves: &PathCurves,
+    ) -> RecordStops {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
-        let mut out = Vec::new();
-        loop {
-            match self.replica.step(curves, dt, &mut || pending.take()) {
-                Step::Sample(s) => {
-                    let n = self.samples;
-                    self.samples += 1;
-                    self.last = Some(s);
-                    self.fd.push(&s.point[..tip], &self.limits);
-                    // A record takes at most MAX_HOLD_STOPS (minutes of motion): a hold in the
-                    // rest of such a record waits for its group's end.
-                    let room = out.len() < 3 * MAX_HOLD_STOPS as usize;
-                    if room && n.is_multiple_of(HOLD_STOP_SPACING) && s.feed > MOVING {
-                        if let Some((accel, jerk)) = self.check(&s, record, curves) {
-                            out.extend([n as f64, accel, jerk]);
-                        }
-                    }
+        let mut stops = StopsBuilder::default();
+        let mut last = None;
+        while let Step::Sample(s) = self.replica.step(curves, dt, &mut || pending.take()) {
+            let n = self.samples;
+            self.samples += 1;
+            self.last = Some(s);
+            self.recent = [self.recent[1], self.recent[2], Some(s)];
+            self.fd.push(&s.point[..tip], &self.limits);
+            if n.is_multiple_of(HOLD_STOP_SPACING) {
+                self.offer(n, &s, record, curves, &mut stops);
+            }
+            last = Some((n, s));
+        }
+        // The replica stands at the record's last sample (a starved step changes nothing).
+        if let Some((n, s)) = last.filter(|(n, _)| ends_group && !n.is_multiple_of(HOLD_STOP_SPACING)) {
+            self.offer(n, &s, record, curves, &mut stops);
+        }
+        stops.finish()
+    }
+
+    /// Checks a stop from sample `n` (`s`, the replica standing there) and adds it to `stops`
+    /// if one passes: the S-curve, else (as [`StoredPace`] allows) VPOp's deceleration.
+    fn offer(&mut self, n: u64, s: &Sample, record: &SegmentRecord, curves: &PathCurves, stops: &mut StopsBuilder) {
+        // A record takes at most MAX_HOLD_STOPS (minutes of motion): a hold in the rest of such
+        // a record waits for its group's end.
+        if stops.triples.len() >= 3 * MAX_HOLD_STOPS as usize || s.feed <= MOVING {
+            return;
+        }
+        if let Some((accel, jerk)) = self.check(s, record, curves) {
+            stops.triples.extend([n as f64, accel, jerk]);
+            self.stored_pace.offered();
+        } else if stops.stored.len() < MAX_STORED_VALUES && self.stored_pace.may_try() {
+            match self.stored_stop(s, curves) {
+                Some(stop) => {
+                    // Its offset counts from the first triple: fixed once all are in.
+                    stops
+                        .triples
+                        .extend([n as f64, -(stop.positions as f64), stops.stored.len() as f64]);
+                    stops.stored.extend(stop.values);
+                    stops.last_curve = stops.last_curve.max(Some(stop.last_curve as u32));
+                    self.stored_pace.offered();
                 }
-                Step::Starved | Step::Finished | Step::BadRecord => return out,
+                None => self.stored_pace.failed(),
             }
         }
     }
@@ -274,6 +453,114 @@ impl HoldStops {
         jerks_ok && accels_ok && velocity_ok && at_rest && (peak <= cap || peak <= from.feed)
     }
 
+    /// VPOp's deceleration from sample `s` (the last of the motion's three recent samples), if
+    /// it comes to rest on the elements read and passes the check every stop passes: continuing
+    /// the motion's finite differences, positions as the module's evaluator computes them, at
+    /// rest after the last, never faster than the feed the plan may run, and each step as the
+    /// module checks a stored step (onward on its element or into the next one, its chord
+    /// within its arc length: [`step_fits`]).
+    fn stored_stop(&mut self, s: &Sample, curves: &PathCurves) -> Option<StoredStop> {
+        let recent: Vec<Sample> = self.recent.iter().flatten().copied().collect();
+        if recent.len() < 3 {
+            return None;
+        }
+        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
+        // The elements from the oldest sample's on, as far as the braking distance reaches.
+        let first = recent[0].curve;
+        let (a, j) = tangential_limits(curves, &self.limits, s.curve, s.u);
+        let braking = stop_from(s.feed, s.accel, a, j).table_from(s.accel).end().s;
+        let mut elements = Vec::new();
+        let mut ahead = 0.0;
+        while elements.len() < STORED_ELEMENTS {
+            let Some(e) = curves.get(first + elements.len()) else {
+                break;
+            };
+            if first + elements.len() > s.curve {
+                ahead += e.curve.polygon_length().unwrap_or(f64::INFINITY);
+            }
+            elements.push(e.clone());
+            if ahead >= STORED_REACH * braking {
+                break;
+            }
+        }
+        let path_part = Toolpath { elements };
+        let path = JointPath::tip(&path_part);
+        let point = |x: &Sample| path.eval_at(x.curve - first, x.u);
+        let last: [PathPoint; 3] = [point(&recent[0])?, point(&recent[1])?, point(&recent[2])?];
+        let points = vpop::brake_points(&path, &self.limits, SearchOptions::default(), last)
+            .ok()
+            .flatten()?;
+        // Checked as the module will run it.
+        let cap = curves
+            .programmed_feed(s.curve)
+            .map_or(self.limits.feed, |f| f.min(self.limits.feed))
+            .max(s.feed);
+        let mut eval = self.replica;
+        let mut f = self.fd;
+        f.reset_peaks();
+        let (mut curve, mut u, mut s_at, mut at) = (s.curve, s.u, s.s, s.point);
+        let mut values = Vec::with_capacity(2 * points.len() + StopRun::VALUES);
+        let mut run_header = None;
+        for p in &points {
+            let c = first + p.element;
+            let element = curves.get(c)?;
+            let (lo, hi) = {
+                let v = element.curve.view();
+                (v.u_min(), v.u_max())
+            };
+            // Arc lengths step by step from the sample's own (in each element's measure), so
+            // that the first step starts exactly where the motion stands.
+            let (s_before, s_p) = if c == curve {
+                if !(p.u >= u && p.u <= hi) {
+                    return None;
+                }
+                (s_at, s_at + arc_between(&element.curve, u, p.u, tip))
+            } else {
+                if c != curve + 1 || !(p.u >= lo && p.u <= hi) {
+                    return None;
+                }
+                // The step's start in the next element's measure (before its start): what is
+                // left of the last element, then the next one's start to the position.
+                let left = arc_between(&curves.get(curve)?.curve, u, curves.view(curve).u_max(), tip);
+                let into = arc_between(&element.curve, lo, p.u, tip);
+                (-left, into)
+            };
+            let x = eval.point_at(curves, c, p.u)?;
+            // The module's distance between its output positions (z zero on a 2-D path).
+            let axes = tip.min(3);
+            let chord = (0..axes).map(|i| (x[i] - at[i]) * (x[i] - at[i])).sum::<f64>().sqrt();
+            if !step_fits(chord, s_p - s_before) || chord > cap * dt * (1.0 + 1e-6) {
+                return None;
+            }
+            f.push(&x[..tip], &self.limits);
+            if f.worst_ratio(&self.limits) > 1.0 + SLACK {
+                return None;
+            }
+            if c != curve || run_header.is_none() {
+                run_header = Some(values.len());
+                values.extend(
+                    StopRun {
+                        curve: c,
+                        count: 0,
+                        s_before,
+                    }
+                    .to_values(),
+                );
+            }
+            values.extend([p.u, s_p]);
+            if let Some(h) = run_header {
+                values[h + 1] += 1.0;
+            }
+            (curve, u, s_at, at) = (c, p.u, s_p, x);
+        }
+        f.finish(&self.limits);
+        (f.worst_ratio(&self.limits) <= 1.0 + SLACK).then_some(StoredStop {
+            values,
+            positions: points.len(),
+            last_curve: curve,
+        })
+    }
+
     /// Arc length of element `e` (kept for the element the last check was on).
     fn element_length(&mut self, e: usize, curves: &PathCurves) -> Option<ElementLength> {
         match self.element_length {
@@ -353,6 +640,26 @@ fn landing_jerk(from: &StopStart, accel: f64, jerk: f64, dt: f64) -> Option<f64>
 fn is_line(curve: &nurbs_motion::geometry::Nurbs) -> bool {
     curve.degree() == 1 && curve.control_point_count() == 2 && curve.weights().windows(2).all(|w| w[0] == w[1])
 }
+
+/// Arc length of `curve`'s tool tip from parameter `a` to `b` (a short step: Gauss-Legendre
+/// over the span, accurate to rounding for the steps of a stop).
+fn arc_between(curve: &nurbs_motion::geometry::Nurbs, a: f64, b: f64, tip: usize) -> f64 {
+    if b <= a {
+        return 0.0;
+    }
+    let view = curve.view();
+    let (h, m) = (0.5 * (b - a), 0.5 * (a + b));
+    GAUSS5.iter().map(|(x, w)| w * view.speed(m + h * x, tip)).sum::<f64>() * h
+}
+
+/// Five-point Gauss-Legendre nodes and weights on [-1, 1].
+const GAUSS5: [(f64, f64); 5] = [
+    (-0.906_179_845_938_664, 0.236_926_885_056_189_1),
+    (-0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
+    (0.0, 0.568_888_888_888_888_9),
+    (0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
+    (0.906_179_845_938_664, 0.236_926_885_056_189_1),
+];
 
 /// How long after its last sample a hold stop reaches rest (s).
 const LANDING: f64 = 1e-9;

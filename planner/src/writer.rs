@@ -101,6 +101,11 @@ impl<'a> GeometryWriter<'a> {
         self.curves_in_flight = curves_in_flight.clamp(1, CURVE_SLOTS) as u64;
     }
 
+    /// Arena values the writer may use ([`Self::limit`]).
+    pub fn arena_capacity(&self) -> usize {
+        self.arena_values
+    }
+
     /// Index of the next curve [`GeometryWriter::publish_curve`] publishes.
     pub fn next_curve(&self) -> u32 {
         self.next_curve

@@ -161,6 +161,123 @@ fn a_feed_override_of_zero_holds_as_hold_does() {
     assert_eq!(mock::pin("nurbs_interp.feed-override"), Some(mock::Value::Float(1.0)));
 }
 
+/// Near sharp curvature no S-curve stop passes at some samples (the trident at lab set 1: the
+/// plan rides an axis limit there); the planner stores VPOp's deceleration from such a sample
+/// instead. A hold raised there leaves the plan at that very sample, the module outputs exactly
+/// the stored positions (the planner checked them through the module's own evaluator), comes to
+/// rest at the last one and publishes it; released, the plan from there runs to C(1); the whole
+/// run stays within the axis limits.
+#[test]
+fn a_hold_takes_the_stored_deceleration_where_no_s_curve_stop_passes() {
+    use nurbs_motion::planner::PathCurves;
+    use nurbs_rtcore::interpolator::Interpolator;
+    use nurbs_rtcore::StopRun;
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let all: Vec<_> = job.groups.iter().flat_map(|g| &g.hold_stops).collect();
+    let stored = all.iter().map(|h| h.stored()).sum::<usize>();
+    assert!(stored > 10, "{stored} stored stops on the trident");
+    // The first stored stop: its sample, its positions from the arena values.
+    let (at, positions) = all
+        .iter()
+        .find_map(|h| {
+            let t = h.values[..3 * h.count].chunks_exact(3).find(|t| t[1] < 0.0)?;
+            let (count, mut k) = (-t[1] as usize, t[2] as usize);
+            let mut positions = Vec::new();
+            while positions.len() < count {
+                let run = StopRun::from_values(&h.values[k..]).expect("a run header");
+                k += StopRun::VALUES;
+                positions.extend(
+                    h.values[k..k + 2 * run.count]
+                        .chunks_exact(2)
+                        .map(|p| (run.curve, p[0])),
+                );
+                k += 2 * run.count;
+            }
+            Some((t[0] as usize, positions))
+        })
+        .expect("a stored stop");
+    let curves = PathCurves::new(&job.toolpath);
+    let mut eval = Interpolator::new();
+    let expected: Vec<[f64; 3]> = positions
+        .iter()
+        .map(|&(c, u)| {
+            let p = eval.point_at(&curves, c, u).unwrap();
+            [p[0], p[1], p[2]]
+        })
+        .collect();
+    let l = load();
+    let mut streamer = streamer(&l, &job.toolpath, job.groups.clone(), 0);
+    let mut got: Vec<Out> = Vec::new();
+    while !bit("nurbs_interp.held") && got.len() < job.samples.len() + 20_000 {
+        streamer.fill().unwrap();
+        set_bit("nurbs_interp.hold", got.len() >= at);
+        assert!(!period(), "the update path allocated");
+        assert!(
+            !bit("nurbs_interp.fault"),
+            "fault {}",
+            u32_pin("nurbs_interp.fault-code")
+        );
+        if bit("nurbs_interp.active") {
+            got.push(out());
+        }
+    }
+    let held = stop_point(l.channel).expect("the stop point published");
+    drop(streamer);
+    // Released, it goes on from where it stands: the plan from the stop point to C(1).
+    for _ in 0..5 {
+        period(); // the module empties the ring of the stopped motion
+    }
+    let from = nurbs_planner::feed::plan_start(&mut PathCurves::new(&job.toolpath), &held);
+    let rest = nurbs_planner::feed::plan_groups(&job.toolpath, &job.limits, Some(&held)).unwrap();
+    let mut streamer = nurbs_planner::feed::Streamer::new(
+        l.channel,
+        job.toolpath.tip_dim(),
+        nurbs_planner::feed::Source::groups(rest),
+        from.curve,
+        f64::INFINITY,
+        std::time::Instant::now(),
+    )
+    .unwrap();
+    run(&mut streamer, 200, &mut |_| {}, &mut |_| false);
+    set_bit("nurbs_interp.hold", false);
+    let resumed = run_to_rest(&mut streamer, job.samples.len() + 20_000);
+    assert!(
+        bit("nurbs_interp.done") && !bit("nurbs_interp.fault"),
+        "resumed to C(1)"
+    );
+    drop(streamer);
+    drop(l);
+    let latency = got
+        .iter()
+        .zip(&job.samples)
+        .position(|(o, e)| o.q[0] != e.point[0] || o.q[1] != e.point[1]);
+    assert_eq!(
+        latency,
+        Some(at + 1),
+        "the hold at sample {at} left the plan at {latency:?}"
+    );
+    assert_eq!(
+        got[at].q,
+        [
+            job.samples[at].point[0],
+            job.samples[at].point[1],
+            job.samples[at].point[2]
+        ]
+    );
+    let stop: Vec<[f64; 3]> = got[at + 1..at + 1 + expected.len()].iter().map(|o| o.q).collect();
+    assert_eq!(stop, expected, "the module's stop is the stored sequence");
+    let (last_curve, last_u) = *positions.last().unwrap();
+    assert_eq!((held.curve as usize, held.u), (last_curve, last_u));
+    hold_position(&mut got);
+    got.extend(resumed);
+    assert_eq!(violations(&job, &got, true), Vec::<String>::new());
+    println!(
+        "trident: {stored} stored stops; the hold at sample {at} ran the stored {} positions to rest, and the resumed plan to C(1)",
+        expected.len()
+    );
+}
+
 /// On straight elements the planner accepts a hold stop from its profile alone
 /// (`HoldStops::passes_on_line`); simulated through the interpolator and checked by finite
 /// differences instead, every one of them passes and no other does: the same stops, sample for
@@ -179,10 +296,11 @@ fn stops_on_lines_accepted_by_their_profile_pass_the_simulation() {
         let mut simulated = HoldStops::new(&job.limits).simulating_lines();
         let mut stops = 0;
         for slot in job.groups.iter().flat_map(|g| &g.slots) {
-            let a = shortcut.after(&slot.record, &curves);
-            let b = simulated.after(&slot.record, &curves);
+            let ends_group = slot.has_stop == 1;
+            let a = shortcut.after(&slot.record, ends_group, &curves);
+            let b = simulated.after(&slot.record, ends_group, &curves);
             assert_eq!(a, b, "{name}: record {}", slot.record.seq);
-            stops += a.len() / 3;
+            stops += a.count;
         }
         assert!(stops > 10, "{name}: {stops} stops");
         println!("{name}: {stops} stops, the same either way");

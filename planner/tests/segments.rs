@@ -528,6 +528,56 @@ fn malformed_slots_fault_and_hold() {
     assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::RecordKind as u32);
 }
 
+/// Malformed hold stops in the arena fault the module on a hold (never a loop without end in
+/// the servo thread's search, never a step): a sample index that is not a number, a stored
+/// sequence whose count is not whole or whose offset points into the triples, and one whose
+/// positions are not numbers (found as it is played).
+#[test]
+fn malformed_hold_stops_fault_and_hold() {
+    use nurbs_planner::writer::Release;
+    let _guard = lock_module();
+    let job = job("trident.json");
+    let slots = slots_of(&job);
+    let end = slots.iter().position(|s| s.has_stop == 1).unwrap();
+    let cases: [(&str, Vec<f64>, FaultCode); 4] = [
+        ("sample not a number", vec![f64::NAN, 1.0, 1.0], FaultCode::Record),
+        ("count not whole", vec![20.0, -2.5, 3.0], FaultCode::Record),
+        ("offset into the triples", vec![20.0, -5.0, 0.0], FaultCode::Record),
+        (
+            "positions not numbers",
+            vec![20.0, -2.0, 3.0, 0.0, 2.0, 0.0, f64::NAN, f64::NAN, f64::NAN, f64::NAN],
+            FaultCode::BlockPath,
+        ),
+    ];
+    for (name, values, code) in cases {
+        let l = load();
+        let mut w = raw_stream(&l, &job);
+        let offset = w.put(&values, Release::Slot(u64::MAX)).unwrap();
+        let mut bad = slots.clone();
+        bad[0].hold_stops_offset = offset;
+        bad[0].hold_stops_len = 1;
+        for s in &bad[..=end] {
+            l.channel.segments.producer().push(&Slot::segment(s)).unwrap();
+        }
+        // Raised once the motion runs (a motion does not start under hold).
+        for k in 0..job.samples.len() {
+            set_bit("nurbs_interp.hold", k >= 5);
+            period();
+            if bit("nurbs_interp.fault") || bit("nurbs_interp.held") {
+                break;
+            }
+        }
+        set_bit("nurbs_interp.hold", false);
+        assert_eq!(u32_pin("nurbs_interp.fault-code"), code as u32, "{name}");
+        let held = out().q;
+        for _ in 0..100 {
+            period();
+            assert!(!bit("nurbs_interp.active"), "{name}: moved after the fault");
+        }
+        assert_eq!(out().q, held, "{name}");
+    }
+}
+
 /// The plan streamed from its own thread while the module runs (as `nurbs-planner` runs it):
 /// the module starts once the start rule holds, runs with no underrun and equals the offline
 /// streamed plan bit for bit.
@@ -606,14 +656,14 @@ fn cut_case(job: &Job) -> (usize, u64, Vec<SegmentSlot>, Vec<nurbs_rtcore::inter
     use nurbs_rtcore::interpolator::{Interpolator, Step};
     let (g, i) = (1..job.groups.len())
         .find_map(|g| {
-            let i = job.groups[g].hold_stops.iter().position(|h| h.len() >= 3 * 6)?;
+            let i = job.groups[g].hold_stops.iter().position(|h| h.count >= 6)?;
             Some((g, i))
         })
         .expect("a record with hold stops past the first group");
     let group = &job.groups[g];
     let k = job.groups[..g].iter().map(|g| g.slots.len()).sum::<usize>() + i;
-    let triples = &group.hold_stops[i];
-    let at_sample = triples[3 * (2 * triples.len() / 9)] as u64;
+    let samples: Vec<u64> = group.hold_stops[i].samples().collect();
+    let at_sample = samples[2 * samples.len() / 3];
     let from = CutFrom {
         begin: **group.begin.as_ref().expect("the group's begin state"),
         records: group.slots[..=i].iter().map(|s| s.record).collect(),

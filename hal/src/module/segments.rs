@@ -2,6 +2,7 @@
 //! ([`SegmentSource`]), the stop record and chain a group ends with, and the hold stops checked
 //! inside a record ([`hold_stop_at`]).
 
+use super::blocks::StoredCursor;
 use super::*;
 use crate::channel::{Consumer, Join, Splice, AT_RECORD_END, SEGMENT_SLOTS, SPLICE_DONE, SPLICE_MISSED};
 use crate::slot::Slot;
@@ -245,7 +246,7 @@ impl Instance {
                     // A checked stop inside the record at this very sample: take it now rather
                     // than at the group's end.
                     match hold_stop_at(&self.segment_player.slot, self.geometry.values(), n) {
-                        Ok(Some((accel, jerk))) => self.stop_here(&s, accel, jerk, hold, abort),
+                        Ok(Some(stop)) => self.stop_here(&s, stop, hold, abort),
                         Ok(None) => {}
                         Err(code) => self.fault = code,
                     }
@@ -336,7 +337,7 @@ impl Instance {
             _ => {
                 channel.splice.answer(SPLICE_MISSED);
                 match hold_stop_at(&self.segment_player.slot, self.geometry.values(), join.at_sample) {
-                    Ok(Some((accel, jerk))) => self.stop_here(s, accel, jerk, false, false),
+                    Ok(Some(stop)) => self.stop_here(s, stop, false, false),
                     Ok(None) | Err(_) => self.fault = FaultCode::Record,
                 }
                 return;
@@ -365,63 +366,98 @@ impl Instance {
         channel.splice.answer(SPLICE_DONE);
     }
 
-    /// Stops from sample `s` (just output) with the checked deceleration and jerk of a hold stop
-    /// inside the current record ([`SegmentSlot::hold_stops_offset`]): the record the planner
-    /// simulated, started from that sample; nothing is taken from the ring any more.
-    fn stop_here(&mut self, s: &Sample, accel: f64, jerk: f64, hold: bool, abort: bool) {
-        let from = StopStart {
-            seq: self.segment_player.slot.record.seq.wrapping_add(1),
-            flags: 0,
-            curve: u32::try_from(s.curve).unwrap_or(u32::MAX),
-            u: s.u,
-            s: s.s,
-            feed: s.feed,
-            accel: s.accel,
-        };
-        let (stop, a0) = stop_record(&from, accel, jerk);
-        if !self
-            .interp
-            .start_profile(&self.geometry, stop, stop.profile().table_from(a0))
-        {
-            self.fault = FaultCode::BadRecord;
-            return;
+    /// Stops from sample `s` (just output) with the checked hold stop there
+    /// ([`SegmentSlot::hold_stops_offset`]): the S-curve record the planner simulated, started
+    /// from that sample, or its stored sequence of positions from the next period on; nothing is
+    /// taken from the ring any more.
+    fn stop_here(&mut self, s: &Sample, stop: HoldStop, hold: bool, abort: bool) {
+        let seq = self.segment_player.slot.record.seq.wrapping_add(1);
+        match stop {
+            HoldStop::SCurve { accel, jerk } => {
+                let from = StopStart {
+                    seq,
+                    flags: 0,
+                    curve: u32::try_from(s.curve).unwrap_or(u32::MAX),
+                    u: s.u,
+                    s: s.s,
+                    feed: s.feed,
+                    accel: s.accel,
+                };
+                let (stop, a0) = stop_record(&from, accel, jerk);
+                if !self
+                    .interp
+                    .start_profile(&self.geometry, stop, stop.profile().table_from(a0))
+                {
+                    self.fault = FaultCode::BadRecord;
+                    return;
+                }
+            }
+            HoldStop::Stored { offset, len } => {
+                // Read as a path-block motion's stored stop is, from where this sample stands.
+                let point = self.point_of(s);
+                let player = &mut self.block_player;
+                player.curve = s.curve;
+                player.u = s.u;
+                player.s = s.s;
+                player.s_before = s.s;
+                player.point = point;
+                player.stored = Some(StoredCursor::new(seq, offset, len));
+            }
         }
         self.begin_stop(hold, abort);
         self.segment_player.chain = ChainCursor::default();
     }
 }
 
-/// The deceleration and jerk of the checked hold stop of `slot` at motion sample `n`, if it has
-/// one there; `Err` if its hold stops do not lie in the arena or the one found is not valid.
-/// The triples are in increasing sample order: a binary search, at most 17 probes (their count
-/// is at most [`crate::slot::MAX_HOLD_STOPS`], checked when the slot was taken), so a period
-/// under hold costs the same whatever the record's length.
-pub(super) fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<(f64, f64)>, FaultCode> {
+/// A checked stop inside a record ([`SegmentSlot::hold_stops_offset`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum HoldStop {
+    /// The S-curve stop [`stop_record`] builds from the sample with this deceleration and jerk.
+    SCurve { accel: f64, jerk: f64 },
+    /// The stored sequence of `len` positions from arena value `offset`.
+    Stored { offset: u32, len: u32 },
+}
+
+/// The checked hold stop of `slot` at motion sample `n`, if it has one there; `Err` if its hold
+/// stops do not lie in the arena or the one found is not valid. The triples are in increasing
+/// sample order: a binary search, at most 17 probes (their count is at most
+/// [`crate::slot::MAX_HOLD_STOPS`], checked when the slot was taken), so a period under hold
+/// costs the same whatever the record's length.
+pub(super) fn hold_stop_at(slot: &SegmentSlot, values: &[f64], n: u64) -> Result<Option<HoldStop>, FaultCode> {
     if slot.hold_stops_len == 0 {
         return Ok(None);
     }
     let start = slot.hold_stops_offset as usize;
-    let end = (slot.hold_stops_len as usize)
-        .checked_mul(3)
-        .and_then(|len| start.checked_add(len))
-        .ok_or(FaultCode::Record)?;
+    let len = (slot.hold_stops_len as usize).checked_mul(3).ok_or(FaultCode::Record)?;
+    let end = start.checked_add(len).ok_or(FaultCode::Record)?;
     let triples = values.get(start..end).ok_or(FaultCode::Record)?;
     let target = n as f64;
     let (mut lo, mut hi) = (0usize, triples.len() / 3);
     while lo < hi {
         let mid = lo + (hi - lo) / 2;
-        let Some(&[at, accel, jerk]) = triples.get(3 * mid..3 * mid + 3) else {
+        let Some(&[at, a, b]) = triples.get(3 * mid..3 * mid + 3) else {
             return Err(FaultCode::Record);
         };
         if at < target {
             lo = mid + 1;
         } else if at > target {
             hi = mid;
-        } else if at == target && accel > 0.0 && jerk > 0.0 && accel.is_finite() && jerk.is_finite() {
-            return Ok(Some((accel, jerk)));
+        } else if at == target && a > 0.0 && b > 0.0 && a.is_finite() && b.is_finite() {
+            return Ok(Some(HoldStop::SCurve { accel: a, jerk: b }));
         } else {
-            // Not a number, or not a valid stop: the planner never writes one.
-            return Err(FaultCode::Record);
+            // A stored sequence: a whole count, and an offset past the triples within the
+            // arena's index range (what lies there is checked as it is read). Anything else
+            // (not a number, not a valid stop) the planner never writes.
+            let whole = |x: f64| x >= 0.0 && x <= u32::MAX as f64 && x == (x as u64) as f64;
+            let (count, offset) = (-a, b);
+            let stored = at == target && whole(count) && count >= 1.0 && whole(offset) && offset >= len as f64;
+            return match (start as u64).checked_add(offset as u64) {
+                Some(o) if stored && o <= u64::from(u32::MAX) => Ok(Some(HoldStop::Stored {
+                    offset: o as u32,
+                    len: count as u32,
+                })),
+                _ => Err(FaultCode::Record),
+            };
         }
     }
     Ok(None)
