@@ -19,9 +19,10 @@
 #define CHANNEL_MAGIC 1314013779
 
 /**
- * Layout version; bump on any change to [`Channel`] or the record types.
+ * Layout version; bump on any change to [`Channel`], the record types or what the module
+ * accepts in them (15: stored stop runs may pass elements shorter than a step).
  */
-#define CHANNEL_VERSION 14
+#define CHANNEL_VERSION 15
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into

@@ -35,8 +35,9 @@ pub use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, Slot};
 pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
-/// Layout version; bump on any change to [`Channel`] or the record types.
-pub const CHANNEL_VERSION: u32 = 14;
+/// Layout version; bump on any change to [`Channel`], the record types or what the module
+/// accepts in them (15: stored stop runs may pass elements shorter than a step).
+pub const CHANNEL_VERSION: u32 = 15;
 /// Slots in the record ring (a power of two). A group of records that share one stop goes into
 /// the ring whole before the module takes its first record, so the longest group must fit.
 pub const SEGMENT_SLOTS: usize = 8192;

@@ -42,8 +42,9 @@ pub const HOLD_STOP_SPACING: u64 = 20;
 /// there. The first steps are small: near sharp curvature the centripetal terms take a few
 /// percent of an axis' jerk, and a much softer stop keeps the feed up for longer, into more
 /// curvature.
-pub(crate) const STOP_SCALES: [(f64, f64); 8] = [
+pub(crate) const STOP_SCALES: [(f64, f64); 9] = [
     (1.0, 1.0),
+    (1.0, 0.94),
     (0.95, 0.9),
     (0.9, 0.8),
     (0.8, 0.65),
@@ -57,6 +58,9 @@ pub(crate) const STOP_SCALES: [(f64, f64); 8] = [
 /// rounding of a third difference of positions far from the origin (1e-6 relative at 1 m and
 /// 0.25 ms) decides the check.
 pub(crate) const INSIDE: f64 = 1.0 - 1e-3;
+
+/// A stop stored across element ends runs on at most this many elements after its own.
+const ACROSS_ELEMENTS: usize = 64;
 
 /// Below this feed (mm/s) the motion is as good as at rest: no stop is offered there.
 const MOVING: f64 = 1e-6;
@@ -162,6 +166,15 @@ struct StopsBuilder {
 }
 
 impl StopsBuilder {
+    /// Adds stored stop `stop` from motion sample `n`.
+    fn store(&mut self, n: u64, stop: StoredStop) {
+        // Its offset counts from the first triple: fixed once all are in.
+        self.triples
+            .extend([n as f64, -(stop.positions as f64), self.stored.len() as f64]);
+        self.stored.extend(stop.values);
+        self.last_curve = self.last_curve.max(Some(stop.last_curve as u32));
+    }
+
     /// The arena values: the triples with the stored sequences' offsets counted from the first
     /// triple, then the sequences.
     fn finish(self) -> RecordStops {
@@ -183,7 +196,89 @@ impl StopsBuilder {
     }
 }
 
-/// A stored stop: VPOp's deceleration from a sample, as arena values ([`StopRun`]s, each
+/// How a stop inside an element fared.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Verdict {
+    Passes,
+    /// It needs more than what is left of its element (and is within the limits until then).
+    LeavesElement,
+    Fails,
+}
+
+/// Walks arc length along consecutive elements from a curve parameter, one stop sample after the
+/// other: where each lies (element, curve parameter).
+struct ArcWalk {
+    curve: usize,
+    u: f64,
+    /// Arc length walked so far, and what is left of the current element.
+    travelled: f64,
+    left: Option<f64>,
+    /// The last element the walk may enter.
+    last: usize,
+}
+
+impl ArcWalk {
+    fn new(curve: usize, u: f64, elements: usize) -> Self {
+        ArcWalk {
+            curve,
+            u,
+            travelled: 0.0,
+            left: None,
+            last: curve + elements,
+        }
+    }
+
+    /// The point `along` (arc length from the start, at least the last one's) ahead; `None`
+    /// past the elements the walk may enter or the path's end.
+    fn to(&mut self, along: f64, curves: &PathCurves, tip: usize) -> Option<(usize, f64)> {
+        let mut need = along - self.travelled;
+        self.travelled = along.max(self.travelled);
+        loop {
+            let element = &curves.get(self.curve)?.curve;
+            let hi = element.view().u_max();
+            let left = *self.left.get_or_insert_with(|| arc_in_pieces(element, self.u, hi, tip));
+            if need > left {
+                if self.curve >= self.last {
+                    return None;
+                }
+                need -= left;
+                self.curve += 1;
+                self.u = curves.get(self.curve)?.curve.view().u_min();
+                self.left = None;
+                continue;
+            }
+            if need > 0.0 {
+                // Newton on the arc length from the last point.
+                let view = element.view();
+                let mut x = (self.u + need / view.speed(self.u, tip).max(f64::MIN_POSITIVE)).min(hi);
+                for _ in 0..4 {
+                    let error = arc_between(element, self.u, x, tip) - need;
+                    let speed = view.speed(x, tip);
+                    if speed.is_nan() || speed <= 0.0 || error.abs() <= 1e-12 * (1.0 + need) {
+                        break;
+                    }
+                    x = (x - error / speed).clamp(self.u, hi);
+                }
+                self.u = x;
+                self.left = Some(left - need);
+            }
+            return Some((self.curve, self.u));
+        }
+    }
+}
+
+/// Arc length of `curve` between parameters `a` and `b` by [`arc_between`] on eight pieces.
+fn arc_in_pieces(curve: &nurbs_motion::geometry::Nurbs, a: f64, b: f64, tip: usize) -> f64 {
+    (0..8)
+        .map(|k| {
+            let (x, y) = (a + (b - a) * k as f64 / 8.0, a + (b - a) * (k + 1) as f64 / 8.0);
+            arc_between(curve, x, y, tip)
+        })
+        .sum()
+}
+
+/// A stored stop (VPOp's deceleration, or an S-curve stop across element ends) from a sample,
+/// as arena values ([`StopRun`]s, each
 /// position as (u, s) in its element's measure), and the highest element it runs on.
 struct StoredStop {
     values: Vec<f64>,
@@ -317,18 +412,28 @@ impl HoldStops {
         if stops.triples.len() >= 3 * MAX_HOLD_STOPS as usize || s.feed <= MOVING {
             return;
         }
-        if let Some((accel, jerk)) = self.check(s, record, curves) {
-            stops.triples.extend([n as f64, accel, jerk]);
+        let leaving = match self.check(s, record, curves) {
+            Ok((accel, jerk)) => {
+                stops.triples.extend([n as f64, accel, jerk]);
+                self.stored_pace.offered();
+                return;
+            }
+            Err(leaving) => leaving,
+        };
+        if stops.stored.len() >= MAX_STORED_VALUES {
+            return;
+        }
+        // On short elements: the same stop, stored, across the element ends.
+        let across = leaving
+            .iter()
+            .find_map(|&(accel, jerk)| self.scurve_across(s, record, accel, jerk, curves));
+        if let Some(stop) = across {
+            stops.store(n, stop);
             self.stored_pace.offered();
-        } else if stops.stored.len() < MAX_STORED_VALUES && self.stored_pace.may_try() {
+        } else if self.stored_pace.may_try() {
             match self.stored_stop(s, curves) {
                 Some(stop) => {
-                    // Its offset counts from the first triple: fixed once all are in.
-                    stops
-                        .triples
-                        .extend([n as f64, -(stop.positions as f64), stops.stored.len() as f64]);
-                    stops.stored.extend(stop.values);
-                    stops.last_curve = stops.last_curve.max(Some(stop.last_curve as u32));
+                    stops.store(n, stop);
                     self.stored_pace.offered();
                 }
                 None => self.stored_pace.failed(),
@@ -337,10 +442,19 @@ impl HoldStops {
     }
 
     /// The deceleration and jerk of a stop from sample `s` that stays on its element and within
-    /// the axis limits, if one of [`STOP_SCALES`] does.
-    fn check(&mut self, s: &Sample, record: &SegmentRecord, curves: &PathCurves) -> Option<(f64, f64)> {
+    /// the axis limits, if one of [`STOP_SCALES`] does; else, where all that fail do so only by
+    /// leaving the element, their deceleration and (landed) jerk.
+    fn check(
+        &mut self,
+        s: &Sample,
+        record: &SegmentRecord,
+        curves: &PathCurves,
+    ) -> Result<(f64, f64), Vec<(f64, f64)>> {
         let dt = self.limits.period;
-        let mut length = self.element_length(s.curve, curves)?;
+        let Some(mut length) = self.element_length(s.curve, curves) else {
+            return Err(Vec::new());
+        };
+        let (mut leaving, mut exceeded) = (Vec::new(), false);
         let tangential = tangential_limits(curves, &self.limits, s.curve, s.u);
         let (accel0, jerk0) = (tangential.0 * INSIDE, tangential.1 * INSIDE);
         let from = StopStart {
@@ -362,29 +476,40 @@ impl HoldStops {
                     self.passes(&from, accel, landed, &mut length, curves)
                 };
                 self.element_length = Some(length);
-                if passed {
-                    return Some((accel, landed));
+                match passed {
+                    Verdict::Passes => return Ok((accel, landed)),
+                    Verdict::LeavesElement => leaving.push((accel, landed)),
+                    Verdict::Fails => exceeded = true,
                 }
             }
         }
-        None
+        // Where one exceeds the limits inside the element, the limits decide rather than the
+        // element's length: no stored version (each simulates a whole stop) is offered.
+        Err(if exceeded { Vec::new() } else { leaving })
     }
 
     /// Whether the stop from `from` with `accel` and `jerk` stays on its element (of arc length
     /// `length`) and, continuing the motion's samples and held at rest after it, within the axis
     /// limits.
-    fn passes(&self, from: &StopStart, accel: f64, jerk: f64, length: &mut ElementLength, curves: &PathCurves) -> bool {
+    fn passes(
+        &self,
+        from: &StopStart,
+        accel: f64,
+        jerk: f64,
+        length: &mut ElementLength,
+        curves: &PathCurves,
+    ) -> Verdict {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
         let (stop, a0) = stop_record(from, accel, jerk);
         // Room for rounding of the arc length at the element's end.
         let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
         // Beyond the bound it leaves the exact length too (most stops on short elements).
         if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
-            return false;
+            return Verdict::LeavesElement;
         }
         let mut sim = self.replica;
         if !sim.start_profile(curves, stop, stop.profile().table_from(a0)) {
-            return false;
+            return Verdict::Fails;
         }
         // A stop that starts while the plan still accelerates speeds up first: never beyond the
         // feed the plan may run there.
@@ -396,12 +521,19 @@ impl HoldStops {
         while let Step::Sample(x) = sim.step(curves, dt, &mut || None) {
             f.push(&x.point[..tip], &self.limits);
             let too_fast = x.feed > cap && x.feed > from.feed;
-            if too_fast || x.curve != stop.curve() || f.worst_ratio(&self.limits) > 1.0 + SLACK {
-                return false;
+            if x.curve != stop.curve() {
+                return Verdict::LeavesElement;
+            }
+            if too_fast || f.worst_ratio(&self.limits) > 1.0 + SLACK {
+                return Verdict::Fails;
             }
         }
         f.finish(&self.limits);
-        f.worst_ratio(&self.limits) <= 1.0 + SLACK
+        if f.worst_ratio(&self.limits) <= 1.0 + SLACK {
+            Verdict::Passes
+        } else {
+            Verdict::Fails
+        }
     }
 
     /// [`Self::passes`] on a straight element, from the stop's profile alone: on a line every
@@ -420,11 +552,11 @@ impl HoldStops {
         tangential: (f64, f64),
         length: &mut ElementLength,
         curves: &PathCurves,
-    ) -> bool {
+    ) -> Verdict {
         let (stop, a0) = stop_record(from, accel, jerk);
         let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
         if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
-            return false;
+            return Verdict::LeavesElement;
         }
         let table = stop.profile().table_from(a0);
         // Within the tangential limits (the profile's jerks, and its acceleration at every phase
@@ -450,21 +582,21 @@ impl HoldStops {
                 .zip(&self.limits.velocity)
                 .all(|(di, vmax)| peak * (di / norm).abs() <= *vmax);
         let at_rest = table.end().v.abs() <= 1e-9 * (1.0 + from.feed);
-        jerks_ok && accels_ok && velocity_ok && at_rest && (peak <= cap || peak <= from.feed)
+        if jerks_ok && accels_ok && velocity_ok && at_rest && (peak <= cap || peak <= from.feed) {
+            Verdict::Passes
+        } else {
+            Verdict::Fails
+        }
     }
 
     /// VPOp's deceleration from sample `s` (the last of the motion's three recent samples), if
-    /// it comes to rest on the elements read and passes the check every stop passes: continuing
-    /// the motion's finite differences, positions as the module's evaluator computes them, at
-    /// rest after the last, never faster than the feed the plan may run, and each step as the
-    /// module checks a stored step (onward on its element or into the next one, its chord
-    /// within its arc length: [`step_fits`]).
+    /// it comes to rest on the elements read and passes as every stored stop must
+    /// ([`Self::checked_stored`]).
     fn stored_stop(&mut self, s: &Sample, curves: &PathCurves) -> Option<StoredStop> {
         let recent: Vec<Sample> = self.recent.iter().flatten().copied().collect();
         if recent.len() < 3 {
             return None;
         }
-        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
         // The elements from the oldest sample's on, as far as the braking distance reaches.
         let first = recent[0].curve;
         let (a, j) = tangential_limits(curves, &self.limits, s.curve, s.u);
@@ -490,6 +622,70 @@ impl HoldStops {
         let points = vpop::brake_points(&path, &self.limits, SearchOptions::default(), last)
             .ok()
             .flatten()?;
+        let mut positions = points.iter().map(|p| Some((first + p.element, p.u)));
+        self.checked_stored(s, &mut positions, curves)
+    }
+
+    /// The stop of [`Self::check`] with deceleration `accel` and (landed) jerk `jerk` from sample
+    /// `s`, which leaves its element: the same tangential profile sampled at the servo period,
+    /// each sample's arc length walked along the elements ahead ([`ACROSS_ELEMENTS`] at most),
+    /// checked and stored as every stored stop is ([`Self::checked_stored`]).
+    fn scurve_across(
+        &self,
+        s: &Sample,
+        record: &SegmentRecord,
+        accel: f64,
+        jerk: f64,
+        curves: &PathCurves,
+    ) -> Option<StoredStop> {
+        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
+        let from = StopStart {
+            seq: record.seq.wrapping_add(1),
+            flags: 0,
+            curve: s.curve as u32,
+            u: s.u,
+            s: s.s,
+            feed: s.feed,
+            accel: s.accel,
+        };
+        let (stop, a0) = stop_record(&from, accel, jerk);
+        let table = stop.profile().table_from(a0);
+        // Room for it on the elements ahead (none at the path's end), before any sample.
+        let mut room = {
+            let view = curves.view(s.curve);
+            arc_in_pieces(&curves.get(s.curve)?.curve, s.u, view.u_max(), tip)
+        };
+        let mut next = s.curve + 1;
+        while room < table.length() {
+            if next > s.curve + ACROSS_ELEMENTS {
+                return None;
+            }
+            let element = &curves.get(next)?.curve;
+            let view = element.view();
+            room += arc_in_pieces(element, view.u_min(), view.u_max(), tip);
+            next += 1;
+        }
+        let steps = (table.total_time() / dt).ceil() as usize;
+        let mut walk = ArcWalk::new(s.curve, s.u, ACROSS_ELEMENTS);
+        let mut positions = (1..=steps).map(|k| {
+            let along = table.state_at((k as f64 * dt).min(table.total_time())).s;
+            walk.to(along, curves, tip)
+        });
+        self.checked_stored(s, &mut positions, curves)
+    }
+
+    /// A stored stop from sample `s` through `positions` (element, curve parameter; `None`: no
+    /// such stop), if it passes the check every stored stop passes, position by position: continuing the motion's finite differences, positions
+    /// as the module's evaluator computes them, at rest after the last, never faster than the
+    /// feed the plan may run, and each step as the module checks a stored step (onward on its
+    /// element or into a later one, its chord within its arc length: [`step_fits`]).
+    fn checked_stored(
+        &self,
+        s: &Sample,
+        positions: &mut dyn Iterator<Item = Option<(usize, f64)>>,
+        curves: &PathCurves,
+    ) -> Option<StoredStop> {
+        let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
         // Checked as the module will run it.
         let cap = curves
             .programmed_feed(s.curve)
@@ -499,10 +695,12 @@ impl HoldStops {
         let mut f = self.fd;
         f.reset_peaks();
         let (mut curve, mut u, mut s_at, mut at) = (s.curve, s.u, s.s, s.point);
-        let mut values = Vec::with_capacity(2 * points.len() + StopRun::VALUES);
+        let mut values = Vec::new();
         let mut run_header = None;
-        for p in &points {
-            let c = first + p.element;
+        let mut count = 0;
+        for position in positions {
+            let (c, pu) = position?;
+            count += 1;
             let element = curves.get(c)?;
             let (lo, hi) = {
                 let v = element.curve.view();
@@ -511,21 +709,27 @@ impl HoldStops {
             // Arc lengths step by step from the sample's own (in each element's measure), so
             // that the first step starts exactly where the motion stands.
             let (s_before, s_p) = if c == curve {
-                if !(p.u >= u && p.u <= hi) {
+                if !(pu >= u && pu <= hi) {
                     return None;
                 }
-                (s_at, s_at + arc_between(&element.curve, u, p.u, tip))
+                (s_at, s_at + arc_between(&element.curve, u, pu, tip))
             } else {
-                if c != curve + 1 || !(p.u >= lo && p.u <= hi) {
+                if c <= curve || !(pu >= lo && pu <= hi) {
                     return None;
                 }
-                // The step's start in the next element's measure (before its start): what is
-                // left of the last element, then the next one's start to the position.
-                let left = arc_between(&curves.get(curve)?.curve, u, curves.view(curve).u_max(), tip);
-                let into = arc_between(&element.curve, lo, p.u, tip);
+                // The step's start in the later element's measure (before its start): what is
+                // left of the last element and the elements it passes (shorter than the step),
+                // then the element's start to the position.
+                let mut left = arc_between(&curves.get(curve)?.curve, u, curves.view(curve).u_max(), tip);
+                for passed in curve + 1..c {
+                    let passed = &curves.get(passed)?.curve;
+                    let view = passed.view();
+                    left += arc_in_pieces(passed, view.u_min(), view.u_max(), tip);
+                }
+                let into = arc_between(&element.curve, lo, pu, tip);
                 (-left, into)
             };
-            let x = eval.point_at(curves, c, p.u)?;
+            let x = eval.point_at(curves, c, pu)?;
             // The module's distance between its output positions (z zero on a 2-D path).
             let axes = tip.min(3);
             let chord = (0..axes).map(|i| (x[i] - at[i]) * (x[i] - at[i])).sum::<f64>().sqrt();
@@ -547,16 +751,16 @@ impl HoldStops {
                     .to_values(),
                 );
             }
-            values.extend([p.u, s_p]);
+            values.extend([pu, s_p]);
             if let Some(h) = run_header {
                 values[h + 1] += 1.0;
             }
-            (curve, u, s_at, at) = (c, p.u, s_p, x);
+            (curve, u, s_at, at) = (c, pu, s_p, x);
         }
         f.finish(&self.limits);
-        (f.worst_ratio(&self.limits) <= 1.0 + SLACK).then_some(StoredStop {
+        (count > 0 && f.worst_ratio(&self.limits) <= 1.0 + SLACK).then_some(StoredStop {
             values,
-            positions: points.len(),
+            positions: count,
             last_curve: curve,
         })
     }

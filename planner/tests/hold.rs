@@ -169,34 +169,87 @@ fn a_feed_override_of_zero_holds_as_hold_does() {
 /// run stays within the axis limits.
 #[test]
 fn a_hold_takes_the_stored_deceleration_where_no_s_curve_stop_passes() {
-    use nurbs_motion::planner::PathCurves;
-    use nurbs_rtcore::interpolator::Interpolator;
-    use nurbs_rtcore::StopRun;
     let _guard = lock_module();
     let job = job("trident.json");
-    let all: Vec<_> = job.groups.iter().flat_map(|g| &g.hold_stops).collect();
-    let stored = all.iter().map(|h| h.stored()).sum::<usize>();
-    assert!(stored > 10, "{stored} stored stops on the trident");
-    // The first stored stop: its sample, its positions from the arena values.
-    let (at, positions) = all
+    let stored = job
+        .groups
         .iter()
-        .find_map(|h| {
-            let t = h.values[..3 * h.count].chunks_exact(3).find(|t| t[1] < 0.0)?;
-            let (count, mut k) = (-t[1] as usize, t[2] as usize);
-            let mut positions = Vec::new();
-            while positions.len() < count {
-                let run = StopRun::from_values(&h.values[k..]).expect("a run header");
-                k += StopRun::VALUES;
-                positions.extend(
-                    h.values[k..k + 2 * run.count]
-                        .chunks_exact(2)
-                        .map(|p| (run.curve, p[0])),
-                );
-                k += 2 * run.count;
-            }
-            Some((t[0] as usize, positions))
+        .flat_map(|g| &g.hold_stops)
+        .map(|h| h.stored())
+        .sum::<usize>();
+    assert!(stored > 10, "{stored} stored stops on the trident");
+    let (at, len) = hold_at_stored_stop(&job, &|_| true);
+    println!("trident: {stored} stored stops; the hold at sample {at} ran the stored {len} positions to rest, and the resumed plan to C(1)");
+}
+
+/// On a dense G1 program every S-curve stop leaves its 0.02 mm element (and the corner splines
+/// between the lines are shorter than a period's step): the planner stores the same stop
+/// across the element ends instead, so that nearly every sample a stop is offered at has one.
+/// A hold at one that passes over a whole element within one period runs it as stored.
+#[test]
+fn on_dense_g1_the_stops_run_across_short_elements() {
+    let _guard = lock_module();
+    let job = job_at(&dense_g1(300, &std::env::temp_dir()));
+    let stops: Vec<u64> = job
+        .groups
+        .iter()
+        .flat_map(|g| &g.hold_stops)
+        .flat_map(|h| h.samples().collect::<Vec<_>>())
+        .collect();
+    let candidates = job.samples.len() as u64 / HOLD_STOP_SPACING;
+    let offered = stops.iter().filter(|&&n| n % HOLD_STOP_SPACING == 0).count() as u64;
+    assert!(
+        offered * 10 >= candidates * 9,
+        "stops at {offered} of {candidates} samples a stop is offered at"
+    );
+    let skips = |positions: &[(usize, f64)]| positions.windows(2).any(|w| w[1].0 > w[0].0 + 1);
+    let (at, len) = hold_at_stored_stop(&job, &skips);
+    println!(
+        "dense G1 (300 lines): stops at {offered} of {candidates} samples offered; the hold at sample {at} ran the stored {len} positions (past an element within one step) to rest"
+    );
+}
+
+/// A stored stop's positions: (element, curve parameter) each.
+type Positions = Vec<(usize, f64)>;
+
+/// Which stored stop a test takes, by its positions.
+type Pick = dyn Fn(&[(usize, f64)]) -> bool;
+
+/// The first stored stop whose positions `pick` takes, as the arena carries it: its sample and
+/// positions.
+fn stored_stop(job: &Job, pick: &Pick) -> (usize, Positions) {
+    use nurbs_rtcore::StopRun;
+    job.groups
+        .iter()
+        .flat_map(|g| &g.hold_stops)
+        .flat_map(|h| {
+            h.values[..3 * h.count].chunks_exact(3).filter(|t| t[1] < 0.0).map(|t| {
+                let (count, mut k) = (-t[1] as usize, t[2] as usize);
+                let mut positions = Vec::new();
+                while positions.len() < count {
+                    let run = StopRun::from_values(&h.values[k..]).expect("a run header");
+                    k += StopRun::VALUES;
+                    positions.extend(
+                        h.values[k..k + 2 * run.count]
+                            .chunks_exact(2)
+                            .map(|p| (run.curve, p[0])),
+                    );
+                    k += 2 * run.count;
+                }
+                (t[0] as usize, positions)
+            })
         })
-        .expect("a stored stop");
+        .find(|(_, positions)| pick(positions))
+        .expect("a stored stop")
+}
+
+/// Holds at the first stored stop `pick` takes: the module leaves the plan at its sample, outputs
+/// exactly its positions, rests at the last and publishes it; released, the plan from there runs
+/// to C(1); the whole run within the axis limits. Its sample and length.
+fn hold_at_stored_stop(job: &Job, pick: &Pick) -> (usize, usize) {
+    use nurbs_motion::planner::PathCurves;
+    use nurbs_rtcore::interpolator::Interpolator;
+    let (at, positions) = stored_stop(job, pick);
     let curves = PathCurves::new(&job.toolpath);
     let mut eval = Interpolator::new();
     let expected: Vec<[f64; 3]> = positions
@@ -271,11 +324,8 @@ fn a_hold_takes_the_stored_deceleration_where_no_s_curve_stop_passes() {
     assert_eq!((held.curve as usize, held.u), (last_curve, last_u));
     hold_position(&mut got);
     got.extend(resumed);
-    assert_eq!(violations(&job, &got, true), Vec::<String>::new());
-    println!(
-        "trident: {stored} stored stops; the hold at sample {at} ran the stored {} positions to rest, and the resumed plan to C(1)",
-        expected.len()
-    );
+    assert_eq!(violations(job, &got, true), Vec::<String>::new());
+    (at, expected.len())
 }
 
 /// On straight elements the planner accepts a hold stop from its profile alone

@@ -239,13 +239,14 @@ impl Instance {
             self.fault = FaultCode::BlockPath;
             return false;
         };
-        // On the same curve onwards from the last position, or at the start of a run on the
-        // next curve (across the join), where the run gives the step's start in its measure.
+        // On the same curve onwards from the last position, or at the start of a run on a
+        // later curve (across the join, and past elements shorter than the step), where the run
+        // gives the step's start in its measure.
         let s_before = c.run_s_before.take().unwrap_or(p.s);
         let follows = if curve == p.curve {
             u >= p.u && s_before == p.s
         } else {
-            curve == p.curve.wrapping_add(1) && u >= view.u_min()
+            curve > p.curve && u >= view.u_min()
         };
         let sample = Sample {
             curve,
