@@ -457,15 +457,7 @@ impl HoldStops {
         let (mut leaving, mut exceeded) = (Vec::new(), false);
         let tangential = tangential_limits(curves, &self.limits, s.curve, s.u);
         let (accel0, jerk0) = (tangential.0 * INSIDE, tangential.1 * INSIDE);
-        let from = StopStart {
-            seq: record.seq.wrapping_add(1),
-            flags: 0,
-            curve: s.curve as u32,
-            u: s.u,
-            s: s.s,
-            feed: s.feed,
-            accel: s.accel,
-        };
+        let from = stop_start(record, s);
         let line = self.line_shortcut && curves.get(s.curve).is_some_and(|e| is_line(&e.curve));
         for (sa, sj) in STOP_SCALES {
             let (accel, jerk) = (accel0 * sa, jerk0 * sj);
@@ -639,15 +631,7 @@ impl HoldStops {
         curves: &PathCurves,
     ) -> Option<StoredStop> {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
-        let from = StopStart {
-            seq: record.seq.wrapping_add(1),
-            flags: 0,
-            curve: s.curve as u32,
-            u: s.u,
-            s: s.s,
-            feed: s.feed,
-            accel: s.accel,
-        };
+        let from = stop_start(record, s);
         let (stop, a0) = stop_record(&from, accel, jerk);
         let table = stop.profile().table_from(a0);
         // Room for it on the elements ahead (none at the path's end), before any sample.
@@ -836,6 +820,20 @@ fn landing_jerk(from: &StopStart, accel: f64, jerk: f64, dt: f64) -> Option<f64>
         }
     }
     None
+}
+
+/// Where a stop from sample `s` inside `record` starts: its feed and tangential acceleration
+/// there, as the module builds it when a hold takes that sample.
+fn stop_start(record: &SegmentRecord, s: &Sample) -> StopStart {
+    StopStart {
+        seq: record.seq.wrapping_add(1),
+        flags: 0,
+        curve: s.curve as u32,
+        u: s.u,
+        s: s.s,
+        feed: s.feed,
+        accel: s.accel,
+    }
 }
 
 /// True if `curve` is a straight line through its tool-tip coordinates at a pace uniform in its
