@@ -212,18 +212,19 @@ struct ArcWalk {
     u: f64,
     /// Arc length walked so far, and what is left of the current element.
     travelled: f64,
-    left: Option<f64>,
+    left: f64,
     /// The last element the walk may enter.
     last: usize,
 }
 
 impl ArcWalk {
-    fn new(curve: usize, u: f64, elements: usize) -> Self {
+    /// From `u` on element `curve`, `left` of arc length from there to the element's end.
+    fn new(curve: usize, u: f64, left: f64, elements: usize) -> Self {
         ArcWalk {
             curve,
             u,
             travelled: 0.0,
-            left: None,
+            left,
             last: curve + elements,
         }
     }
@@ -233,48 +234,41 @@ impl ArcWalk {
     fn to(&mut self, along: f64, curves: &PathCurves, tip: usize) -> Option<(usize, f64)> {
         let mut need = along - self.travelled;
         self.travelled = along.max(self.travelled);
-        loop {
+        while need > self.left {
+            if self.curve >= self.last {
+                return None;
+            }
+            need -= self.left;
+            self.curve += 1;
             let element = &curves.get(self.curve)?.curve;
-            let hi = element.view().u_max();
-            let left = *self.left.get_or_insert_with(|| arc_in_pieces(element, self.u, hi, tip));
-            if need > left {
-                if self.curve >= self.last {
-                    return None;
-                }
-                need -= left;
-                self.curve += 1;
-                self.u = curves.get(self.curve)?.curve.view().u_min();
-                self.left = None;
-                continue;
-            }
-            if need > 0.0 {
-                // Newton on the arc length from the last point.
-                let view = element.view();
-                let mut x = (self.u + need / view.speed(self.u, tip).max(f64::MIN_POSITIVE)).min(hi);
-                for _ in 0..4 {
-                    let error = arc_between(element, self.u, x, tip) - need;
-                    let speed = view.speed(x, tip);
-                    if speed.is_nan() || speed <= 0.0 || error.abs() <= 1e-12 * (1.0 + need) {
-                        break;
-                    }
-                    x = (x - error / speed).clamp(self.u, hi);
-                }
-                self.u = x;
-                self.left = Some(left - need);
-            }
-            return Some((self.curve, self.u));
+            self.u = element.view().u_min();
+            self.left = element_length(element);
         }
+        if need > 0.0 {
+            // Newton on the arc length from the last point (a step of one period: the
+            // five-point rule is exact to rounding there).
+            let element = &curves.get(self.curve)?.curve;
+            let view = element.view();
+            let hi = view.u_max();
+            let mut x = (self.u + need / view.speed(self.u, tip).max(f64::MIN_POSITIVE)).min(hi);
+            for _ in 0..4 {
+                let error = arc_between(element, self.u, x, tip) - need;
+                let speed = view.speed(x, tip);
+                if speed.is_nan() || speed <= 0.0 || error.abs() <= 1e-12 * (1.0 + need) {
+                    break;
+                }
+                x = (x - error / speed).clamp(self.u, hi);
+            }
+            self.u = x;
+            self.left -= need;
+        }
+        Some((self.curve, self.u))
     }
 }
 
-/// Arc length of `curve` between parameters `a` and `b` by [`arc_between`] on eight pieces.
-fn arc_in_pieces(curve: &nurbs_motion::geometry::Nurbs, a: f64, b: f64, tip: usize) -> f64 {
-    (0..8)
-        .map(|k| {
-            let (x, y) = (a + (b - a) * k as f64 / 8.0, a + (b - a) * (k + 1) as f64 / 8.0);
-            arc_between(curve, x, y, tip)
-        })
-        .sum()
+/// Arc length of a whole element (its arc-length table's).
+fn element_length(curve: &nurbs_motion::geometry::Nurbs) -> f64 {
+    ArcLengthTable::new(curve).total()
 }
 
 /// A stored stop (VPOp's deceleration, or an S-curve stop across element ends) from a sample,
@@ -296,6 +290,8 @@ pub struct HoldStops {
     limits: Limits,
     /// Arc length of the element the last stop was checked on.
     element_length: Option<ElementLength>,
+    /// Arc-length table of the element the last stored S-curve started on.
+    arc_table: Option<(usize, ArcLengthTable)>,
     /// The motion's last sample.
     last: Option<Sample>,
     /// Accept stops on straight elements by their profile alone ([`Self::passes_on_line`]);
@@ -323,6 +319,7 @@ impl HoldStops {
             samples: 0,
             limits: limits.clone(),
             element_length: None,
+            arc_table: None,
             last: None,
             line_shortcut: true,
             recent: [None; 3],
@@ -424,9 +421,17 @@ impl HoldStops {
             return;
         }
         // On short elements: the same stop, stored, across the element ends.
-        let across = leaving
-            .iter()
-            .find_map(|&(accel, jerk)| self.scurve_across(s, record, accel, jerk, curves));
+        let rest = if leaving.is_empty() {
+            None
+        } else {
+            self.rest_of_element(s, curves)
+        };
+        let across = match rest {
+            Some(rest) => leaving
+                .iter()
+                .find_map(|&(accel, jerk)| self.scurve_across(s, record, (accel, jerk), rest, curves)),
+            _ => None,
+        };
         if let Some(stop) = across {
             stops.store(n, stop);
             self.stored_pace.offered();
@@ -618,16 +623,28 @@ impl HoldStops {
         self.checked_stored(s, &mut positions, curves)
     }
 
+    /// Arc length from sample `s` to its element's end (the element's table kept for the next
+    /// samples on it).
+    fn rest_of_element(&mut self, s: &Sample, curves: &PathCurves) -> Option<f64> {
+        let curve = &curves.get(s.curve)?.curve;
+        if self.arc_table.as_ref().is_none_or(|(e, _)| *e != s.curve) {
+            self.arc_table = Some((s.curve, ArcLengthTable::new(curve)));
+        }
+        let (_, table) = self.arc_table.as_ref()?;
+        Some(table.total() - table.length_to(curve, s.u))
+    }
+
     /// The stop of [`Self::check`] with deceleration `accel` and (landed) jerk `jerk` from sample
-    /// `s`, which leaves its element: the same tangential profile sampled at the servo period,
-    /// each sample's arc length walked along the elements ahead ([`ACROSS_ELEMENTS`] at most),
-    /// checked and stored as every stored stop is ([`Self::checked_stored`]).
+    /// `s`, which leaves its element (`rest_of_own` of arc length left of it): the same tangential
+    /// profile sampled at the servo period, each sample's arc length walked along the elements
+    /// ahead ([`ACROSS_ELEMENTS`] at most), checked and stored as every stored stop is
+    /// ([`Self::checked_stored`]).
     fn scurve_across(
         &self,
         s: &Sample,
         record: &SegmentRecord,
-        accel: f64,
-        jerk: f64,
+        (accel, jerk): (f64, f64),
+        rest_of_own: f64,
         curves: &PathCurves,
     ) -> Option<StoredStop> {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
@@ -635,22 +652,17 @@ impl HoldStops {
         let (stop, a0) = stop_record(&from, accel, jerk);
         let table = stop.profile().table_from(a0);
         // Room for it on the elements ahead (none at the path's end), before any sample.
-        let mut room = {
-            let view = curves.view(s.curve);
-            arc_in_pieces(&curves.get(s.curve)?.curve, s.u, view.u_max(), tip)
-        };
+        let mut room = rest_of_own;
         let mut next = s.curve + 1;
         while room < table.length() {
             if next > s.curve + ACROSS_ELEMENTS {
                 return None;
             }
-            let element = &curves.get(next)?.curve;
-            let view = element.view();
-            room += arc_in_pieces(element, view.u_min(), view.u_max(), tip);
+            room += element_length(&curves.get(next)?.curve);
             next += 1;
         }
         let steps = (table.total_time() / dt).ceil() as usize;
-        let mut walk = ArcWalk::new(s.curve, s.u, ACROSS_ELEMENTS);
+        let mut walk = ArcWalk::new(s.curve, s.u, rest_of_own, ACROSS_ELEMENTS);
         let mut positions = (1..=steps).map(|k| {
             let along = table.state_at((k as f64 * dt).min(table.total_time())).s;
             walk.to(along, curves, tip)
@@ -706,9 +718,7 @@ impl HoldStops {
                 // then the element's start to the position.
                 let mut left = arc_between(&curves.get(curve)?.curve, u, curves.view(curve).u_max(), tip);
                 for passed in curve + 1..c {
-                    let passed = &curves.get(passed)?.curve;
-                    let view = passed.view();
-                    left += arc_in_pieces(passed, view.u_min(), view.u_max(), tip);
+                    left += element_length(&curves.get(passed)?.curve);
                 }
                 let into = arc_between(&element.curve, lo, pu, tip);
                 (-left, into)
@@ -779,11 +789,9 @@ struct ElementLength {
 
 impl ElementLength {
     fn exact(&mut self, curves: &PathCurves) -> f64 {
-        *self.exact.get_or_insert_with(|| {
-            curves
-                .get(self.element)
-                .map_or(0.0, |e| ArcLengthTable::new(&e.curve).total())
-        })
+        *self
+            .exact
+            .get_or_insert_with(|| curves.get(self.element).map_or(0.0, |e| element_length(&e.curve)))
     }
 }
 
