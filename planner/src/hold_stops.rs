@@ -27,7 +27,7 @@ use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
-use nurbs_motion::planner::vpop::{self, JointPath, PathPoint, SearchOptions};
+use nurbs_motion::planner::vpop::{self, CurvatureTables, JointPath, PathPoint, SearchOptions};
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_rtcore::block_stop::{step_fits, stop_record, StopStart};
 use nurbs_rtcore::interpolator::{Interpolator, Sample, Step};
@@ -115,45 +115,6 @@ impl RecordStops {
             values,
             last_curve: None,
         }
-    }
-}
-
-/// When a stored stop is worth its cost (VPOp's deceleration simulates the whole stop, some
-/// hundreds of periods, where the S-curve check takes a few): only where the candidate before
-/// had no stop either (so a hold waits at most two spacings where stored stops pass), and after
-/// one that did not pass, only after [`STORED_BACKOFF`] times as many candidates as the last
-/// wait (up to [`STORED_BACKOFF_MAX`]): where the plan's state is one VPOp cannot brake from,
-/// the next samples mostly are too.
-#[derive(Clone, Copy, Debug, Default)]
-struct StoredPace {
-    /// Candidates since the last one with a stop.
-    without: u32,
-    /// Candidates still to skip, and the last wait.
-    skip: u32,
-    wait: u32,
-}
-
-const STORED_BACKOFF: u32 = 2;
-const STORED_BACKOFF_MAX: u32 = 8;
-
-impl StoredPace {
-    fn offered(&mut self) {
-        *self = StoredPace::default();
-    }
-
-    /// Called at a candidate whose S-curve stop did not pass.
-    fn may_try(&mut self) -> bool {
-        self.without += 1;
-        if self.skip > 0 {
-            self.skip -= 1;
-            return false;
-        }
-        self.without >= 2
-    }
-
-    fn failed(&mut self) {
-        self.wait = (self.wait * STORED_BACKOFF).clamp(1, STORED_BACKOFF_MAX);
-        self.skip = self.wait;
     }
 }
 
@@ -300,7 +261,8 @@ pub struct HoldStops {
     /// The motion's last three samples (oldest first) and how many of them are real: a stored
     /// stop starts from their finite differences.
     recent: [Option<Sample>; 3],
-    stored_pace: StoredPace,
+    /// Curvature tables of the elements VPOp's decelerations ran on (built once each).
+    curvature_tables: CurvatureTables,
 }
 
 impl HoldStops {
@@ -323,7 +285,7 @@ impl HoldStops {
             last: None,
             line_shortcut: true,
             recent: [None; 3],
-            stored_pace: StoredPace::default(),
+            curvature_tables: CurvatureTables::default(),
         }
     }
 
@@ -402,7 +364,9 @@ impl HoldStops {
     }
 
     /// Checks a stop from sample `n` (`s`, the replica standing there) and adds it to `stops`
-    /// if one passes: the S-curve, else (as [`StoredPace`] allows) VPOp's deceleration.
+    /// if one passes: the S-curve, else the same stored across element ends, else VPOp's
+    /// deceleration (each candidate tries all: a hold waits at most one spacing wherever one
+    /// passes).
     fn offer(&mut self, n: u64, s: &Sample, record: &SegmentRecord, curves: &PathCurves, stops: &mut StopsBuilder) {
         // A record takes at most MAX_HOLD_STOPS (minutes of motion): a hold in the rest of such
         // a record waits for its group's end.
@@ -412,7 +376,6 @@ impl HoldStops {
         let leaving = match self.check(s, record, curves) {
             Ok((accel, jerk)) => {
                 stops.triples.extend([n as f64, accel, jerk]);
-                self.stored_pace.offered();
                 return;
             }
             Err(leaving) => leaving,
@@ -432,17 +395,8 @@ impl HoldStops {
                 .find_map(|&(accel, jerk)| self.scurve_across(s, record, (accel, jerk), rest, curves)),
             _ => None,
         };
-        if let Some(stop) = across {
+        if let Some(stop) = across.or_else(|| self.stored_stop(s, curves)) {
             stops.store(n, stop);
-            self.stored_pace.offered();
-        } else if self.stored_pace.may_try() {
-            match self.stored_stop(s, curves) {
-                Some(stop) => {
-                    stops.store(n, stop);
-                    self.stored_pace.offered();
-                }
-                None => self.stored_pace.failed(),
-            }
         }
     }
 
@@ -613,13 +567,14 @@ impl HoldStops {
             }
         }
         let path_part = Toolpath { elements };
-        let path = JointPath::tip(&path_part);
+        let path = JointPath::tip_reusing(&path_part, first, std::mem::take(&mut self.curvature_tables));
         let point = |x: &Sample| path.eval_at(x.curve - first, x.u);
         let last: [PathPoint; 3] = [point(&recent[0])?, point(&recent[1])?, point(&recent[2])?];
         let points = vpop::brake_points(&path, &self.limits, SearchOptions::default(), last)
             .ok()
-            .flatten()?;
-        let mut positions = points.iter().map(|p| Some((first + p.element, p.u)));
+            .flatten();
+        self.curvature_tables = path.into_curvature_tables();
+        let mut positions = points?.into_iter().map(|p| Some((first + p.element, p.u)));
         self.checked_stored(s, &mut positions, curves)
     }
 

@@ -12,7 +12,7 @@ pub mod constraints;
 pub mod path;
 
 pub use backtrack::{BrakeSetting, SearchOptions, SearchStats, BRAKES};
-pub use path::{JointPath, PathPoint};
+pub use path::{CurvatureTables, JointPath, PathPoint};
 
 use crate::geometry::Toolpath;
 use crate::kinematics::TableTilting;

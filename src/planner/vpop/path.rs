@@ -62,6 +62,24 @@ impl<'a> JointPath<'a> {
         }
     }
 
+    /// The tool-tip path of `toolpath`, the elements `first ..` of a longer path, with the
+    /// curvature tables an earlier such path built for them ([`Self::into_curvature_tables`]):
+    /// a short path built again and again along a longer one (a stored hold stop at every few
+    /// samples) builds each element's table once.
+    pub fn tip_reusing(toolpath: &'a Toolpath, first: usize, tables: CurvatureTables) -> Self {
+        let mut path = Self::tip(toolpath);
+        path.kappa.first = first;
+        path.kappa.built = RefCell::new(tables.built);
+        path
+    }
+
+    /// The curvature tables built so far, by element of the longer path.
+    pub fn into_curvature_tables(self) -> CurvatureTables {
+        CurvatureTables {
+            built: self.kappa.built.into_inner(),
+        }
+    }
+
     /// Five-axis path on a table-tilting machine: every element must carry a top curve (dim 6).
     pub fn five_axis(toolpath: &'a Toolpath, machine: TableTilting) -> Result<Self, String> {
         if toolpath
@@ -506,8 +524,17 @@ const KAPPA_SAMPLES: usize = 4;
 /// plan of it.
 struct CurvatureTable {
     tip: usize,
-    /// Built tables with their element, the latest last.
+    /// Built tables with their element (counted in a longer path whose element `first` is this
+    /// path's first), the latest last.
     built: RefCell<VecDeque<(usize, ElementCurvature)>>,
+    first: usize,
+}
+
+/// Curvature tables of a [`JointPath`], to build another one over the same elements with
+/// ([`JointPath::tip_reusing`]).
+#[derive(Default)]
+pub struct CurvatureTables {
+    built: VecDeque<(usize, ElementCurvature)>,
 }
 
 /// Element curvature tables kept at a time (some 180 kB each for a cubic element).
@@ -572,6 +599,7 @@ impl CurvatureTable {
         CurvatureTable {
             tip,
             built: RefCell::new(VecDeque::new()),
+            first: 0,
         }
     }
 
@@ -587,7 +615,8 @@ impl CurvatureTable {
     /// Largest curvature over cells `a ..= b` of element `e` (its table built if need be).
     fn element_max(&self, curves: &[PowerCurve], e: usize, a: usize, b: usize) -> f64 {
         let mut built = self.built.borrow_mut();
-        if let Some((_, table)) = built.iter().rev().find(|(i, _)| *i == e) {
+        let key = self.first + e;
+        if let Some((_, table)) = built.iter().rev().find(|(i, _)| *i == key) {
             return table.max(a, b);
         }
         if built.len() == KAPPA_TABLES_KEPT {
@@ -595,7 +624,7 @@ impl CurvatureTable {
         }
         let table = ElementCurvature::new(&curves[e], self.tip);
         let m = table.max(a, b);
-        built.push_back((e, table));
+        built.push_back((key, table));
         m
     }
 
