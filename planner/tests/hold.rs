@@ -209,6 +209,33 @@ fn on_dense_g1_the_stops_run_across_short_elements() {
     );
 }
 
+/// On a G1 program with rounded corners a stop is offered at every candidate sample: where no
+/// S-curve stop passes (near the corners), VPOp's stored deceleration does, tried at every such
+/// candidate. The stops inside records lie at most one spacing apart, but where a group ends
+/// between two candidates (its last sample is a candidate of its own) by a sample or two.
+#[test]
+fn on_g1_corners_every_candidate_has_a_stop() {
+    let job = job_of(g1_zigzag(40));
+    let stops: Vec<u64> = job
+        .groups
+        .iter()
+        .flat_map(|g| &g.hold_stops)
+        .flat_map(|h| h.samples().collect::<Vec<_>>())
+        .collect();
+    let stored: usize = job.groups.iter().flat_map(|g| &g.hold_stops).map(|h| h.stored()).sum();
+    let widest = stops.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(u64::MAX);
+    assert!(stored > 0, "no stored stop on the zigzag's corners");
+    assert!(
+        widest <= HOLD_STOP_SPACING + 2,
+        "stops {widest} samples apart somewhere ({} stops, {stored} stored)",
+        stops.len()
+    );
+    println!(
+        "G1 zigzag (40 lines): {} stops, {stored} stored, at most {widest} samples apart",
+        stops.len()
+    );
+}
+
 /// A stored stop's positions: (element, curve parameter) each.
 type Positions = Vec<(usize, f64)>;
 
