@@ -190,12 +190,7 @@ fn a_hold_takes_the_stored_deceleration_where_no_s_curve_stop_passes() {
 fn on_dense_g1_the_stops_run_across_short_elements() {
     let _guard = lock_module();
     let job = job_at(&dense_g1(300, &std::env::temp_dir()));
-    let stops: Vec<u64> = job
-        .groups
-        .iter()
-        .flat_map(|g| &g.hold_stops)
-        .flat_map(|h| h.samples().collect::<Vec<_>>())
-        .collect();
+    let stops = offered_stops(&job);
     let candidates = job.samples.len() as u64 / HOLD_STOP_SPACING;
     let offered = stops.iter().filter(|&&n| n % HOLD_STOP_SPACING == 0).count() as u64;
     assert!(
@@ -216,12 +211,7 @@ fn on_dense_g1_the_stops_run_across_short_elements() {
 #[test]
 fn on_g1_corners_every_candidate_has_a_stop() {
     let job = job_of(g1_zigzag(40));
-    let stops: Vec<u64> = job
-        .groups
-        .iter()
-        .flat_map(|g| &g.hold_stops)
-        .flat_map(|h| h.samples().collect::<Vec<_>>())
-        .collect();
+    let stops = offered_stops(&job);
     let stored: usize = job.groups.iter().flat_map(|g| &g.hold_stops).map(|h| h.stored()).sum();
     let widest = stops.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(u64::MAX);
     assert!(stored > 0, "no stored stop on the zigzag's corners");
@@ -234,6 +224,15 @@ fn on_g1_corners_every_candidate_has_a_stop() {
         "G1 zigzag (40 lines): {} stops, {stored} stored, at most {widest} samples apart",
         stops.len()
     );
+}
+
+/// The motion samples the planner offers a stop inside the records at, in order.
+fn offered_stops(job: &Job) -> Vec<u64> {
+    job.groups
+        .iter()
+        .flat_map(|g| &g.hold_stops)
+        .flat_map(|h| h.samples().collect::<Vec<_>>())
+        .collect()
 }
 
 /// A stored stop's positions: (element, curve parameter) each.
