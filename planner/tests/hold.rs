@@ -207,9 +207,11 @@ fn on_dense_g1_the_stops_run_across_short_elements() {
 /// On a G1 program with rounded corners a stop is offered at every candidate sample: where no
 /// S-curve stop passes (near the corners), VPOp's stored deceleration does, tried at every such
 /// candidate. The stops inside records lie at most one spacing apart, but where a group ends
-/// between two candidates (its last sample is a candidate of its own) by a sample or two.
+/// between two candidates (its last sample is a candidate of its own) by a sample or two. A hold
+/// at the first stored one runs its positions exactly, within the limits, and resumes to C(1).
 #[test]
 fn on_g1_corners_every_candidate_has_a_stop() {
+    let _guard = lock_module();
     let job = job_of(g1_zigzag(40));
     let stops = offered_stops(&job);
     let stored: usize = job.groups.iter().flat_map(|g| &g.hold_stops).map(|h| h.stored()).sum();
@@ -220,8 +222,9 @@ fn on_g1_corners_every_candidate_has_a_stop() {
         "stops {widest} samples apart somewhere ({} stops, {stored} stored)",
         stops.len()
     );
+    let (at, len) = hold_at_stored_stop(&job, &|_| true);
     println!(
-        "G1 zigzag (40 lines): {} stops, {stored} stored, at most {widest} samples apart",
+        "G1 zigzag (40 lines): {} stops, {stored} stored, at most {widest} samples apart; the hold at sample {at} ran the stored {len} positions to rest",
         stops.len()
     );
 }
