@@ -51,6 +51,8 @@ pub struct CutPlace {
 #[derive(Clone, Debug)]
 pub struct Cut {
     pub place: CutPlace,
+    /// Which of [`CutFrom::candidates`] it cuts at.
+    pub candidate: usize,
     /// The change of feed from the sample cut at, and its start acceleration.
     pub ramp: SegmentRecord,
     pub accel_start: f64,
@@ -73,13 +75,14 @@ pub const CUT_RAMPS: usize = 3;
 /// by only releasing the acceleration; where it goes up, at that release (the plan after it
 /// speeds up), at half the sample's feed and at a fifth. Each with the tangential deceleration
 /// and jerk the axes allow there, softened in turn ([`STOP_SCALES`]). Where the plan brakes
-/// hard into sharp curvature no ramp passes: the next candidate is tried.
+/// hard into sharp curvature no ramp passes: the next candidate is tried. Candidates before
+/// number `skip` are not (the plans after their cuts were refused).
 pub fn cut_into(
     curves: &mut PathCurves,
     limits: &Limits,
     from: &CutFrom,
     feed_override: f64,
-    choice: usize,
+    (choice, skip): (usize, usize),
 ) -> Result<Cut, String> {
     if choice >= CUT_RAMPS {
         return Err("no more ramps to try".into());
@@ -93,7 +96,7 @@ pub fn cut_into(
     let mut state = from.begin;
     let mut queue = from.records.iter().copied();
     let mut tried = 0;
-    for &(record, at_sample) in &from.candidates {
+    for (candidate, &(record, at_sample)) in from.candidates.iter().enumerate() {
         // The motion up to the candidate's sample.
         let sample = loop {
             match state.interp.step(curves, dt, &mut || queue.next()) {
@@ -113,6 +116,9 @@ pub fn cut_into(
         if state.interp.record().map(|r| r.seq) != seq || state.samples as u64 != at_sample + 1 {
             return Err(format!("motion sample {at_sample} is not in record {seq:?}"));
         }
+        if candidate < skip {
+            continue;
+        }
         tried += 1;
         if let Some(cut) = ramp_from(
             curves,
@@ -127,7 +133,11 @@ pub fn cut_into(
                 at_sample,
                 dropped_time: state.interp.time_left_in_segment(),
             };
-            return Ok(Cut { place, ..cut });
+            return Ok(Cut {
+                place,
+                candidate,
+                ..cut
+            });
         }
     }
     Err(format!(
@@ -223,6 +233,7 @@ fn ramp(
     }
     Some(Cut {
         place: CutPlace::default(),
+        candidate: 0,
         ramp: record,
         accel_start: a0,
         before: *before,

@@ -221,46 +221,72 @@ pub fn stream_plan(
     feed_override: f64,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) {
-    // (ramp share, which of the cut's ramps) of each try.
+    // (ramp share, which of the cut's ramps) of each try; a cut tries them all at one
+    // candidate, then (where only the plans after them were refused) at the next ones.
     let tries: Vec<(f64, usize)> = match start {
         StreamStart::Rest(_) => vec![(SLOW_DOWN_SHARES[0], 0)],
         StreamStart::After { .. } => SLOW_DOWN_SHARES.iter().map(|&share| (share, 0)).collect(),
         StreamStart::Cut { .. } => (0..CUT_RAMPS).map(|k| (SLOW_DOWN_SHARES[0], k)).collect(),
     };
-    let mut refusals = Vec::new();
-    for (k, &(share, ramp)) in tries.iter().enumerate() {
-        let curves = match open() {
-            Ok(c) => c,
-            Err(e) => {
-                emit(PlanEvent::Failed(e));
-                return;
+    let rounds = if matches!(start, StreamStart::Cut { .. }) {
+        CUT_CANDIDATES
+    } else {
+        1
+    };
+    let (mut refusals, mut skip) = (Vec::new(), 0);
+    for round in 0..rounds {
+        let mut next_skip = usize::MAX;
+        for (k, &(share, ramp)) in tries.iter().enumerate() {
+            let curves = match open() {
+                Ok(c) => c,
+                Err(e) => {
+                    emit(PlanEvent::Failed(e));
+                    return;
+                }
+            };
+            let last_try = round + 1 == rounds && k + 1 == tries.len();
+            match stream_plan_once(
+                curves,
+                limits,
+                &start,
+                (feed_override, share, (ramp, skip)),
+                last_try,
+                emit,
+            ) {
+                Ok(()) => return,
+                Err((e, cut_at)) => {
+                    refusals.push(e);
+                    next_skip = next_skip.min(cut_at.map_or(usize::MAX, |c| c + 1));
+                }
             }
-        };
-        let last_try = k + 1 == tries.len();
-        match stream_plan_once(curves, limits, &start, (feed_override, share, ramp), last_try, emit) {
-            Ok(()) => return,
-            Err(e) => refusals.push(e),
         }
+        if next_skip == usize::MAX {
+            break;
+        }
+        skip = next_skip;
     }
     emit(PlanEvent::Failed(refusals.join("; ")));
 }
 
+/// Candidates a cut tries where the plans after its ramps are refused ([`stream_plan`]).
+const CUT_CANDIDATES: usize = 4;
+
 /// One try of [`stream_plan`] (with ramp share `brake_share` after a group, the cut's ramp
-/// `cut_ramp`): `Err` where the plan is refused before its first group and another try may
-/// pass (`last_try`: none may).
+/// `cut_ramp` from its candidate `skip` on): `Err` where the plan is refused before its first
+/// group and another try may pass (`last_try`: none may), with the candidate a cut came at.
 fn stream_plan_once(
     mut curves: PathCurves,
     limits: &Limits,
     start: &StreamStart,
-    (feed_override, brake_share, cut_ramp): (f64, f64, usize),
+    (feed_override, brake_share, (cut_ramp, skip)): (f64, f64, (usize, usize)),
     last_try: bool,
     emit: &mut dyn FnMut(PlanEvent) -> bool,
-) -> Result<(), String> {
+) -> Result<(), (String, Option<usize>)> {
     let (plan_from, moving, cut) = match start {
         StreamStart::Rest(from) => (from.map(|p| plan_start(&mut curves, &p)), None, None),
         StreamStart::After { end, .. } => (Some(end.start(&mut curves)), Some(end.moving(brake_share)), None),
         StreamStart::Cut { from, .. } => {
-            let cut = match cut_into(&mut curves, limits, from, feed_override, cut_ramp) {
+            let cut = match cut_into(&mut curves, limits, from, feed_override, (cut_ramp, skip)) {
                 Ok(cut) => cut,
                 Err(e) if last_try => {
                     emit(PlanEvent::Failed(format!(
@@ -268,7 +294,7 @@ fn stream_plan_once(
                     )));
                     return Ok(());
                 }
-                Err(e) => return Err(e),
+                Err(e) => return Err((e, None)),
             };
             let moving = MovingStart {
                 feed: cut.feed,
@@ -319,7 +345,7 @@ fn stream_plan_once(
             stop: Vec::new(),
         };
         if grouper.push(ramp, inside, Some(begin)).is_some() {
-            return Err("a ramp without a stop ended a group".into());
+            return Err(("a ramp without a stop ended a group".into(), Some(cut.candidate)));
         }
     }
     let mut cut_place = cut.as_ref().map(|c| c.place);
@@ -368,7 +394,9 @@ fn stream_plan_once(
                 }
             }
             // Refused before anything went out: a gentler ramp down may pass.
-            Err(e) if groups == 0 && !last_try && moving.is_some() => return Err(e.to_string()),
+            Err(e) if groups == 0 && !last_try && moving.is_some() => {
+                return Err((e.to_string(), cut.as_ref().map(|c| c.candidate)))
+            }
             Err(e) => {
                 emit(PlanEvent::Failed(why(e.to_string())));
                 return Ok(());
@@ -1255,12 +1283,16 @@ pub struct Replanner {
     feed_override: f64,
     asked: f64,
     pending: Option<Pending>,
-    /// The override a cut into a running record was refused for (it then joins at a group
-    /// end).
-    cut_refused: Option<f64>,
-    /// How far ahead of the module it joins (s of motion): [`JOIN_LEAD`], doubled each time
-    /// the re-plan came too late.
+    /// The override a cut was refused for, and the first slot of the group it was refused in:
+    /// a re-plan at that override cuts only into later groups (else it joins at a group end).
+    cut_refused: Option<(f64, u64)>,
+    /// How far ahead of the module it joins (s of motion): at least [`JOIN_LEAD`] and what the
+    /// last re-plan took to be ready ([`Self::lead`]), doubled each time the re-plan came too
+    /// late.
     lead: f64,
+    /// How long the last re-plan took from its start until it was ready to join (s); before
+    /// the first, how long the first plan took to plan [`START_AHEAD`] of motion.
+    ready_after: Option<f64>,
     /// When the override the next re-plan is for was asked for, where earlier re-plans at it
     /// came too late.
     retry_since: Option<Instant>,
@@ -1290,6 +1322,18 @@ struct Pending {
     cut_group: Option<u64>,
     /// The join has been asked of the module (nothing is sent until it answers).
     requested: bool,
+    /// When its first group came, and that group's motion time (its pace counts from there).
+    first_group: Option<(Instant, f64)>,
+}
+
+impl Replanner {
+    /// How far ahead of the module the next re-plan joins: the lead, and at least what the last
+    /// re-plan took to be ready, with a quarter more and the module's time to answer (a re-plan
+    /// that comes too late plans again from further on, which takes twice as long).
+    fn lead(&self) -> f64 {
+        let learned = self.ready_after.map_or(0.0, |t| 1.25 * t + SPLICE_LAST_CALL);
+        self.lead.max(learned).min(JOIN_LEAD_MAX)
+    }
 }
 
 /// Runs [`stream_plan`] in a thread of its own; its events, at most [`EVENTS_AHEAD`] waiting.
@@ -1316,7 +1360,7 @@ const REPLAN_LOW_WATER: f64 = 0.05;
 /// module: at the first checked hold stop there (a cut into the record), else at the first
 /// group end with this much motion queued before it. Time to plan its first groups and ask the
 /// module; where that comes too late, the lead doubles, up to [`JOIN_LEAD_MAX`].
-const JOIN_LEAD: f64 = 0.03;
+const JOIN_LEAD: f64 = 0.02;
 const JOIN_LEAD_MAX: f64 = 0.32;
 
 /// ... and asks the module only while at least this much is (s).
@@ -1345,6 +1389,7 @@ impl Source {
                 pending: None,
                 cut_refused: None,
                 lead: JOIN_LEAD,
+                ready_after: None,
                 retry_since: None,
             })),
         }
@@ -1562,14 +1607,15 @@ impl<'a> Streamer<'a> {
     }
 
     /// Where a re-plan at another feed override may cut in: the checked hold stops at least
-    /// `lead` (s of motion) ahead of the module's last sample in the first group that has one,
-    /// in records still to run or running (the group's first slot number and what the cut
-    /// needs), or `None`.
-    fn cut_point(&mut self, period: f64, lead: f64) -> Option<(u64, Box<CutFrom>)> {
+    /// `lead` (s of motion) ahead of the module's last sample in the first group that has one
+    /// (after the group whose first slot is `after`, if given), in records still to run or
+    /// running (the group's first slot number and what the cut needs), or `None`.
+    fn cut_point(&mut self, period: f64, lead: f64, after: Option<u64>) -> Option<(u64, Box<CutFrom>)> {
         let taken = self.taken();
         self.buffered();
         let target = self.channel.splice.samples() + (lead / period).ceil() as u64;
-        self.ring_groups.iter().find_map(|g| {
+        let later = |g: &&RingGroup| after.is_none_or(|k| g.first > k);
+        self.ring_groups.iter().filter(later).find_map(|g| {
             let candidates: Vec<(usize, u64)> = g
                 .hold_samples
                 .iter()
@@ -1620,7 +1666,7 @@ impl<'a> Streamer<'a> {
             queued,
             total,
             error,
-            ..
+            replanner,
         } = &mut self.source
         else {
             return Ok(());
@@ -1633,6 +1679,11 @@ impl<'a> Streamer<'a> {
                 Ok(PlanEvent::Group(g)) => {
                     self.planned += g.time;
                     self.groups_planned += 1;
+                    if let (true, Some(r)) = (self.planned >= START_AHEAD, replanner.as_deref_mut()) {
+                        // What a re-plan of this path will take to be ready, until one has been:
+                        // what its first plan took to plan as much.
+                        r.ready_after.get_or_insert(self.began.elapsed().as_secs_f64());
+                    }
                     *queued += g.time;
                     queue.push_back(g);
                 }
@@ -1687,13 +1738,15 @@ impl<'a> Streamer<'a> {
         }
         let (pushed, next_queued) = (self.pushed, self.next_queued);
         let last_end = self.last_end.clone();
-        let (period, may_cut, lead) = match &self.source {
-            Source::Segments { replanner: Some(r), .. } => {
-                (r.limits.period, r.cut_refused != Some(feed_override), r.lead)
-            }
+        let (period, refused_in, lead) = match &self.source {
+            Source::Segments { replanner: Some(r), .. } => (
+                r.limits.period,
+                r.cut_refused.filter(|&(o, _)| o == feed_override).map(|(_, g)| g),
+                r.lead(),
+            ),
             _ => return,
         };
-        let cut = if may_cut { self.cut_point(period, lead) } else { None };
+        let cut = self.cut_point(period, lead, refused_in);
         let join = if cut.is_some() { None } else { self.join_point(lead) };
         let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
             return;
@@ -1726,7 +1779,10 @@ impl<'a> Streamer<'a> {
                 None,
             ),
             // The path's last group has gone out: nothing left to plan.
-            (None, None, None) if pushed > 0 => return,
+            (None, None, None) if pushed > 0 => {
+                say!("nurbs-planner: feed override {feed_override}: not taken, the path's last group has gone out and has no cut ahead of the module");
+                return;
+            }
             (None, None, None) => (StreamStart::Rest(r.from), "its start".to_string(), None),
         };
         say!("nurbs-planner: feed override {feed_override}: planning the rest of the motion again from {from}");
@@ -1743,6 +1799,7 @@ impl<'a> Streamer<'a> {
             join: place,
             cut_group: cut_group.then_some(place.map_or(0, |(k, _)| k)),
             requested: false,
+            first_group: None,
         });
     }
 
@@ -1775,6 +1832,7 @@ impl<'a> Streamer<'a> {
         while p.queued < QUEUED_AHEAD && p.total.is_none() {
             match p.events.try_recv() {
                 Ok(PlanEvent::Group(g)) => {
+                    p.first_group.get_or_insert((Instant::now(), g.time));
                     p.queued += g.time;
                     p.groups.push_back(g);
                 }
@@ -1784,13 +1842,13 @@ impl<'a> Streamer<'a> {
                     p.error = error;
                 }
                 Ok(PlanEvent::Failed(e)) if !p.requested && p.join.is_some_and(|(_, n)| n != AT_RECORD_END) => {
-                    // No cut there: join at a group end instead.
+                    // No cut in that group: cut into a later one, or join at a group end.
                     say!(
-                        "nurbs-planner: feed override {}: no cut into the running record ({e}); joining at a group end",
+                        "nurbs-planner: feed override {}: no cut into that group ({e}); trying a later one or a group end",
                         p.feed_override
                     );
                     let asked = p.feed_override;
-                    r.cut_refused = Some(asked);
+                    r.cut_refused = p.cut_group.or(p.join.map(|(k, _)| k)).map(|g| (asked, g));
                     let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
                     self.plan_again(asked, since);
                     return;
@@ -1832,12 +1890,40 @@ impl<'a> Streamer<'a> {
             p.join = Some((first + place.record as u64, place.at_sample));
             p.cut_group = None;
         }
-        // The motion runs into the new plan only once it could start on it: as much planned
-        // ahead, at the pace, as a motion from rest waits for ([`START_AHEAD`]).
-        let rate = p.queued / p.began.elapsed().as_secs_f64().max(1e-9);
-        if !p.requested && !far_enough_ahead(p.queued, p.total.unwrap_or(f64::INFINITY), rate, START_AHEAD) {
-            return;
+        if !p.requested {
+            // The motion runs into the new plan only once it could start on it: as much motion
+            // ahead of the module, the old plan's up to the join and the new one's planned, at
+            // the pace, as a motion from rest waits for ([`START_AHEAD`]). The pace counts from
+            // the first group on (its wait is the time to join, not the pace it keeps) once a
+            // second one has come.
+            let rate = match p.first_group {
+                Some((at, time)) if p.groups.len() >= 2 => (p.queued - time) / at.elapsed().as_secs_f64().max(1e-9),
+                _ => p.queued / p.began.elapsed().as_secs_f64().max(1e-9),
+            };
+            let (queued, total, join) = (p.queued, p.total, p.join);
+            let before_join = match join {
+                None => self.buffered(),
+                Some((k, AT_RECORD_END)) => self.queued_through(k),
+                Some((_, n)) => n.saturating_sub(self.channel.splice.samples()) as f64 * r.limits.period,
+            };
+            let total = total.map_or(f64::INFINITY, |t| t + before_join);
+            if !far_enough_ahead(queued + before_join, total, rate, START_AHEAD) {
+                return;
+            }
+            let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+                return;
+            };
+            let Some(p) = &mut r.pending else {
+                return;
+            };
+            r.ready_after = Some(p.began.elapsed().as_secs_f64());
         }
+        let Source::Segments { replanner: Some(r), .. } = &mut self.source else {
+            return;
+        };
+        let Some(p) = &mut r.pending else {
+            return;
+        };
         if p.join.is_none() && p.pushed != pushed && p.pushed > 0 {
             // The old plan's next group went out meanwhile: the group end the re-plan starts
             // from is in the ring now, and the module may join there (dropping what went out
@@ -1903,6 +1989,7 @@ impl<'a> Streamer<'a> {
             return;
         };
         r.feed_override = p.feed_override;
+        r.lead = JOIN_LEAD;
         let still_asked = r.asked;
         match p.join {
             Some((_, AT_RECORD_END)) => self.joins_in_ring += 1,

@@ -21,6 +21,9 @@
 //! for the next one (or the group's end). The module, holding, switches to the first offered
 //! stop at or after the hold's edge, at exactly that sample.
 
+use std::cell::RefCell;
+use std::collections::HashMap;
+
 use nurbs_hal::channel::ARENA_VALUES;
 use nurbs_hal::slot::MAX_HOLD_STOPS;
 use nurbs_motion::geometry::{ArcLengthTable, Toolpath};
@@ -192,7 +195,7 @@ impl ArcWalk {
 
     /// The point `along` (arc length from the start, at least the last one's) ahead; `None`
     /// past the elements the walk may enter or the path's end.
-    fn to(&mut self, along: f64, curves: &PathCurves, tip: usize) -> Option<(usize, f64)> {
+    fn to(&mut self, along: f64, curves: &PathCurves, lengths: &ElementLengths, tip: usize) -> Option<(usize, f64)> {
         let mut need = along - self.travelled;
         self.travelled = along.max(self.travelled);
         while need > self.left {
@@ -201,9 +204,8 @@ impl ArcWalk {
             }
             need -= self.left;
             self.curve += 1;
-            let element = &curves.get(self.curve)?.curve;
-            self.u = element.view().u_min();
-            self.left = element_length(element);
+            self.u = curves.get(self.curve)?.curve.view().u_min();
+            self.left = lengths.of(self.curve, curves)?;
         }
         if need > 0.0 {
             // Newton on the arc length from the last point (a step of one period: the
@@ -230,6 +232,29 @@ impl ArcWalk {
 /// Arc length of a whole element (its arc-length table's).
 fn element_length(curve: &nurbs_motion::geometry::Nurbs) -> f64 {
     ArcLengthTable::new(curve).total()
+}
+
+/// Arc lengths of whole elements, each integrated once: the stops of consecutive candidates
+/// cross the same elements ahead, and integrating them afresh for each was 60 % of a re-plan's
+/// time on a dense G1 program (the wait before a feed override takes effect).
+#[derive(Default)]
+struct ElementLengths(RefCell<HashMap<usize, f64>>);
+
+impl ElementLengths {
+    /// Element `e`'s arc length (`None`: no such element).
+    fn of(&self, e: usize, curves: &PathCurves) -> Option<f64> {
+        if let Some(&l) = self.0.borrow().get(&e) {
+            return Some(l);
+        }
+        let l = element_length(&curves.get(e)?.curve);
+        let mut kept = self.0.borrow_mut();
+        if kept.len() >= 4 * ACROSS_ELEMENTS {
+            // Those behind the stops being checked now.
+            kept.retain(|&k, _| k + ACROSS_ELEMENTS > e);
+        }
+        kept.insert(e, l);
+        Some(l)
+    }
 }
 
 /// A stored stop (VPOp's deceleration, or an S-curve stop across element ends) from a sample,
@@ -263,6 +288,8 @@ pub struct HoldStops {
     recent: [Option<Sample>; 3],
     /// Curvature tables of the elements VPOp's decelerations ran on (built once each).
     curvature_tables: CurvatureTables,
+    /// Arc lengths of the elements stops stored across element ends ran on.
+    lengths: ElementLengths,
 }
 
 impl HoldStops {
@@ -286,6 +313,7 @@ impl HoldStops {
             line_shortcut: true,
             recent: [None; 3],
             curvature_tables: CurvatureTables::default(),
+            lengths: ElementLengths::default(),
         }
     }
 
@@ -613,14 +641,14 @@ impl HoldStops {
             if next > s.curve + ACROSS_ELEMENTS {
                 return None;
             }
-            room += element_length(&curves.get(next)?.curve);
+            room += self.lengths.of(next, curves)?;
             next += 1;
         }
         let steps = (table.total_time() / dt).ceil() as usize;
         let mut walk = ArcWalk::new(s.curve, s.u, rest_of_own, ACROSS_ELEMENTS);
         let mut positions = (1..=steps).map(|k| {
             let along = table.state_at((k as f64 * dt).min(table.total_time())).s;
-            walk.to(along, curves, tip)
+            walk.to(along, curves, &self.lengths, tip)
         });
         self.checked_stored(s, &mut positions, curves)
     }
@@ -673,7 +701,7 @@ impl HoldStops {
                 // then the element's start to the position.
                 let mut left = arc_between(&curves.get(curve)?.curve, u, curves.view(curve).u_max(), tip);
                 for passed in curve + 1..c {
-                    left += element_length(&curves.get(passed)?.curve);
+                    left += self.lengths.of(passed, curves)?;
                 }
                 let into = arc_between(&element.curve, lo, pu, tip);
                 (-left, into)

@@ -65,6 +65,8 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
         ),
     ];
     let mut instants = Instants::new(0x9e37_79b9_7f4a_7c15);
+    // `OVERRIDE_AT`: every change at this sample (to reproduce one).
+    let fixed: Option<usize> = std::env::var("OVERRIDE_AT").ok().and_then(|v| v.parse().ok());
     let mut all = Vec::new();
     // `OVERRIDE_PATHS`: only the paths whose names contain it.
     let only = std::env::var("OVERRIDE_PATHS").unwrap_or_default();
@@ -75,7 +77,7 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
         for _ in 0..per_path {
             // In the first 90 % of the motion (a change in its last moments may find nothing
             // left to change).
-            let at = instants.next(n * 9 / 10);
+            let at = fixed.unwrap_or_else(|| instants.next(n * 9 / 10));
             let (got, latency, joins) = change_at(job, at, 0.5);
             assert_eq!(
                 violations(job, &got, true),
