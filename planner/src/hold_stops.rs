@@ -580,6 +580,9 @@ impl HoldStops {
         let first = recent[0].curve;
         let (a, j) = tangential_limits(curves, &self.limits, s.curve, s.u);
         let braking = stop_from(s.feed, s.accel, a, j).table_from(s.accel).end().s;
+        if self.ends_path_before(s, braking, curves) {
+            return None;
+        }
         let mut elements = Vec::new();
         let mut ahead = 0.0;
         while elements.len() < STORED_ELEMENTS {
@@ -604,6 +607,23 @@ impl HoldStops {
         self.curvature_tables = path.into_curvature_tables();
         let mut positions = points?.into_iter().map(|p| Some((first + p.element, p.u)));
         self.checked_stored(s, &mut positions, curves)
+    }
+
+    /// Whether sample `s` is on the path's last element, a straight line, where the shortest
+    /// jerk-limited stop along it at the axes' own limits (`braking`: on a line the tangential
+    /// limits are exactly theirs) would end no further than [`END_MARGIN`] before the path's
+    /// end: the plan's own final braking, which a hold follows to the end. A stored stop there
+    /// could gain no more than that margin, and VPOp's search for one fails nearly always, slowly
+    /// (on a 2000 mm line re-planned at another feed override it was tried at every candidate
+    /// of the final braking and took four fifths of the re-plan's time).
+    fn ends_path_before(&mut self, s: &Sample, braking: f64, curves: &PathCurves) -> bool {
+        let last = curves.is_complete() && s.curve + 1 == curves.len();
+        if !last || !curves.get(s.curve).is_some_and(|e| is_line(&e.curve)) {
+            return false;
+        }
+        let margin = END_MARGIN.0 * braking + END_MARGIN.1 * s.feed * self.limits.period;
+        self.rest_of_element(s, curves)
+            .is_some_and(|rest| rest < braking + margin)
     }
 
     /// Arc length from sample `s` to its element's end (the element's table kept for the next
@@ -853,6 +873,11 @@ const GAUSS5: [(f64, f64); 5] = [
     (0.538_469_310_105_683_1, 0.478_628_670_499_366_5),
     (0.906_179_845_938_664, 0.236_926_885_056_189_1),
 ];
+
+/// What a stop on a path's last line must gain over following the plan to the end for VPOp's
+/// deceleration to be tried ([`HoldStops::ends_path_before`]): a share of the shortest stop's
+/// length, and periods of the sample's feed.
+const END_MARGIN: (f64, f64) = (1e-3, 4.0);
 
 /// How long after its last sample a hold stop reaches rest (s).
 const LANDING: f64 = 1e-9;
