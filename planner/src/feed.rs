@@ -1357,9 +1357,10 @@ const OVERRIDE_STEP: f64 = 1e-3;
 const REPLAN_LOW_WATER: f64 = 0.05;
 
 /// A re-plan at another feed override joins at least this far (s of motion) ahead of the
-/// module: at the first checked hold stop there (a cut into the record), else at the first
-/// group end with this much motion queued before it. Time to plan its first groups and ask the
-/// module; where that comes too late, the lead doubles, up to [`JOIN_LEAD_MAX`].
+/// module, and as far as the last re-plan took to be ready ([`Replanner::lead`]): at the first
+/// checked hold stop there (a cut into the record), else at the first group end with that much
+/// motion queued before it. Where it comes too late, the lead doubles, up to
+/// [`JOIN_LEAD_MAX`].
 const JOIN_LEAD: f64 = 0.02;
 const JOIN_LEAD_MAX: f64 = 0.32;
 
@@ -1709,9 +1710,10 @@ impl<'a> Streamer<'a> {
     }
 
     /// Asks for the motion at feed override `feed_override` (the operator's, clamped to what
-    /// the machine allows): a streamed plan is planned again at it from the first group end in
-    /// the ring with [`JOIN_LEAD`] of motion before it (the module drops the old plan's slots
-    /// after it there: [`nurbs_hal::channel::Splice`]), else from the end of the last group
+    /// the machine allows): a streamed plan is planned again at it from a cut into a record at
+    /// a checked hold stop the join lead ahead (learned by the [`Replanner`]; [`crate::cut`]), else from
+    /// the first group end in the ring with that much motion before it (the module drops the
+    /// old plan's slots after it there: [`nurbs_hal::channel::Splice`]), else from the end of the last group
     /// sent (or from its start while nothing has been sent), and the motion runs into the new
     /// plan there. 0 (a hold, which the module carries out) and small changes keep the plan.
     /// Plans sent whole keep their override.
