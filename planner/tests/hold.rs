@@ -3,8 +3,11 @@
 //! (`nurbs_planner::hold_stops`, every 20 samples where one passes) or, failing one, at the
 //! group's end. Every stop stays within the axis limits (the project's check over the whole
 //! sampled run, at rest after it); the latency from the edge to the first sample that leaves
-//! the plan is collected and its distribution printed. `HOLD_INSTANTS` (default 12 per path)
-//! selects a longer run; docs/testing.md records one of 1,000.
+//! the plan is collected and its distribution printed, and next to it the latency until the
+//! tool decelerates: the first sample from which its feed falls at every sample to rest, where
+//! that comes before the plan is left (a hold while the plan itself brakes into
+//! sharp curvature at the jerk limit follows that braking to the next stop). `HOLD_INSTANTS`
+//! (default 12 per path) selects a longer run; docs/testing.md records one of 1,000.
 
 mod common;
 
@@ -59,6 +62,20 @@ fn hold_by(job: &Job, at: usize, raise: &dyn Fn(bool)) -> (Vec<Out>, Option<usiz
     (got, latency)
 }
 
+/// Samples from the edge at `at` until the tool decelerates to rest in `got` (a hold that
+/// left the plan `latency` samples after the edge): the first sample from which the module's
+/// feed falls at every sample until it is at rest, if that comes before the plan was left; else
+/// the latency itself.
+fn braking_latency(got: &[Out], at: usize, latency: usize) -> usize {
+    let rest = (at..got.len()).find(|&k| got[k].feed <= 0.0).unwrap_or(got.len());
+    // The last sample before rest whose feed did not fall: the deceleration starts there.
+    let from = (at.max(1)..rest)
+        .rev()
+        .find(|&k| got[k].feed >= got[k - 1].feed)
+        .unwrap_or(at);
+    from.saturating_sub(at).min(latency)
+}
+
 #[test]
 fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
     let _guard = lock_module();
@@ -82,7 +99,7 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
     let mut all = Vec::new();
     for (name, job) in &jobs {
         let n = job.samples.len();
-        let mut latencies = Vec::new();
+        let (mut latencies, mut braking) = (Vec::new(), Vec::new());
         let mut ended = 0;
         for _ in 0..per_path {
             let at = instants.next(n - 2);
@@ -93,12 +110,17 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
                 "{name}: hold at sample {at}"
             );
             match latency {
-                Some(l) => latencies.push(l),
+                Some(l) => {
+                    latencies.push(l);
+                    braking.push(braking_latency(&got, at, l));
+                }
                 None => ended += 1,
             }
         }
         latencies.sort_unstable();
+        braking.sort_unstable();
         let q = |p: f64| quantile(&latencies, p);
+        let b = |p: f64| quantile(&braking, p);
         println!(
             "{name}: {} holds: latency (samples of {:.2} ms) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them; {ended} in the last group ended at C(1)",
             per_path,
@@ -109,6 +131,15 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
             latencies.last().copied().unwrap_or(0),
             HOLD_STOP_SPACING + 1,
             latencies.iter().filter(|&&l| l <= HOLD_STOP_SPACING as usize + 1).count()
+        );
+        println!(
+            "{name}: decelerating to rest after (samples) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them",
+            b(0.5),
+            b(0.9),
+            b(0.99),
+            braking.last().copied().unwrap_or(0),
+            HOLD_STOP_SPACING + 1,
+            braking.iter().filter(|&&l| l <= HOLD_STOP_SPACING as usize + 1).count()
         );
         all.extend(latencies);
     }
