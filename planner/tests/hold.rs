@@ -76,6 +76,21 @@ fn braking_latency(got: &[Out], at: usize, latency: usize) -> usize {
     from.saturating_sub(at).min(latency)
 }
 
+/// Median, 90 %, 99 % and worst of sorted latencies (samples), and how many are within one
+/// hold-stop spacing.
+fn distribution(sorted: &[usize]) -> String {
+    let q = |p: f64| quantile(sorted, p);
+    let spacing = HOLD_STOP_SPACING as usize + 1;
+    format!(
+        "median {}, 90 % {}, 99 % {}, worst {}; within {spacing} samples: {} of them",
+        q(0.5),
+        q(0.9),
+        q(0.99),
+        sorted.last().copied().unwrap_or(0),
+        sorted.iter().filter(|&&l| l <= spacing).count()
+    )
+}
+
 #[test]
 fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
     let _guard = lock_module();
@@ -119,28 +134,12 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
         }
         latencies.sort_unstable();
         braking.sort_unstable();
-        let q = |p: f64| quantile(&latencies, p);
-        let b = |p: f64| quantile(&braking, p);
         println!(
-            "{name}: {} holds: latency (samples of {:.2} ms) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them; {ended} in the last group ended at C(1)",
-            per_path,
-            PERIOD * 1e3,
-            q(0.5),
-            q(0.9),
-            q(0.99),
-            latencies.last().copied().unwrap_or(0),
-            HOLD_STOP_SPACING + 1,
-            latencies.iter().filter(|&&l| l <= HOLD_STOP_SPACING as usize + 1).count()
+            "{name}: {per_path} holds, samples of {:.2} ms; {ended} in the last group ended at C(1)",
+            PERIOD * 1e3
         );
-        println!(
-            "{name}: decelerating to rest after (samples) median {}, 90 % {}, 99 % {}, worst {}; within {} samples: {} of them",
-            b(0.5),
-            b(0.9),
-            b(0.99),
-            braking.last().copied().unwrap_or(0),
-            HOLD_STOP_SPACING + 1,
-            braking.iter().filter(|&&l| l <= HOLD_STOP_SPACING as usize + 1).count()
-        );
+        println!("  leaves the plan after {}", distribution(&latencies));
+        println!("  decelerates to rest after {}", distribution(&braking));
         all.extend(latencies);
     }
     // On the dense program most stops inside records would leave their 0.02 mm element; the
