@@ -1711,12 +1711,12 @@ impl<'a> Streamer<'a> {
 
     /// Asks for the motion at feed override `feed_override` (the operator's, clamped to what
     /// the machine allows): a streamed plan is planned again at it from a cut into a record at
-    /// a checked hold stop the join lead ahead (learned by the [`Replanner`]; [`crate::cut`]), else from
-    /// the first group end in the ring with that much motion before it (the module drops the
-    /// old plan's slots after it there: [`nurbs_hal::channel::Splice`]), else from the end of the last group
-    /// sent (or from its start while nothing has been sent), and the motion runs into the new
-    /// plan there. 0 (a hold, which the module carries out) and small changes keep the plan.
-    /// Plans sent whole keep their override.
+    /// a checked hold stop the join lead ahead (learned by the [`Replanner`]; [`crate::cut`]),
+    /// else from the first group end in the ring with that much motion before it (the module
+    /// drops the old plan's slots after it there: [`nurbs_hal::channel::Splice`]), else from
+    /// the end of the last group sent (or from its start while nothing has been sent), and the
+    /// motion runs into the new plan there. 0 (a hold, which the module carries out) and small
+    /// changes keep the plan. Plans sent whole keep their override.
     pub fn set_feed_override(&mut self, feed_override: f64) {
         {
             let Source::Segments { replanner: Some(r), .. } = &mut self.source else {

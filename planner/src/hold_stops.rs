@@ -235,8 +235,8 @@ fn element_length(curve: &nurbs_motion::geometry::Nurbs) -> f64 {
 }
 
 /// Arc lengths of whole elements, each integrated once: the stops of consecutive candidates
-/// cross the same elements ahead, and integrating them afresh for each was 60 % of a re-plan's
-/// time on a dense G1 program (the wait before a feed override takes effect).
+/// cross the same elements ahead, and integrating them afresh for each took a sixth of a
+/// re-plan's time on a dense G1 program (the wait before a feed override takes effect).
 #[derive(Default)]
 struct ElementLengths(RefCell<HashMap<usize, f64>>);
 
