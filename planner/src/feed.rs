@@ -245,14 +245,15 @@ pub fn stream_plan(
                 }
             };
             let last_try = round + 1 == rounds && k + 1 == tries.len();
-            match stream_plan_once(
+            let outcome = stream_plan_once(
                 curves,
                 limits,
                 &start,
                 (feed_override, share, (ramp, skip)),
                 last_try,
                 emit,
-            ) {
+            );
+            match outcome {
                 Ok(()) => return,
                 Err((e, cut_at)) => {
                     refusals.push(e);
@@ -1439,6 +1440,13 @@ pub const START_AHEAD: f64 = 0.1;
 /// Motion time (s) of the groups a streamed plan hands out ahead of the ring: the planner
 /// thread waits beyond it, so that memory follows the look-ahead, not the program's length.
 pub const QUEUED_AHEAD: f64 = 20.0;
+/// While a re-plan at another feed override is on its way, the plan it is to replace is not
+/// read further once this much of its motion (s) waits to be sent: its thread then waits (its
+/// channel full), and the re-plan has the processor (on two cores, a plan still running ahead
+/// near a program's start, its scan helper and the re-plan shared them, and the re-plan took
+/// twice as long).
+const REPLAN_PAUSE: f64 = 1.0;
+
 /// Events the planner thread may hand out before the streamer takes them.
 const EVENTS_AHEAD: usize = 4;
 
@@ -1672,8 +1680,9 @@ impl<'a> Streamer<'a> {
         else {
             return Ok(());
         };
+        let replanning = replanner.as_ref().is_some_and(|r| r.pending.is_some());
         while let Some(rx) = events {
-            if *queued >= QUEUED_AHEAD {
+            if *queued >= QUEUED_AHEAD || (replanning && *queued >= REPLAN_PAUSE) {
                 break;
             }
             match rx.try_recv() {

@@ -505,7 +505,16 @@ impl Planner {
             splits: 0,
             backtracks: 0,
             work: Cell::new(0),
-            work_budget: (WORK_BUDGET_BASE, WORK_PER_PLANNED_PERIOD),
+            // A plan that continues a motion (another feed override) is of use only if it comes
+            // at once: it gives up long before a plan from rest would.
+            work_budget: (
+                if options.moving.is_some() {
+                    CONTINUED_WORK_BUDGET_BASE
+                } else {
+                    WORK_BUDGET_BASE
+                },
+                WORK_PER_PLANNED_PERIOD,
+            ),
             settled: 0,
             settled_stop: Vec::new(),
             inner_stops: VecDeque::new(),

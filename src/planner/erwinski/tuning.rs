@@ -55,6 +55,13 @@ pub(super) const WORK_BUDGET_BASE: u64 = 20_000_000;
 
 pub(super) const WORK_PER_PLANNED_PERIOD: u64 = 200;
 
+/// The base of the same budget for a plan that continues a motion ([`super::MovingStart`]: a
+/// re-plan at another feed override), some 0.5 s of planning: a re-plan that cannot find its
+/// first segments within it cannot join in time anyway (one from a cut into the trident at
+/// 50 % back to 100 % searched its first segment for over 15 s on the base above, a processor
+/// busy all that time).
+pub(super) const CONTINUED_WORK_BUDGET_BASE: u64 = 500_000;
+
 /// Relative headroom of the planned feed below the programmed feed.
 pub(super) const FEED_HEADROOM: f64 = 1e-7;
 
