@@ -1859,6 +1859,8 @@ impl<'a> Streamer<'a> {
                         p.feed_override
                     );
                     let asked = p.feed_override;
+                    // (The group it cuts into, or, where its groups came before it failed, the
+                    // record it cut into: either way a later group is tried next.)
                     r.cut_refused = p.cut_group.or(p.join.map(|(k, _)| k)).map(|g| (asked, g));
                     let since = r.pending.take().map_or_else(Instant::now, |p| p.since);
                     self.plan_again(asked, since);

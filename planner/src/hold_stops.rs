@@ -288,7 +288,7 @@ pub struct HoldStops {
     recent: [Option<Sample>; 3],
     /// Curvature tables of the elements VPOp's decelerations ran on (built once each).
     curvature_tables: CurvatureTables,
-    /// Arc lengths of the elements stops stored across element ends ran on.
+    /// Arc lengths of the elements stops were checked on or stored across.
     lengths: ElementLengths,
 }
 
@@ -438,7 +438,7 @@ impl HoldStops {
         curves: &PathCurves,
     ) -> Result<(f64, f64), Vec<(f64, f64)>> {
         let dt = self.limits.period;
-        let Some(mut length) = self.element_length(s.curve, curves) else {
+        let Some(length) = self.element_length(s.curve, curves) else {
             return Err(Vec::new());
         };
         let (mut leaving, mut exceeded) = (Vec::new(), false);
@@ -450,9 +450,9 @@ impl HoldStops {
             let (accel, jerk) = (accel0 * sa, jerk0 * sj);
             if let Some(landed) = landing_jerk(&from, accel, jerk, dt) {
                 let passed = if line {
-                    self.passes_on_line(&from, (accel, landed), tangential, &mut length, curves)
+                    self.passes_on_line(&from, (accel, landed), tangential, &length, curves)
                 } else {
-                    self.passes(&from, accel, landed, &mut length, curves)
+                    self.passes(&from, accel, landed, &length, curves)
                 };
                 self.element_length = Some(length);
                 match passed {
@@ -470,20 +470,13 @@ impl HoldStops {
     /// Whether the stop from `from` with `accel` and `jerk` stays on its element (of arc length
     /// `length`) and, continuing the motion's samples and held at rest after it, within the axis
     /// limits.
-    fn passes(
-        &self,
-        from: &StopStart,
-        accel: f64,
-        jerk: f64,
-        length: &mut ElementLength,
-        curves: &PathCurves,
-    ) -> Verdict {
+    fn passes(&self, from: &StopStart, accel: f64, jerk: f64, length: &ElementLength, curves: &PathCurves) -> Verdict {
         let (tip, dt) = (self.limits.velocity.len(), self.limits.period);
         let (stop, a0) = stop_record(from, accel, jerk);
         // Room for rounding of the arc length at the element's end.
         let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
         // Beyond the bound it leaves the exact length too (most stops on short elements).
-        if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
+        if length.bound.is_some_and(leaves) || leaves(length.exact(&self.lengths, curves)) {
             return Verdict::LeavesElement;
         }
         let mut sim = self.replica;
@@ -529,12 +522,12 @@ impl HoldStops {
         from: &StopStart,
         (accel, jerk): (f64, f64),
         tangential: (f64, f64),
-        length: &mut ElementLength,
+        length: &ElementLength,
         curves: &PathCurves,
     ) -> Verdict {
         let (stop, a0) = stop_record(from, accel, jerk);
         let leaves = |length: f64| stop.s_start + stop.length >= length * (1.0 - 1e-9) - 1e-9;
-        if length.bound.is_some_and(leaves) || leaves(length.exact(curves)) {
+        if length.bound.is_some_and(leaves) || leaves(length.exact(&self.lengths, curves)) {
             return Verdict::LeavesElement;
         }
         let table = stop.profile().table_from(a0);
@@ -770,11 +763,7 @@ impl HoldStops {
                 let curve = &curves.get(e)?.curve;
                 // Above the polygon's length by more than the table's rounding (1e-14 per piece).
                 let bound = curve.polygon_length().map(|l| l * (1.0 + 1e-9) + 1e-12);
-                Some(ElementLength {
-                    element: e,
-                    bound,
-                    exact: None,
-                })
+                Some(ElementLength { element: e, bound })
             }
         }
     }
@@ -782,19 +771,16 @@ impl HoldStops {
 
 /// The arc length of an element: an upper bound first (it decides most stops on short
 /// elements: integrating the arc length of every element the motion passes was a sixth of the
-/// planning time on dense G1 programs), the exact length where it must.
+/// planning time on dense G1 programs), the exact length ([`ElementLengths`]) where it must.
 #[derive(Clone, Copy)]
 struct ElementLength {
     element: usize,
     bound: Option<f64>,
-    exact: Option<f64>,
 }
 
 impl ElementLength {
-    fn exact(&mut self, curves: &PathCurves) -> f64 {
-        *self
-            .exact
-            .get_or_insert_with(|| curves.get(self.element).map_or(0.0, |e| element_length(&e.curve)))
+    fn exact(&self, lengths: &ElementLengths, curves: &PathCurves) -> f64 {
+        lengths.of(self.element, curves).unwrap_or(0.0)
     }
 }
 
