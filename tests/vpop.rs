@@ -7,7 +7,7 @@ mod common;
 use common::{example, lab1, table1, tip_vpop, trident_vpop};
 use nurbs_motion::geometry::{ElementKind, Nurbs, Toolpath};
 use nurbs_motion::planner::verify::{verify, Report, Row};
-use nurbs_motion::planner::vpop::{plan_tip, SearchOptions, VpopPlan, BRAKES};
+use nurbs_motion::planner::vpop::{plan_tip, run_streamed, JointPath, PathPoint, SearchOptions, VpopPlan, BRAKES};
 use nurbs_motion::planner::{Limits, PathCurves};
 
 fn rows(plan: &VpopPlan, tip: usize) -> Vec<Row> {
@@ -100,6 +100,63 @@ fn straight_line_rest_to_rest() {
     assert!(plan.motion_time >= t_opt - 2.0 * limits.period);
     assert!(plan.motion_time <= 1.1 * t_opt, "{} vs {t_opt}", plan.motion_time);
     assert!(r.max_feed > 0.99 * f);
+}
+
+/// VPOp streams: its points go out as soon as no back-tracking can reach them, so a run holds
+/// the points of its look-ahead (the braking distance ahead), not of the motion: on a long line
+/// and on the butterfly (lab set 1) at most 0.25 s of motion, against the thousands of periods
+/// of the whole motion. The points handed out are the plan (verified), and an error of the
+/// receiver ends the run at once with its message.
+#[test]
+fn points_go_out_as_they_become_final() {
+    let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[vec![0.0, 0.0], vec![300.0, 0.0]], None).unwrap();
+    let line = Toolpath::single(ElementKind::Polyline, curve);
+    let cases = [
+        (
+            "300 mm line",
+            line,
+            Limits::uniform(2, 100.0, 1000.0, 10000.0, 0.01, 0.00025),
+        ),
+        ("butterfly", example("butterfly.json"), lab1(2)),
+    ];
+    for (name, tp, limits) in &cases {
+        let path = JointPath::tip(tp);
+        let mut points: Vec<PathPoint> = Vec::new();
+        let run = run_streamed(&path, limits, SearchOptions::default(), &mut |p| {
+            points.push(*p);
+            Ok(())
+        })
+        .unwrap();
+        let held = run.stats.most_held;
+        eprintln!(
+            "{name}: {} points, at most {held} held at once, first handed out after {:.2} ms",
+            run.points,
+            run.first_points_time * 1e3
+        );
+        assert_eq!(points.len(), run.points);
+        assert!(run.points > 10_000, "{name}: {}", run.points);
+        assert!(held as f64 * limits.period <= 0.25, "{name}: {held} points held");
+        let plan = VpopPlan {
+            points,
+            limits: run.limits,
+            axes: run.axes,
+            motion_time: run.motion_time,
+            plan_time: run.plan_time,
+            stats: run.stats,
+        };
+        check(tp, &plan);
+        let mut taken = 0;
+        let refused = run_streamed(&path, limits, SearchOptions::default(), &mut |_| {
+            taken += 1;
+            if taken > 100 {
+                Err("the receiver is gone".into())
+            } else {
+                Ok(())
+            }
+        });
+        assert!(refused.is_err_and(|e| e.to_string().contains("the receiver is gone")));
+        assert_eq!(taken, 101);
+    }
 }
 
 /// A polyline with two corners and a reversal, as one degree-1 curve, at a coarse 5.6 ms period

@@ -83,9 +83,6 @@ fn plot_title(args: &PlanArgs, planner: &str, limits: &nurbs_motion::planner::Li
 
 pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if args.planner == PlannerKind::Vpop {
-        if args.stream {
-            return Err("--stream is for the erwinski planner (VPOp plans the whole path)".into());
-        }
         if args.interp != Interpolation::Rk2pc {
             return Err("--interp is for the erwinski planner (VPOp plans the positions themselves)".into());
         }
@@ -431,22 +428,26 @@ impl<'a> SetpointSink<'a> {
 }
 
 /// `--planner vpop`: the tool-tip path planned by constraint intersection at the servo period
-/// (same CSV columns and summary keys as the default planner).
+/// (same CSV columns and summary keys as the default planner). The setpoints are written as
+/// VPOp hands them out (final: no back-tracking reaches them), with or without `--stream`.
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use nurbs_motion::planner::vpop::{plan_five_axis, plan_tip, SearchOptions};
+    use nurbs_motion::planner::vpop::{constraints::tip_distance, run_streamed, JointPath, SearchOptions};
     let prepared = prepare(args.toolpath, args.round_corners, args.limits)?;
     let toolpath = &prepared.toolpath;
     let tip = toolpath.tip_dim();
     args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
     // A top curve on every element: 5-axis on the machine (XYZAC unless --machine says otherwise), limits in joint order.
     let five = is_five_axis(toolpath);
-    let plan = if five {
-        let limits = args.limits.limits(5)?;
-        plan_five_axis(toolpath, args.machine.kinematics(), &limits, SearchOptions::default())?
+    let (path, limits) = if five {
+        (
+            JointPath::five_axis(toolpath, args.machine.kinematics())?,
+            args.limits.limits(5)?,
+        )
     } else {
-        plan_tip(toolpath, &args.limits.limits(tip)?, SearchOptions::default())?
+        (JointPath::tip(toolpath), args.limits.limits(tip)?)
     };
-    let axes = plan.axes;
+    let axes = path.axes();
+    let limits = limits.for_axes(axes)?;
     let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
     if five {
         let joints = args.machine.kinematics().joint_names().join(",");
@@ -454,13 +455,15 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     } else {
         writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
     }
-    let mut check = FiniteDifferences::new(axes, plan.limits.period);
+    let mut check = FiniteDifferences::new(axes, limits.period);
+    let mut program = open(args.toolpath, args.round_corners, args.limits)?.program()?;
+    let mut deviation = Deviation::default();
     let mut prev: Option<[f64; 3]> = None;
     let mut points = Vec::new();
-    for (j, p) in plan.points.iter().enumerate() {
-        let feed = prev.map_or(0.0, |a| {
-            nurbs_motion::planner::vpop::constraints::tip_distance(&p.tip, &a, tip) / plan.limits.period
-        });
+    let mut rows = 0usize;
+    let mut write_error = None;
+    let mut write = |p: &nurbs_motion::planner::vpop::PathPoint| -> std::io::Result<()> {
+        let feed = prev.map_or(0.0, |a| tip_distance(&p.tip, &a, tip) / limits.period);
         if args.plot.is_some() {
             let mut q = [0.0; MAX_AXES];
             q[..axes].copy_from_slice(&p.q[..axes]);
@@ -471,7 +474,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 q,
             });
         }
-        write!(out, "{:?},{:?}", j as f64 * plan.limits.period, p.u)?;
+        write!(out, "{:?},{:?}", rows as f64 * limits.period, p.u)?;
         if five {
             for c in p.q[..5].iter().chain(&p.tip) {
                 write!(out, ",{c:?}")?;
@@ -482,21 +485,35 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         writeln!(out, ",{feed:?},{}", p.element)?;
-        check.push(&p.q[..axes], &plan.limits);
+        check.push(&p.q[..axes], &limits);
+        deviation.push(&mut program, &p.tip[..tip]);
         prev = Some(p.tip);
+        rows += 1;
+        Ok(())
+    };
+    let planned = run_streamed(&path, &limits, SearchOptions::default(), &mut |p| {
+        write(p).map_err(|e| {
+            let message = format!("writing {}: {e}", args.out.display());
+            write_error = Some(e);
+            message
+        })
+    });
+    if let Some(e) = write_error {
+        return Err(format!("writing {}: {e}", args.out.display()).into());
     }
-    check.finish(&plan.limits);
+    let plan = planned?;
+    check.finish(&limits);
     out.flush()?;
     eprintln!(
-        "VPOp: motion {:.6} s ({} setpoints), planning {:.3} ms, {} dead ends, {} deceleration checks",
+        "VPOp: motion {:.6} s ({} setpoints), planning {:.3} ms (first setpoints final after {:.3} ms), {} dead ends, {} deceleration checks",
         plan.motion_time,
-        plan.points.len(),
+        plan.points,
         plan.plan_time * 1e3,
+        plan.first_points_time * 1e3,
         plan.stats.dead_ends,
         plan.stats.brakes
     );
-    let mut program = open(args.toolpath, args.round_corners, args.limits)?.program()?;
-    let deviation = program.max_distance(plan.points.iter().map(|p| &p.tip[..tip]));
+    let deviation = deviation.finish(&program);
     if let Some(line) = describe(prepared.rounding, deviation, plan.limits.chord_tolerance) {
         eprintln!("{line}");
     }
@@ -506,9 +523,11 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             serde_json::json!({
                 "motion_time_s": plan.motion_time,
                 "plan_time_s": plan.plan_time,
-                "setpoints": plan.points.len(),
+                "setpoints": plan.points,
+                "first_points_time_s": plan.first_points_time,
                 "dead_ends": plan.stats.dead_ends,
                 "deceleration_checks": plan.stats.brakes,
+                "most_points_held": plan.stats.most_held,
                 "axes": if five { args.machine.kinematics().joint_names().join(",") } else { "tool tip".into() },
             }),
         );

@@ -33,6 +33,8 @@ pub struct SearchStats {
     pub brakes: usize,
     /// Steps simulated inside deceleration sequences.
     pub brake_steps: usize,
+    /// Most points held at once, not yet final (the memory a streamed run needs).
+    pub most_held: usize,
 }
 
 /// Search settings.
@@ -442,8 +444,15 @@ impl Search<'_, '_, '_> {
         true
     }
 
-    /// Runs the whole motion from rest at the path start to rest at its end.
-    pub fn run(&mut self) -> Result<Vec<PathPoint>, String> {
+    /// Runs the whole motion from rest at the path start to rest at its end, handing each
+    /// point to `emit` as soon as no back-tracking can revise it:
+    /// back-tracking never goes behind the last state checked safe (the dichotomy runs between
+    /// it and the dead end), so every point up to it is final. While the motion runs free
+    /// (no deceleration check limits it) the state is checked every [`COMMIT_EVERY`] of motion
+    /// and becomes the safe point when its deceleration reaches rest, so that points keep
+    /// going out on long free runs too, and the points kept are those of a few
+    /// milliseconds. Returns the number of points; an error from `emit` ends the search.
+    pub fn run_streamed(&mut self, emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>) -> Result<usize, String> {
         let path = self.stepper.path;
         let end = path.end();
         let first = match self.options.start {
@@ -452,13 +461,19 @@ impl Search<'_, '_, '_> {
                 .eval_at(element, u)
                 .ok_or_else(|| format!("start point (element {element}, u = {u}) is not on the path"))?,
         };
+        // The points not yet handed out; `base` of them have been (the first of `points` is
+        // point `base` of the motion). Before the first hand-out the motion starts at rest:
+        // the history before point 0 repeats it.
         let mut points = vec![first];
+        let mut base = 0usize;
         let mut safe = 0usize;
         let mut careful = false;
         let mut stalls = 0usize;
+        let commit_every = ((COMMIT_EVERY / self.stepper.limits.period).ceil() as usize).max(1);
+        let mut free_run = 0usize;
         let eps = self.stepper.limits.chord_tolerance;
         loop {
-            if points.len() > self.options.max_steps {
+            if base + points.len() > self.options.max_steps {
                 return Err(format!("no motion found within {} periods", self.options.max_steps));
             }
             let j = points.len() - 1;
@@ -511,6 +526,17 @@ impl Search<'_, '_, '_> {
                         if was_max {
                             careful = false;
                         }
+                        free_run = 0;
+                    } else {
+                        free_run += 1;
+                        if free_run >= commit_every {
+                            free_run = 0;
+                            let k = points.len() - 1;
+                            if let Some(b) = self.brakes(Self::history(&points, k)) {
+                                safe = k;
+                                self.safe_brake = b;
+                            }
+                        }
                     }
                     stalls = 0;
                 }
@@ -519,17 +545,38 @@ impl Search<'_, '_, '_> {
                     // deceleration sequence reaches rest.
                     self.stats.dead_ends += 1;
                     stalls += 1;
-                    if stalls > 1000 || self.stats.dead_ends > 100 * (points.len() + 1000) {
+                    if stalls > 1000 || self.stats.dead_ends > 100 * (base + points.len() + 1000) {
                         return Err(format!("no feasible step at s = {}", h.current().w));
                     }
                     let (mut good, mut bad) = (safe, j);
                     let mut good_brake = match self.brakes(Self::history(&points, good)) {
                         Some(b) => b,
+                        // Not met: the safe point was checked with the same deceleration
+                        // sequences, which depend on the state alone.
+                        None if base > 0 => {
+                            return Err(format!(
+                                "back-tracking from s = {} reached points already handed out",
+                                h.current().w
+                            ))
+                        }
                         None => {
                             good = 0;
                             0
                         }
                     };
+                    // Galloping back from the dead end first: the safe state nearest to it
+                    // (safety is not monotone along the motion; a bisection over the whole
+                    // run may settle on an earlier boundary).
+                    let mut step = 1;
+                    while bad - good > step {
+                        let at = bad - step;
+                        if let Some(b) = self.brakes(Self::history(&points, at)) {
+                            (good, good_brake) = (at, b);
+                            break;
+                        }
+                        bad = at;
+                        step *= 2;
+                    }
                     while bad - good > 1 {
                         let mid = (good + bad) / 2;
                         if let Some(b) = self.brakes(Self::history(&points, mid)) {
@@ -545,12 +592,33 @@ impl Search<'_, '_, '_> {
                     careful = true;
                     self.last_fraction = None;
                     (self.skip, self.backoff) = (0, 0);
+                    free_run = 0;
                 }
             }
+            self.stats.most_held = self.stats.most_held.max(points.len());
+            // Hand out the final points, keeping the two before the safe point (its history).
+            if safe >= HAND_OUT_AFTER + 2 {
+                let out = safe - 2;
+                for p in points.drain(..out) {
+                    emit(&p)?;
+                }
+                base += out;
+                safe -= out;
+            }
         }
-        Ok(points)
+        for p in &points {
+            emit(p)?;
+        }
+        Ok(base + points.len())
     }
 }
+
+/// Motion time after which a free run (no deceleration check limiting it) checks its state
+/// and, if that is safe, hands out the points before it (s).
+pub const COMMIT_EVERY: f64 = 0.005;
+
+/// Final points gathered before they are handed out (fewer, larger hand-outs).
+const HAND_OUT_AFTER: usize = 64;
 
 /// Next acceleration of the fastest discrete stop in path coordinates: the most negative jerk
 /// in `[-jw, jw]` (acceleration kept above `-aw`) after which releasing the deceleration with

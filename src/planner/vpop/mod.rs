@@ -95,17 +95,66 @@ pub fn brake_points(
 
 /// Plans along any [`JointPath`].
 pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<VpopPlan, VpopError> {
+    let mut points = Vec::new();
+    let run = run_streamed(path, limits, options, &mut |p| {
+        points.push(*p);
+        Ok(())
+    })?;
+    Ok(VpopPlan {
+        points,
+        limits: run.limits,
+        axes: run.axes,
+        motion_time: run.motion_time,
+        plan_time: run.plan_time,
+        stats: run.stats,
+    })
+}
+
+/// What a streamed plan came to; its points went to the caller as they became final.
+#[derive(Clone, Debug)]
+pub struct VpopRun {
+    /// Points handed out.
+    pub points: usize,
+    /// Limits as used (one value per joint axis).
+    pub limits: Limits,
+    /// Axes the limits apply to.
+    pub axes: usize,
+    /// Motion time (s): (points - 1) periods.
+    pub motion_time: f64,
+    /// Wall-clock planning time (s), the caller's handling of the points included.
+    pub plan_time: f64,
+    /// Wall-clock time until the first points were handed out (s).
+    pub first_points_time: f64,
+    pub stats: SearchStats,
+}
+
+/// Plans along `path`, handing each point to `emit` as soon as it is final (see
+/// [`backtrack::Search::run_streamed`]): the motion of any length with the points of a few
+/// milliseconds in memory. The points are those [`run`] returns, bit for bit.
+pub fn run_streamed(
+    path: &JointPath,
+    limits: &Limits,
+    options: SearchOptions,
+    emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+) -> Result<VpopRun, VpopError> {
     let started = Instant::now();
     let limits = limits.for_axes(path.axes()).map_err(VpopError::Limits)?;
     let stepper = constraints::Stepper::new(path, &limits);
     let mut search = backtrack::Search::new(&stepper, options);
-    let points = search.run().map_err(VpopError::Search)?;
+    let mut first_points_time = None;
+    let points = search
+        .run_streamed(&mut |p| {
+            first_points_time.get_or_insert_with(|| started.elapsed().as_secs_f64());
+            emit(p)
+        })
+        .map_err(VpopError::Search)?;
     let stats = search.stats;
-    Ok(VpopPlan {
-        motion_time: (points.len() - 1) as f64 * limits.period,
+    Ok(VpopRun {
         points,
+        motion_time: (points - 1) as f64 * limits.period,
         axes: path.axes(),
         plan_time: started.elapsed().as_secs_f64(),
+        first_points_time: first_points_time.unwrap_or(0.0),
         stats,
         limits,
     })
