@@ -5,8 +5,10 @@
 # LINES (default "1000 10000 100000"): motion time, planning time (the planner alone) and its
 # ratio to the motion, time per 1,000 lines, first record, groups and the longest, stops on the
 # way (where back-tracking found no feed but rest; 0 is the aim), peak RSS of the whole command
-# (planning and writing the CSV), then `verify` of the written setpoints.
-# Usage: scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
+# (planning and writing the CSV), then `verify` of the written setpoints. PLANNER=vpop runs
+# VPOp instead (its first points instead of the first record; no groups: a stop of its own at
+# every state it hands out).
+# Usage: [PLANNER=vpop] scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
 limits="--limits lab1 --feed 500"
@@ -15,7 +17,7 @@ echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 for lines in ${LINES:-1000 10000 100000}; do
   python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
   # shellcheck disable=SC2086
-  /usr/bin/time -f "%M" -o "$dir/rss" $bin plan "$dir/dense.ngc" $limits --stream \
+  /usr/bin/time -f "%M" -o "$dir/rss" $bin plan "$dir/dense.ngc" $limits --stream --planner "${PLANNER:-erwinski}" \
     --out "$dir/dense.csv" --summary "$dir/dense.json" 2>/dev/null
   # shellcheck disable=SC2086
   if $bin verify "$dir/dense.csv" "$dir/dense.ngc" $limits >/dev/null; then ok=pass; else ok=FAIL; fi
@@ -25,7 +27,9 @@ lines, rss, ok, path = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv
 s = json.load(open(path))
 t, plan = s["motion_time_s"], s["plan_time_s"]
 elements = s["elements"]
+first = s.get("first_segment_time_s", s.get("first_points_time_s"))
+groups = f"{s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']}" if "groups" in s else "- | - | -"
 print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "
-      f"| {s['first_segment_time_s'] * 1e3:.1f} | {s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']} | {rss / 1024:.0f} | {ok} |")
+      f"| {first * 1e3:.1f} | {groups} | {rss / 1024:.0f} | {ok} |")
 PY
 done

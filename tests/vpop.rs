@@ -159,6 +159,52 @@ fn points_go_out_as_they_become_final() {
     }
 }
 
+/// A program read as it is planned: 2,400 line elements in a row (a 1000 mm line cut into
+/// 0.5 mm pieces, then 400 pieces turning a little at every join, each join a tangent break
+/// the plan stops on as it comes) give the same plan, bit for bit, streamed as read whole, and
+/// the streamed path holds a few hundred elements at a time.
+#[test]
+fn a_streamed_path_plans_as_the_whole_path() {
+    use nurbs_motion::geometry::PathElement;
+    let mut vertices: Vec<[f64; 2]> = (0..=2000).map(|k| [0.5 * k as f64, 0.0]).collect();
+    vertices.extend((1..=400).map(|k| {
+        let a = 0.002 * k as f64;
+        [1000.0 + 50.0 * a.sin(), 50.0 * (1.0 - a.cos())]
+    }));
+    let elements: Vec<PathElement> = vertices
+        .windows(2)
+        .map(|w| {
+            let curve = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &[w[0].to_vec(), w[1].to_vec()], None).unwrap();
+            PathElement {
+                kind: ElementKind::Polyline,
+                curve,
+                feed: None,
+                source_line: None,
+            }
+        })
+        .collect();
+    let tp = Toolpath { elements };
+    let limits = Limits::uniform(2, 200.0, 2000.0, 20000.0, 0.01, 0.001);
+    let whole = plan_tip(&tp, &limits, SearchOptions::default()).unwrap();
+    let source = tp.elements.clone().into_iter().map(Ok);
+    let path = JointPath::streamed(Box::new(source)).unwrap();
+    let mut points = Vec::new();
+    let run = run_streamed(&path, &limits, SearchOptions::default(), &mut |p| {
+        points.push(*p);
+        Ok(())
+    })
+    .unwrap();
+    let held = path.most_elements_held();
+    eprintln!(
+        "{} elements, {} points, at most {held} elements held at once",
+        tp.elements.len(),
+        run.points
+    );
+    assert_eq!(points, whole.points);
+    assert!(held < tp.elements.len() / 4, "{held} elements held");
+    check(&tp, &whole);
+}
+
 /// A polyline with two corners and a reversal, as one degree-1 curve, at a coarse 5.6 ms period
 /// with a high jerk limit (a case the property test found refused): VPOp stops exactly on every
 /// corner (a sample on the vertex, then at rest there) and the plan passes the checker.

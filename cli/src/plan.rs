@@ -429,22 +429,41 @@ impl<'a> SetpointSink<'a> {
 
 /// `--planner vpop`: the tool-tip path planned by constraint intersection at the servo period
 /// (same CSV columns and summary keys as the default planner). The setpoints are written as
-/// VPOp hands them out (final: no back-tracking reaches them), with or without `--stream`.
+/// VPOp hands them out (final: no back-tracking reaches them), and a tool-tip path is read as
+/// it is planned (a program of any length in memory that follows the look-ahead; the plan is
+/// the same as from the whole path, so `--stream` changes nothing here). A 5-axis path (its C
+/// angle is unwrapped along the whole path), machine flags and the plot read it whole.
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     use nurbs_motion::planner::vpop::{constraints::tip_distance, run_streamed, JointPath, SearchOptions};
-    let prepared = prepare(args.toolpath, args.round_corners, args.limits)?;
-    let toolpath = &prepared.toolpath;
-    let tip = toolpath.tip_dim();
-    args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
-    // A top curve on every element: 5-axis on the machine (XYZAC unless --machine says otherwise), limits in joint order.
-    let five = is_five_axis(toolpath);
-    let (path, limits) = if five {
-        (
-            JointPath::five_axis(toolpath, args.machine.kinematics())?,
-            args.limits.limits(5)?,
-        )
+    let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
+    let mut program = stream.program()?;
+    let streamed = match args.plot.is_none() && args.machine.given().is_none() {
+        true => Some(JointPath::streamed(stream.take_elements())?).filter(|p| !p.has_top_curve()),
+        false => None,
+    };
+    let whole = match streamed {
+        Some(_) => None,
+        None => Some(prepare(args.toolpath, args.round_corners, args.limits)?),
+    };
+    let (path, five) = match (streamed, &whole) {
+        (Some(path), _) => (path, false),
+        (None, Some(whole)) => {
+            let toolpath = &whole.toolpath;
+            args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
+            // A top curve on every element: 5-axis on the machine (XYZAC unless --machine says otherwise).
+            match is_five_axis(toolpath) {
+                true => (JointPath::five_axis(toolpath, args.machine.kinematics())?, true),
+                false => (JointPath::tip(toolpath), false),
+            }
+        }
+        (None, None) => unreachable!("a path read whole where it is not streamed"),
+    };
+    let tip = path.tip_dim();
+    // Limits in joint order.
+    let limits = if five {
+        args.limits.limits(5)?
     } else {
-        (JointPath::tip(toolpath), args.limits.limits(tip)?)
+        args.limits.limits(tip)?
     };
     let axes = path.axes();
     let limits = limits.for_axes(axes)?;
@@ -456,7 +475,6 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
     }
     let mut check = FiniteDifferences::new(axes, limits.period);
-    let mut program = open(args.toolpath, args.round_corners, args.limits)?.program()?;
     let mut deviation = Deviation::default();
     let mut prev: Option<[f64; 3]> = None;
     let mut points = Vec::new();
@@ -514,8 +532,17 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         plan.stats.brakes
     );
     let deviation = deviation.finish(&program);
-    if let Some(line) = describe(prepared.rounding, deviation, plan.limits.chord_tolerance) {
+    let rounding = whole.as_ref().map_or_else(|| stream.rounding(), |w| w.rounding);
+    let (elements, most_elements_held) = (path.end() as usize, path.most_elements_held());
+    if let Some(line) = describe(rounding, deviation, plan.limits.chord_tolerance) {
         eprintln!("{line}");
+    }
+    if let Some(e) = path.read_error() {
+        return Err(format!(
+            "{e}\nthe plan ends at rest at the end of the path element before it ({rows} setpoints written to {})",
+            args.out.display()
+        )
+        .into());
     }
     if let Some(path) = args.summary {
         let summary = with_fields(
@@ -528,20 +555,22 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "dead_ends": plan.stats.dead_ends,
                 "deceleration_checks": plan.stats.brakes,
                 "most_points_held": plan.stats.most_held,
+                "elements": elements,
+                "most_elements_held": most_elements_held,
                 "axes": if five { args.machine.kinematics().joint_names().join(",") } else { "tool tip".into() },
             }),
         );
-        let mut summary = with_fields(summary, summary_fields(prepared.rounding, deviation));
+        let mut summary = with_fields(summary, summary_fields(rounding, deviation));
         if five {
             summary = with_fields(summary, args.machine.summary_fields());
         }
         std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
     }
-    if let Some(path) = args.plot {
+    if let (Some(path), Some(whole)) = (args.plot, &whole) {
         let joints = args.machine.kinematics().joint_names();
         let names: &[&str] = if five { &joints } else { &AXIS_NAMES[..tip] };
         let profile = Profile {
-            toolpath,
+            toolpath: &whole.toolpath,
             limits: &plan.limits,
             axes: names,
             rotary_from: if five { 3 } else { axes },

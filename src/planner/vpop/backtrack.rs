@@ -105,8 +105,8 @@ pub const BRAKES: [BrakeSetting; 5] = [
     brake(0.7, 0.3),
 ];
 
-pub struct Search<'s, 'p, 'a> {
-    pub stepper: &'s Stepper<'p, 'a>,
+pub struct Search<'s, 'p> {
+    pub stepper: &'s Stepper<'p>,
     pub options: SearchOptions,
     pub stats: SearchStats,
     /// Where in [deceleration point, s_max] the last careful step found its position.
@@ -121,9 +121,9 @@ pub struct Search<'s, 'p, 'a> {
     max_backoff: usize,
 }
 
-impl<'s, 'p, 'a> Search<'s, 'p, 'a> {
+impl<'s, 'p> Search<'s, 'p> {
     /// A search on `stepper` with no statistics yet.
-    pub fn new(stepper: &'s Stepper<'p, 'a>, options: SearchOptions) -> Self {
+    pub fn new(stepper: &'s Stepper<'p>, options: SearchOptions) -> Self {
         // No setting at all would leave no way to brake: the defaults then.
         let brakes = if options.brakes.is_empty() {
             &BRAKES[..]
@@ -143,7 +143,7 @@ impl<'s, 'p, 'a> Search<'s, 'p, 'a> {
     }
 }
 
-impl Search<'_, '_, '_> {
+impl Search<'_, '_> {
     fn history(points: &[PathPoint], k: usize) -> History {
         let at = |i: isize| points[i.max(0) as usize];
         let k = k as isize;
@@ -454,7 +454,6 @@ impl Search<'_, '_, '_> {
     /// milliseconds. Returns the number of points; an error from `emit` ends the search.
     pub fn run_streamed(&mut self, emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>) -> Result<usize, String> {
         let path = self.stepper.path;
-        let end = path.end();
         let first = match self.options.start {
             None => path.eval(0.0),
             Some((element, u)) => path
@@ -478,7 +477,8 @@ impl Search<'_, '_, '_> {
             }
             let j = points.len() - 1;
             let h = Self::history(&points, j);
-            if h.current().w == end && self.can_stop_here(&h) {
+            // The path end (known once a streamed path has been read to it).
+            if h.current().w == path.end() && self.can_stop_here(&h) {
                 break;
             }
             let mut chosen = None;
@@ -604,6 +604,7 @@ impl Search<'_, '_, '_> {
                 }
                 base += out;
                 safe -= out;
+                path.release_before(points[0].w);
             }
         }
         for p in &points {

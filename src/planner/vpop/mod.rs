@@ -138,6 +138,9 @@ pub fn run_streamed(
     emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
 ) -> Result<VpopRun, VpopError> {
     let started = Instant::now();
+    if path.is_empty() {
+        return Err(VpopError::Path("no elements".into()));
+    }
     let limits = limits.for_axes(path.axes()).map_err(VpopError::Limits)?;
     let stepper = constraints::Stepper::new(path, &limits);
     let mut search = backtrack::Search::new(&stepper, options);

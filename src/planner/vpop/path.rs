@@ -2,13 +2,21 @@
 //! `[e, e + 1]`, linear in its curve parameter), and at every `w` the joint positions q(w) that
 //! the limits apply to (the tool tip for 2-/3-axis paths, x y z a|b c on a table-tilting machine) and
 //! the tool tip in the workpiece frame (feed and chord error).
+//!
+//! A tool-tip path may be read as it is planned ([`JointPath::streamed`]): elements are read as
+//! far as the queries reach and forgotten behind the motion ([`JointPath::release_before`]), so
+//! that a program of any length is planned in memory that follows the look-ahead. The answers
+//! are the same whether the path is read whole or streamed.
 
-use std::cell::RefCell;
+use std::cell::{Cell, Ref, RefCell};
 use std::collections::VecDeque;
 
 use crate::geometry::Toolpath;
 use crate::kinematics::TableTilting;
 use crate::planner::axial::MAX_AXES;
+use crate::planner::window::Window;
+use crate::planner::PathCurves;
+use crate::readers::{ElementStream, ReadError};
 use nurbs_rtcore::{CurveView, MAX_DIM};
 
 /// Joint positions, tool tip, and where on the toolpath they are.
@@ -22,43 +30,145 @@ pub struct PathPoint {
 }
 
 /// Evaluates joint positions and tool tip along a toolpath.
-pub struct JointPath<'a> {
-    views: Vec<CurveView<'a>>,
-    spans: Vec<(f64, f64)>,
-    /// Power-basis copy of every element (the planner's evaluator).
-    fast: Vec<PowerCurve>,
+pub struct JointPath {
+    store: RefCell<Store>,
     /// Upper estimate of the tool-tip curvature over cells of `w` (range maximum table).
     kappa: CurvatureTable,
     tip: usize,
     kinematics: Option<(TableTilting, Vec<f64>)>,
-    /// Programmed feed of every element (mm/s), if the source gives one.
-    programmed_feeds: Vec<Option<f64>>,
-    /// Where the motion must stop: the tangent breaks (increasing `w`), then the path end.
-    stops: Vec<f64>,
+    /// The last answers of [`Self::next_stop`] (asked again and again for nearby states): the
+    /// next stop after `w` (asked at rest or not) and after every `w` between it and that stop.
+    stop_after: Cell<(f64, bool, f64)>,
+    /// The end of the elements in view, the last element it was checked to reach the horizon
+    /// from, and that horizon.
+    view_checked: Cell<(usize, usize, f64)>,
+}
+
+/// The elements held, as far as they have been read, with what the planner needs of each.
+struct Store {
+    curves: PathCurves,
+    elements: Window<Element>,
+    /// The tangent breaks of the elements read (increasing `w`), then the path end once read.
+    stops: VecDeque<f64>,
+    /// Number of elements once the path has been read to its end.
+    count: Option<usize>,
+    /// Elements in view of the planner ([`JointPath::next_stop`]).
+    view: usize,
+    /// Most elements held at once.
+    most_held: usize,
+}
+
+/// Elements the planner's view moves on by at a time.
+const VIEW_STEP: usize = 64;
+
+/// What the planner keeps of one element.
+struct Element {
+    /// Power-basis copy (the planner's evaluator).
+    fast: PowerCurve,
+    span: (f64, f64),
+    /// Programmed feed (mm/s), if the source gives one.
+    feed: Option<f64>,
+    /// A lower bound of the tool-tip path length before the element (the sum of the distances
+    /// between the elements' end points), and the element's own.
+    before: f64,
+    chord: f64,
+    /// Derivative at the element's end (the next element's join is a tangent break where its
+    /// start turns from it).
+    end_derivative: [f64; MAX_DIM],
 }
 
 /// Samples per element of the C-angle continuity table.
 const C_TABLE: usize = 4096;
 
-impl<'a> JointPath<'a> {
+impl Store {
+    fn new(curves: PathCurves) -> Self {
+        Store {
+            curves,
+            elements: Window::default(),
+            stops: VecDeque::new(),
+            count: None,
+            view: 0,
+            most_held: 0,
+        }
+    }
+
+    /// The lower bound of the tool-tip path length before element `e` (read; at most one
+    /// past the last read).
+    fn length_before(&self, e: usize) -> f64 {
+        match self.elements.get(e) {
+            Some(x) => x.before,
+            None => self.elements.last().map_or(0.0, |x| x.before + x.chord),
+        }
+    }
+
+    /// Whether element `e` is held, reading the path as far as it.
+    fn load(&mut self, e: usize) -> bool {
+        while self.elements.len() <= e && self.count.is_none() {
+            let k = self.elements.len();
+            if !self.curves.load(k) {
+                self.count = Some(k);
+                self.stops.push_back(k as f64);
+                break;
+            }
+            let view = self.curves.view(k);
+            let n = view.dim();
+            let (a, b) = (view.u_min(), view.u_max());
+            let ends = (view.point(a), view.point(b));
+            let tip = self.curves.tip_dim();
+            let chord = (0..tip).map(|i| (ends.1[i] - ends.0[i]).powi(2)).sum::<f64>().sqrt();
+            let before = self.elements.last().map_or(0.0, |p| p.before + p.chord);
+            if let Some(prev) = self.elements.last() {
+                if turns(&prev.end_derivative, &view.derivatives(a, 1)[1], n) {
+                    self.stops.push_back(k as f64);
+                }
+            }
+            self.stops
+                .extend(interior_breaks(&view).into_iter().map(|u| k as f64 + (u - a) / (b - a)));
+            let element = Element {
+                fast: PowerCurve::new(&view),
+                span: (a, b),
+                feed: self.curves.programmed_feed(k),
+                before,
+                chord,
+                end_derivative: view.derivatives(b, 1)[1],
+            };
+            self.elements.push(element);
+            self.most_held = self.most_held.max(self.elements.len() - self.elements.first_index());
+        }
+        self.elements.len() > e
+    }
+
+    /// Elements held or read (one past the highest index).
+    fn len(&self) -> usize {
+        self.elements.len()
+    }
+}
+
+impl JointPath {
     /// Tool-tip path (joints = tip coordinates).
-    pub fn tip(toolpath: &'a Toolpath) -> Self {
-        let views: Vec<CurveView<'a>> = toolpath.elements.iter().map(|e| e.curve.view()).collect();
-        let spans = views.iter().map(|v| (v.u_min(), v.u_max())).collect();
-        let fast: Vec<PowerCurve> = views.iter().map(PowerCurve::new).collect();
-        let tip = toolpath.tip_dim();
-        let kappa = CurvatureTable::new(tip);
-        let mut stops = tangent_breaks(&views);
-        stops.push(views.len() as f64);
+    pub fn tip(toolpath: &Toolpath) -> Self {
+        let curves = PathCurves::new(toolpath);
+        let path = Self::over(curves);
+        path.store.borrow_mut().load(usize::MAX - 1);
+        path
+    }
+
+    /// The tool-tip path of a toolpath read as it is planned (elements read as the queries
+    /// reach them, forgotten behind [`Self::release_before`]). A file that fails part way ends
+    /// the path before the element that failed ([`Self::read_error`]).
+    pub fn streamed(source: ElementStream) -> Result<Self, ReadError> {
+        Ok(Self::over(PathCurves::streamed(source)?))
+    }
+
+    fn over(curves: PathCurves) -> Self {
+        let tip = curves.tip_dim();
         JointPath {
-            views,
-            spans,
-            fast,
-            kappa,
+            store: RefCell::new(Store::new(curves)),
+            kappa: CurvatureTable::new(tip),
             tip,
             kinematics: None,
-            programmed_feeds: toolpath.elements.iter().map(|e| e.feed).collect(),
-            stops,
+            stop_after: Cell::new((f64::NAN, false, f64::NAN)),
+            view_checked: Cell::new((0, 0, f64::NAN)),
         }
     }
 
@@ -66,7 +176,7 @@ impl<'a> JointPath<'a> {
     /// curvature tables an earlier such path built for them ([`Self::into_curvature_tables`]):
     /// a short path built again and again along a longer one (a stored hold stop at every few
     /// samples) builds each element's table once.
-    pub fn tip_reusing(toolpath: &'a Toolpath, first: usize, tables: CurvatureTables) -> Self {
+    pub fn tip_reusing(toolpath: &Toolpath, first: usize, tables: CurvatureTables) -> Self {
         let mut path = Self::tip(toolpath);
         path.kappa.first = first;
         path.kappa.built = RefCell::new(tables.built);
@@ -81,7 +191,7 @@ impl<'a> JointPath<'a> {
     }
 
     /// Five-axis path on a table-tilting machine: every element must carry a top curve (dim 6).
-    pub fn five_axis(toolpath: &'a Toolpath, machine: TableTilting) -> Result<Self, String> {
+    pub fn five_axis(toolpath: &Toolpath, machine: TableTilting) -> Result<Self, String> {
         if toolpath
             .elements
             .iter()
@@ -91,7 +201,7 @@ impl<'a> JointPath<'a> {
         }
         let mut path = Self::tip(toolpath);
         // Continuous C: unwrap along a fine grid; evaluation takes the branch nearest the grid.
-        let n = path.views.len();
+        let n = toolpath.elements.len();
         let mut table = Vec::with_capacity(n * C_TABLE + 1);
         let mut prev: Option<f64> = None;
         for k in 0..=n * C_TABLE {
@@ -116,64 +226,186 @@ impl<'a> JointPath<'a> {
     pub fn tip_dim(&self) -> usize {
         self.tip
     }
-    /// Number of path elements.
-    pub fn elements(&self) -> usize {
-        self.views.len()
-    }
-    /// Largest coordinate (path end).
+
+    /// Largest coordinate (the path end; infinite until the path has been read to its end,
+    /// which [`Self::next_stop`] does before the motion can reach it).
     pub fn end(&self) -> f64 {
-        self.views.len() as f64
+        self.store.borrow().count.map_or(f64::INFINITY, |n| n as f64)
     }
-    /// Programmed feed of element `e` (mm/s), if the source gives one.
-    pub fn programmed_feed(&self, e: usize) -> Option<f64> {
-        self.programmed_feeds.get(e).copied().flatten()
+
+    /// Most elements held at once so far (the memory a streamed path needs).
+    pub fn most_elements_held(&self) -> usize {
+        self.store.borrow().most_held
     }
-    pub fn machine(&self) -> Option<&TableTilting> {
-        self.kinematics.as_ref().map(|(m, _)| m)
+
+    /// Whether the path has no element.
+    pub fn is_empty(&self) -> bool {
+        self.held(0).len() == 0
+    }
+
+    /// Whether the first element carries a top curve (a 5-axis toolpath, planned whole).
+    pub fn has_top_curve(&self) -> bool {
+        let store = self.held(0);
+        store.len() > 0 && store.curves.get(0).is_some_and(|e| e.curve.dim() != e.curve.tip_dim())
+    }
+
+    /// Why a streamed path ended before its file did.
+    pub fn read_error(&self) -> Option<ReadError> {
+        self.store.borrow().curves.error().cloned()
+    }
+
+    /// The store with element `e` held (read if need be; past the path end, the last element).
+    #[inline]
+    fn held(&self, e: usize) -> Ref<'_, Store> {
+        let store = self.store.borrow();
+        if store.len() > e || store.count.is_some() {
+            return store;
+        }
+        drop(store);
+        self.store.borrow_mut().load(e);
+        self.store.borrow()
+    }
+
+    /// Feed cap (mm/s) of a step from element `from` to element `to`: the lowest of `limit` and
+    /// the programmed feeds of the elements it touches.
+    #[inline]
+    pub fn feed_cap(&self, from: usize, to: usize, limit: f64) -> f64 {
+        let store = self.held(from.max(to));
+        (from.min(to)..=from.max(to))
+            .filter_map(|e| store.elements.get(e).and_then(|x| x.feed))
+            .fold(limit, f64::min)
     }
 
     /// The first exact stop at or after `w` (a tangent break or the path end); past the one at
-    /// `w` itself once the machine is `at_rest` there.
-    pub fn next_stop(&self, w: f64, at_rest: bool) -> f64 {
-        let k = self.stops.partition_point(|&s| s < w);
-        let k = if at_rest && self.stops.get(k) == Some(&w) {
-            k + 1
+    /// `w` itself once the machine is `at_rest` there; at most the end of the elements in view.
+    /// The view reaches at least `horizon` (mm of tool-tip path, by a lower bound of the
+    /// lengths) beyond the end of `w`'s element: nothing beyond it matters to a step from `w`
+    /// (the caller's steps are shorter), and the path need not be read further. The view moves
+    /// on by the same rule whether the path is read whole or streamed, so that the answers
+    /// are the same.
+    pub fn next_stop(&self, w: f64, at_rest: bool, horizon: f64) -> f64 {
+        let view = self.view_to(element_of(w).saturating_add(1), horizon) as f64;
+        let (asked, asked_at_rest, stop) = self.stop_after.get();
+        // The last answer holds between where it was asked and the stop it found.
+        let known = if (asked < w && w < stop) || (asked == w && asked_at_rest == at_rest) {
+            Some(stop)
         } else {
-            k
+            let store = self.store.borrow();
+            let k = store.stops.partition_point(|&s| s < w);
+            let k = if at_rest && store.stops.get(k) == Some(&w) {
+                k + 1
+            } else {
+                k
+            };
+            let found = match (store.stops.get(k), store.count) {
+                (Some(&s), _) => Some(s),
+                // At rest on the path end: it stays the bound.
+                (None, Some(n)) => Some(n as f64),
+                (None, None) => None,
+            };
+            if let Some(s) = found.filter(|s| *s > w) {
+                self.stop_after.set((w, at_rest, s));
+            }
+            found
         };
-        self.stops[k.min(self.stops.len() - 1)]
+        known.map_or(view, |s| s.min(view))
+    }
+
+    /// The end of the elements in view once they reach `horizon` beyond element `from`'s start:
+    /// [`VIEW_STEP`] elements more at a time, up to the path end.
+    #[inline]
+    fn view_to(&self, from: usize, horizon: f64) -> usize {
+        // The view reaches `horizon` beyond every element up to the last one it was checked for.
+        let (view, checked, for_horizon) = self.view_checked.get();
+        if from <= checked && horizon == for_horizon {
+            return view;
+        }
+        let mut store = self.store.borrow_mut();
+        loop {
+            let at_end = store.count.is_some_and(|n| store.view >= n);
+            if at_end || (store.view >= from && store.length_before(store.view) - store.length_before(from) >= horizon)
+            {
+                let checked = if store.view == view && horizon == for_horizon {
+                    checked.max(from)
+                } else {
+                    from
+                };
+                self.view_checked.set((store.view, checked, horizon));
+                return store.view;
+            }
+            let next = store.view.max(from) + VIEW_STEP;
+            store.load(next - 1);
+            store.view = store.count.map_or(next, |n| next.min(n));
+        }
+    }
+
+    /// Forgets the elements before the one of `w` (nothing before it is asked again).
+    pub fn release_before(&self, w: f64) {
+        let mut store = self.store.borrow_mut();
+        let e = element_of(w).min(store.len().saturating_sub(1));
+        store.curves.release_before(e);
+        store.elements.release_before(e);
+        let first = e as f64;
+        while store.stops.front().is_some_and(|&s| s < first) {
+            store.stops.pop_front();
+        }
     }
 
     /// Element and curve parameter at `w` (the end of an element belongs to it only at the path end).
     pub fn locate(&self, w: f64) -> (usize, f64) {
-        let n = self.views.len();
+        let store = self.held(element_of(w));
+        Self::locate_in(&store, w)
+    }
+
+    #[inline]
+    fn locate_in(store: &Store, w: f64) -> (usize, f64) {
+        let n = store.len();
         let w = w.clamp(0.0, n as f64);
-        let e = (w.floor() as usize).min(n - 1);
-        let (a, b) = self.spans[e];
+        let e = element_of(w).min(n - 1);
+        let (a, b) = store.elements[e].span;
         let f = w - e as f64;
         let u = if f >= 1.0 { b } else { a + (b - a) * f };
         (e, u)
     }
 
+    /// Curve point and derivatives up to `order` (power basis) at `w`, with its element, curve
+    /// parameter and parameter span.
+    #[inline(always)]
+    fn curve_derivatives(&self, w: f64, order: usize) -> (usize, f64, (f64, f64), [[f64; MAX_DIM]; 3]) {
+        let store = self.held(element_of(w));
+        let (e, u) = Self::locate_in(&store, w);
+        let x = &store.elements[e];
+        (e, u, x.span, x.fast.eval(u, order))
+    }
+
+    /// Curve point (power basis) at `w`, with its element and parameter.
+    #[inline(always)]
+    fn curve_point(&self, w: f64) -> (usize, f64, [f64; MAX_DIM]) {
+        let store = self.held(element_of(w));
+        let (e, u) = Self::locate_in(&store, w);
+        (e, u, store.elements[e].fast.point(u))
+    }
+
     fn tip_and_axis(&self, w: f64) -> ([f64; 3], [f64; 3]) {
-        let (e, u) = self.locate(w);
-        let p = self.fast[e].point(u);
+        let (e, _, p) = self.curve_point(w);
         let mut tip = [0.0; 3];
         tip[..self.tip].copy_from_slice(&p[..self.tip]);
         let mut axis = [0.0, 0.0, 1.0];
-        if self.fast[e].dim == 2 * self.tip && self.tip == 3 {
+        if self.store.borrow().elements[e].fast.dim == 2 * self.tip && self.tip == 3 {
             axis = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
         }
         (tip, axis)
     }
 
     /// Joint positions and tool tip from a curve point at `w`.
+    #[inline]
     fn point_at(&self, w: f64, element: usize, u: f64, p: &[f64; MAX_DIM]) -> PathPoint {
-        let mut tip = [0.0; 3];
-        tip[..self.tip].copy_from_slice(&p[..self.tip]);
+        // Element by element over fixed lengths: a copy of `self.tip` values was a call to
+        // memcpy, some 4 % of the planning time.
+        let tip = [p[0], p[1], if self.tip == 3 { p[2] } else { 0.0 }];
         let mut q = [0.0; MAX_AXES];
         match &self.kinematics {
-            None => q[..self.tip].copy_from_slice(&p[..self.tip]),
+            None => q[..3].copy_from_slice(&tip),
             Some((m, table)) => {
                 let axis = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
                 let k = ((w * C_TABLE as f64).round() as usize).min(table.len() - 1);
@@ -187,31 +419,32 @@ impl<'a> JointPath<'a> {
     /// The point at element `element`, curve parameter `u` exactly (its `w` is where that
     /// lies on the path); `None` off the path.
     pub fn eval_at(&self, element: usize, u: f64) -> Option<PathPoint> {
-        let &(a, b) = self.spans.get(element)?;
-        if !(u >= a && u <= b) {
-            return None;
-        }
-        let w = element as f64 + if b > a { (u - a) / (b - a) } else { 0.0 };
-        let p = self.fast[element].point(u);
-        Some(self.point_at(w, element, u, &p))
+        let p = {
+            let store = self.held(element);
+            let x = store.elements.get(element)?;
+            let (a, b) = x.span;
+            if !(u >= a && u <= b) {
+                return None;
+            }
+            let w = element as f64 + if b > a { (u - a) / (b - a) } else { 0.0 };
+            (w, x.fast.point(u))
+        };
+        Some(self.point_at(p.0, element, u, &p.1))
     }
 
     /// Joint positions and tool tip at `w`.
     pub fn eval(&self, w: f64) -> PathPoint {
-        let (element, u) = self.locate(w);
-        let p = self.fast[element].point(u);
+        let (element, u, p) = self.curve_point(w);
         self.point_at(w, element, u, &p)
     }
 
     /// [`Self::eval`] and [`Self::derivative`] in one evaluation.
     pub fn eval_d(&self, w: f64) -> (PathPoint, [f64; MAX_AXES], [f64; 3]) {
-        let (e, u) = self.locate(w);
         if self.kinematics.is_some() {
             let (dq, dt) = self.derivative(w);
             return (self.eval(w), dq, dt);
         }
-        let d = self.fast[e].eval(u, 1);
-        let (a, b) = self.spans[e];
+        let (e, u, (a, b), d) = self.curve_derivatives(w, 1);
         let mut dq = [0.0; MAX_AXES];
         let mut dt = [0.0; 3];
         for i in 0..self.tip {
@@ -223,18 +456,17 @@ impl<'a> JointPath<'a> {
 
     /// dq/dw and d(tip)/dw at `w` (analytic for tip paths, central differences on the machine).
     pub fn derivative(&self, w: f64) -> ([f64; MAX_AXES], [f64; 3]) {
-        let (e, u) = self.locate(w);
-        let (a, b) = self.spans[e];
         if self.kinematics.is_none() {
-            let d = self.fast[e].eval(u, 1)[1];
+            let (_, _, (a, b), d) = self.curve_derivatives(w, 1);
             let mut dq = [0.0; MAX_AXES];
             let mut dt = [0.0; 3];
             for i in 0..self.tip {
-                dq[i] = d[i] * (b - a);
-                dt[i] = d[i] * (b - a);
+                dq[i] = d[1][i] * (b - a);
+                dt[i] = d[1][i] * (b - a);
             }
             return (dq, dt);
         }
+        let (e, _) = self.locate(w);
         let h = 1e-6;
         let lo = (w - h).max(e as f64);
         let hi = (w + h).min(e as f64 + 1.0);
@@ -252,14 +484,16 @@ impl<'a> JointPath<'a> {
 
     /// Tool-tip curvature at `w` (1/mm).
     pub fn curvature(&self, w: f64) -> f64 {
-        let (e, u) = self.locate(w);
-        curvature_of(&self.fast[e].eval(u, 2), self.tip)
+        let (_, _, _, d) = self.curve_derivatives(w, 2);
+        curvature_of(&d, self.tip)
     }
 
     /// Upper estimate of the tool-tip curvature on `[w0, w1]` (tabulated maxima of the cells
     /// the interval touches).
     pub fn max_curvature(&self, w0: f64, w1: f64) -> f64 {
-        self.kappa.max(&self.fast, w0.min(w1), w0.max(w1))
+        let (w0, w1) = (w0.min(w1), w0.max(w1));
+        let store = self.held(element_of(w1));
+        self.kappa.max(&store.elements, w0, w1)
     }
 
     /// Largest distance between the tip curve on `(a, b)` and the chord between their tips,
@@ -272,16 +506,21 @@ impl<'a> JointPath<'a> {
         let mut pb = [0.0; nurbs_rtcore::MAX_DIM];
         pa[..3].copy_from_slice(&a.tip);
         pb[..3].copy_from_slice(&b.tip);
-        crate::planner::verify::chord_error(&self.views[a.element], self.tip, a.u, b.u, &pa, &pb)
+        let store = self.held(a.element);
+        crate::planner::verify::chord_error(&store.curves.view(a.element), self.tip, a.u, b.u, &pa, &pb)
     }
 }
 
-/// `w` of every point where the path's direction turns (in all coordinates of the curves: for a
-/// two-curve path, a kink of the top curve turns the joints too): an interior knot of
-/// multiplicity >= degree (C0) or an element join whose unit tangents differ. A finite-jerk
-/// motion must stop there, and VPOp lands its last sample exactly on the point.
-fn tangent_breaks(views: &[CurveView]) -> Vec<f64> {
-    let unit = |d: &[f64; MAX_DIM], n: usize| {
+/// The element `w` lies in (the one it starts, at an element join), 0 before the path.
+#[inline]
+fn element_of(w: f64) -> usize {
+    // A float-to-integer cast truncates (saturating): the floor for w >= 0.
+    w.max(0.0) as usize
+}
+
+/// Whether the direction turns from `left` to `right` (first `n` coordinates).
+fn turns(left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize) -> bool {
+    let unit = |d: &[f64; MAX_DIM]| {
         let len = d[..n].iter().map(|x| x * x).sum::<f64>().sqrt();
         let mut t = [0.0; MAX_DIM];
         if len > 0.0 {
@@ -291,34 +530,30 @@ fn tangent_breaks(views: &[CurveView]) -> Vec<f64> {
         }
         t
     };
-    let turns = |left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize| {
-        let (l, r) = (unit(left, n), unit(right, n));
-        (0..n).map(|i| l[i] * r[i]).sum::<f64>() < 1.0 - 1e-12
-    };
+    let (l, r) = (unit(left), unit(right));
+    (0..n).map(|i| l[i] * r[i]).sum::<f64>() < 1.0 - 1e-12
+}
+
+/// Curve parameters inside one element where the path's direction turns (in all coordinates
+/// of the curve: for a two-curve path, a kink of the top curve turns the joints too): an
+/// interior knot of multiplicity >= degree (C0) whose tangents differ. Together with the
+/// element joins whose unit tangents differ these are the tangent breaks: a finite-jerk motion
+/// must stop there, and VPOp lands its last sample exactly on the point.
+fn interior_breaks(view: &CurveView) -> Vec<f64> {
+    let n = view.dim();
+    let (p, knots, count) = (view.degree(), view.knots(), view.control_point_count());
     let mut out = Vec::new();
-    for (e, view) in views.iter().enumerate() {
-        let n = view.dim();
-        if e > 0 {
-            let before = &views[e - 1];
-            let left = before.derivatives(before.u_max(), 1)[1];
-            if turns(&left, &view.derivatives(view.u_min(), 1)[1], n) {
-                out.push(e as f64);
-            }
+    let mut i = p + 1;
+    while i < count {
+        let mut m = 1;
+        while i + m < count && knots[i + m] == knots[i] {
+            m += 1;
         }
-        let (p, knots, count) = (view.degree(), view.knots(), view.control_point_count());
-        let (a, b) = (view.u_min(), view.u_max());
-        let mut i = p + 1;
-        while i < count {
-            let mut m = 1;
-            while i + m < count && knots[i + m] == knots[i] {
-                m += 1;
-            }
-            let u = knots[i];
-            if m >= p && turns(&view.derivatives_left(u, 1)[1], &view.derivatives(u, 1)[1], n) {
-                out.push(e as f64 + (u - a) / (b - a));
-            }
-            i += m;
+        let u = knots[i];
+        if m >= p && turns(&view.derivatives_left(u, 1)[1], &view.derivatives(u, 1)[1], n) {
+            out.push(u);
         }
+        i += m;
     }
     out
 }
@@ -604,16 +839,16 @@ impl CurvatureTable {
     }
 
     /// Element and cell of `w`.
-    fn cell(curves: &[PowerCurve], w: f64) -> (usize, usize) {
+    fn cell(curves: &Window<Element>, w: f64) -> (usize, usize) {
         let n = curves.len();
         let w = w.clamp(0.0, n as f64);
-        let e = (w.floor() as usize).min(n - 1);
-        let cells = cells_of(&curves[e]);
+        let e = element_of(w).min(n - 1);
+        let cells = cells_of(&curves[e].fast);
         (e, (((w - e as f64) * cells as f64) as usize).min(cells - 1))
     }
 
     /// Largest curvature over cells `a ..= b` of element `e` (its table built if need be).
-    fn element_max(&self, curves: &[PowerCurve], e: usize, a: usize, b: usize) -> f64 {
+    fn element_max(&self, curves: &Window<Element>, e: usize, a: usize, b: usize) -> f64 {
         let mut built = self.built.borrow_mut();
         let key = self.first + e;
         if let Some((_, table)) = built.iter().rev().find(|(i, _)| *i == key) {
@@ -622,19 +857,19 @@ impl CurvatureTable {
         if built.len() == KAPPA_TABLES_KEPT {
             built.pop_front();
         }
-        let table = ElementCurvature::new(&curves[e], self.tip);
+        let table = ElementCurvature::new(&curves[e].fast, self.tip);
         let m = table.max(a, b);
         built.push_back((key, table));
         m
     }
 
     /// Largest curvature over the cells from `w0` to `w1` (`w0 <= w1`).
-    fn max(&self, curves: &[PowerCurve], w0: f64, w1: f64) -> f64 {
+    fn max(&self, curves: &Window<Element>, w0: f64, w1: f64) -> f64 {
         let ((ea, a), (eb, b)) = (Self::cell(curves, w0), Self::cell(curves, w1));
         if ea == eb {
             return self.element_max(curves, ea, a, b);
         }
-        let last = |e: usize| cells_of(&curves[e]) - 1;
+        let last = |e: usize| cells_of(&curves[e].fast) - 1;
         let mut m = self.element_max(curves, ea, a, last(ea));
         for e in ea + 1..eb {
             m = m.max(self.element_max(curves, e, 0, last(e)));
