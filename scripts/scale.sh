@@ -12,8 +12,13 @@
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
 limits="--limits lab1 --feed 500"
-echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | stops on the way | peak RSS (MB) | verify |"
-echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+if [ "${PLANNER:-erwinski}" = vpop ]; then
+  echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first setpoints (ms) | points held at most | elements held at most | peak RSS (MB) | verify |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
+else
+  echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | stops on the way | peak RSS (MB) | verify |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
+fi
 for lines in ${LINES:-1000 10000 100000}; do
   python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
   # shellcheck disable=SC2086
@@ -28,8 +33,11 @@ s = json.load(open(path))
 t, plan = s["motion_time_s"], s["plan_time_s"]
 elements = s["elements"]
 first = s.get("first_segment_time_s", s.get("first_points_time_s"))
-groups = f"{s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']}" if "groups" in s else "- | - | -"
+if "groups" in s:
+    groups = f"{s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']}"
+else:
+    groups = f"{s['most_points_held']:,} | {s['most_elements_held']:,}"
 print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "
-      f"| {first * 1e3:.1f} | {groups} | {rss / 1024:.0f} | {ok} |")
+      f"| {first * 1e3:.1f} | {groups} | {rss / 1024:.1f} | {ok} |")
 PY
 done

@@ -4,12 +4,14 @@
 //! module may take, with the stop after them) long before the plan ends: criterion's median of
 //! the time to that first group, on G1 programs of 200 and 2,000 lines (lab set 1), beside the
 //! whole streamed plan (records, stops, hold stops) of the 200-line program, the trident and
-//! the butterfly in the same process.
+//! the butterfly in the same process; and what `nurbs-planner --planner vpop` does before the
+//! motion starts (the whole VPOp plan, then the module's stop checked at every block end) on
+//! the trident and the butterfly.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::PathCurves;
-use nurbs_planner::feed::{plan_groups, stream_plan, PlanEvent, StreamStart};
+use nurbs_planner::feed::{block_plan, plan_groups, stream_plan, vpop_plan, PlanEvent, StreamStart};
 
 #[path = "../tests/common/test_paths.rs"]
 #[allow(dead_code)]
@@ -48,6 +50,19 @@ fn bench_start(c: &mut Criterion) {
         let toolpath = nurbs_motion::readers::read_toolpath(&examples.join(name)).unwrap();
         g.bench_function(format!("whole plan ({name})"), |b| {
             b.iter(|| plan_groups(&toolpath, &limits, None).unwrap().len())
+        });
+    }
+    g.finish();
+    let mut g = c.benchmark_group("vpop start");
+    g.sample_size(10);
+    for name in ["trident.json", "butterfly.json"] {
+        let toolpath = nurbs_motion::readers::read_toolpath(&examples.join(name)).unwrap();
+        g.bench_function(format!("plan ({name})"), |b| {
+            b.iter(|| vpop_plan(&toolpath, &limits, None).unwrap().points.len())
+        });
+        let plan = vpop_plan(&toolpath, &limits, None).unwrap();
+        g.bench_function(format!("block stops ({name})"), |b| {
+            b.iter(|| block_plan(&toolpath, &plan, None, 1.0).unwrap().blocks.len())
         });
     }
     g.finish();
