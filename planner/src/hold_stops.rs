@@ -591,7 +591,7 @@ impl HoldStops {
             }
         }
         let path_part = Toolpath { elements };
-        let path = JointPath::tip_reusing(&path_part, first, std::mem::take(&mut self.curvature_tables));
+        let path = JointPath::tip_reusing(path_part, first, std::mem::take(&mut self.curvature_tables));
         let point = |x: &Sample| path.eval_at(x.curve - first, x.u);
         let last: [PathPoint; 3] = [point(&recent[0])?, point(&recent[1])?, point(&recent[2])?];
         let points = vpop::brake_points(&path, &self.limits, SearchOptions::default(), last)

@@ -43,11 +43,17 @@ pub struct PathCurves {
 impl PathCurves {
     /// A whole toolpath (copied).
     pub fn new(toolpath: &Toolpath) -> Self {
+        Self::taking(toolpath.clone())
+    }
+
+    /// A whole toolpath (taken).
+    pub fn taking(toolpath: Toolpath) -> Self {
+        let tip = toolpath.tip_dim();
         PathCurves {
-            elements: Window::from_vec(toolpath.elements.clone()),
+            elements: Window::from_vec(toolpath.elements),
             source: None,
             error: None,
-            tip: toolpath.tip_dim(),
+            tip,
             generation: 0,
         }
     }

@@ -113,7 +113,8 @@ impl Store {
             let view = self.curves.view(k);
             let n = view.dim();
             let (a, b) = (view.u_min(), view.u_max());
-            let ends = (view.point(a), view.point(b));
+            let fast = PowerCurve::new(&view);
+            let ends = (fast.point(a), fast.point(b));
             let tip = self.curves.tip_dim();
             let chord = (0..tip).map(|i| (ends.1[i] - ends.0[i]).powi(2)).sum::<f64>().sqrt();
             let before = self.elements.last().map_or(0.0, |p| p.before + p.chord);
@@ -122,10 +123,10 @@ impl Store {
                     self.stops.push_back(k as f64);
                 }
             }
-            self.stops
-                .extend(interior_breaks(&view).into_iter().map(|u| k as f64 + (u - a) / (b - a)));
+            let stops = &mut self.stops;
+            interior_breaks(&view, &mut |u| stops.push_back(k as f64 + (u - a) / (b - a)));
             let element = Element {
-                fast: PowerCurve::new(&view),
+                fast,
                 span: (a, b),
                 feed: self.curves.programmed_feed(k),
                 before,
@@ -147,7 +148,11 @@ impl Store {
 impl JointPath {
     /// Tool-tip path (joints = tip coordinates).
     pub fn tip(toolpath: &Toolpath) -> Self {
-        let curves = PathCurves::new(toolpath);
+        Self::whole(PathCurves::new(toolpath))
+    }
+
+    /// A whole path, every element read.
+    fn whole(curves: PathCurves) -> Self {
         let path = Self::over(curves);
         path.store.borrow_mut().load(usize::MAX - 1);
         path
@@ -176,8 +181,8 @@ impl JointPath {
     /// curvature tables an earlier such path built for them ([`Self::into_curvature_tables`]):
     /// a short path built again and again along a longer one (a stored hold stop at every few
     /// samples) builds each element's table once.
-    pub fn tip_reusing(toolpath: &Toolpath, first: usize, tables: CurvatureTables) -> Self {
-        let mut path = Self::tip(toolpath);
+    pub fn tip_reusing(toolpath: Toolpath, first: usize, tables: CurvatureTables) -> Self {
+        let mut path = Self::whole(PathCurves::taking(toolpath));
         path.kappa.first = first;
         path.kappa.built = RefCell::new(tables.built);
         path
@@ -534,15 +539,14 @@ fn turns(left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize) -> bool {
     (0..n).map(|i| l[i] * r[i]).sum::<f64>() < 1.0 - 1e-12
 }
 
-/// Curve parameters inside one element where the path's direction turns (in all coordinates
+/// Hands `found` the curve parameters inside one element where the path's direction turns (in all coordinates
 /// of the curve: for a two-curve path, a kink of the top curve turns the joints too): an
 /// interior knot of multiplicity >= degree (C0) whose tangents differ. Together with the
 /// element joins whose unit tangents differ these are the tangent breaks: a finite-jerk motion
 /// must stop there, and VPOp lands its last sample exactly on the point.
-fn interior_breaks(view: &CurveView) -> Vec<f64> {
+fn interior_breaks(view: &CurveView, found: &mut dyn FnMut(f64)) {
     let n = view.dim();
     let (p, knots, count) = (view.degree(), view.knots(), view.control_point_count());
-    let mut out = Vec::new();
     let mut i = p + 1;
     while i < count {
         let mut m = 1;
@@ -551,11 +555,10 @@ fn interior_breaks(view: &CurveView) -> Vec<f64> {
         }
         let u = knots[i];
         if m >= p && turns(&view.derivatives_left(u, 1)[1], &view.derivatives(u, 1)[1], n) {
-            out.push(u);
+            found(u);
         }
         i += m;
     }
-    out
 }
 
 /// Curvature of the first `n` coordinates from a point and its first two derivatives.
