@@ -136,15 +136,7 @@ fn points_go_out_as_they_become_final() {
         assert_eq!(points.len(), run.points);
         assert!(run.points > 10_000, "{name}: {}", run.points);
         assert!(held as f64 * limits.period <= 0.25, "{name}: {held} points held");
-        let plan = VpopPlan {
-            points,
-            limits: run.limits,
-            axes: run.axes,
-            motion_time: run.motion_time,
-            plan_time: run.plan_time,
-            stats: run.stats,
-        };
-        check(tp, &plan);
+        check(tp, &run.with_points(points));
         let mut taken = 0;
         let refused = run_streamed(&path, limits, SearchOptions::default(), &mut |_| {
             taken += 1;

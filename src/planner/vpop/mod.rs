@@ -100,14 +100,7 @@ pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<
         points.push(*p);
         Ok(())
     })?;
-    Ok(VpopPlan {
-        points,
-        limits: run.limits,
-        axes: run.axes,
-        motion_time: run.motion_time,
-        plan_time: run.plan_time,
-        stats: run.stats,
-    })
+    Ok(run.with_points(points))
 }
 
 /// What a streamed plan came to; its points went to the caller as they became final.
@@ -126,6 +119,20 @@ pub struct VpopRun {
     /// Wall-clock time until the first points were handed out (s).
     pub first_points_time: f64,
     pub stats: SearchStats,
+}
+
+impl VpopRun {
+    /// The plan these figures are of, with its `points` (as handed out).
+    pub fn with_points(self, points: Vec<PathPoint>) -> VpopPlan {
+        VpopPlan {
+            points,
+            limits: self.limits,
+            axes: self.axes,
+            motion_time: self.motion_time,
+            plan_time: self.plan_time,
+            stats: self.stats,
+        }
+    }
 }
 
 /// Plans along `path`, handing each point to `emit` as soon as it is final (see
