@@ -441,22 +441,19 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         true => Some(JointPath::streamed(stream.take_elements())?).filter(|p| !p.has_top_curve()),
         false => None,
     };
-    let whole = match streamed {
-        Some(_) => None,
-        None => Some(prepare(args.toolpath, args.round_corners, args.limits)?),
-    };
-    let (path, five) = match (streamed, &whole) {
-        (Some(path), _) => (path, false),
-        (None, Some(whole)) => {
+    let (path, five, whole) = match streamed {
+        Some(path) => (path, false, None),
+        None => {
+            let whole = prepare(args.toolpath, args.round_corners, args.limits)?;
             let toolpath = &whole.toolpath;
             args.machine.refuse_unless_five_axis(toolpath, args.toolpath)?;
             // A top curve on every element: 5-axis on the machine (XYZAC unless --machine says otherwise).
-            match is_five_axis(toolpath) {
+            let (path, five) = match is_five_axis(toolpath) {
                 true => (JointPath::five_axis(toolpath, args.machine.kinematics())?, true),
                 false => (JointPath::tip(toolpath), false),
-            }
+            };
+            (path, five, Some(whole))
         }
-        (None, None) => unreachable!("a path read whole where it is not streamed"),
     };
     let tip = path.tip_dim();
     // Limits in joint order.
@@ -509,15 +506,15 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         rows += 1;
         Ok(())
     };
+    // A failed write ends the plan; its error is the one to report.
     let planned = run_streamed(&path, &limits, SearchOptions::default(), &mut |p| {
         write(p).map_err(|e| {
-            let message = format!("writing {}: {e}", args.out.display());
-            write_error = Some(e);
-            message
+            write_error = Some(format!("writing {}: {e}", args.out.display()));
+            "the setpoints could not be written".into()
         })
     });
     if let Some(e) = write_error {
-        return Err(format!("writing {}: {e}", args.out.display()).into());
+        return Err(e.into());
     }
     let plan = planned?;
     check.finish(&limits);

@@ -245,15 +245,14 @@ pub fn stream_plan(
                 }
             };
             let last_try = round + 1 == rounds && k + 1 == tries.len();
-            let outcome = stream_plan_once(
+            match stream_plan_once(
                 curves,
                 limits,
                 &start,
                 (feed_override, share, (ramp, skip)),
                 last_try,
                 emit,
-            );
-            match outcome {
+            ) {
                 Ok(()) => return,
                 Err((e, cut_at)) => {
                     refusals.push(e);

@@ -357,7 +357,7 @@ impl JointPath {
     }
 
     /// Element and curve parameter at `w` (the end of an element belongs to it only at the path end).
-    pub fn locate(&self, w: f64) -> (usize, f64) {
+    fn locate(&self, w: f64) -> (usize, f64) {
         let store = self.held(element_of(w));
         Self::locate_in(&store, w)
     }
@@ -485,12 +485,6 @@ impl JointPath {
             dt[i] = (p1.tip[i] - p0.tip[i]) / (hi - lo);
         }
         (dq, dt)
-    }
-
-    /// Tool-tip curvature at `w` (1/mm).
-    pub fn curvature(&self, w: f64) -> f64 {
-        let (_, _, _, d) = self.curve_derivatives(w, 2);
-        curvature_of(&d, self.tip)
     }
 
     /// Upper estimate of the tool-tip curvature on `[w0, w1]` (tabulated maxima of the cells
