@@ -42,6 +42,10 @@ pub struct JointPath {
     /// The end of the elements in view, the last element it was checked to reach the horizon
     /// from, and that horizon.
     view_checked: Cell<(usize, usize, f64)>,
+    /// The derivatives [`Self::derivative`] gives at the last `w` [`Self::eval`] evaluated on a
+    /// tool-tip path: a deceleration step asks for them at the point the step before it
+    /// found, and the curve evaluation is most of a step's cost.
+    last_derivative: Cell<(f64, [f64; MAX_AXES], [f64; 3])>,
 }
 
 /// The elements held, as far as they have been read, with what the planner needs of each.
@@ -174,6 +178,7 @@ impl JointPath {
             kinematics: None,
             stop_after: Cell::new((f64::NAN, false, f64::NAN)),
             view_checked: Cell::new((0, 0, f64::NAN)),
+            last_derivative: Cell::new((f64::NAN, [0.0; MAX_AXES], [0.0; 3])),
         }
     }
 
@@ -439,6 +444,11 @@ impl JointPath {
 
     /// Joint positions and tool tip at `w`.
     pub fn eval(&self, w: f64) -> PathPoint {
+        if self.kinematics.is_none() {
+            let (p, dq, dt) = self.eval_d(w);
+            self.last_derivative.set((w, dq, dt));
+            return p;
+        }
         let (element, u, p) = self.curve_point(w);
         self.point_at(w, element, u, &p)
     }
@@ -462,6 +472,10 @@ impl JointPath {
     /// dq/dw and d(tip)/dw at `w` (analytic for tip paths, central differences on the machine).
     pub fn derivative(&self, w: f64) -> ([f64; MAX_AXES], [f64; 3]) {
         if self.kinematics.is_none() {
+            let (at, dq, dt) = self.last_derivative.get();
+            if at == w {
+                return (dq, dt);
+            }
             let (_, _, (a, b), d) = self.curve_derivatives(w, 1);
             let mut dq = [0.0; MAX_AXES];
             let mut dt = [0.0; 3];
@@ -784,16 +798,26 @@ impl ElementCurvature {
             let s = c.spans.last().unwrap_or(&c.spans[0]);
             s.u0 + 1.0 / s.inv
         });
+        // The samples of cell k at fractions (k + j / KAPPA_SAMPLES) / cells, j = 0 ..=
+        // KAPPA_SAMPLES: the last of one cell is the first of the next (the same number), so
+        // each is evaluated once (building the tables of a dense program's corner splines was
+        // a tenth of VPOp's time there).
+        let sample = |k: usize, j: usize| {
+            let f = (k as f64 + j as f64 / KAPPA_SAMPLES as f64) / cells as f64;
+            let u = (u_min + (u_max - u_min) * f).min(u_max);
+            // A zero speed (cusp) gives infinity: kept, the caps then stop there.
+            curvature_of(&c.eval(u, 2), tip)
+        };
+        let mut first = sample(0, 0);
         let base: Vec<f64> = (0..cells)
             .map(|k| {
-                let mut m: f64 = 0.0;
-                for j in 0..=KAPPA_SAMPLES {
-                    let f = (k as f64 + j as f64 / KAPPA_SAMPLES as f64) / cells as f64;
-                    let u = (u_min + (u_max - u_min) * f).min(u_max);
-                    // A zero speed (cusp) gives infinity: kept, the caps then stop there.
-                    m = m.max(curvature_of(&c.eval(u, 2), tip));
+                let mut m = first;
+                for j in 1..KAPPA_SAMPLES {
+                    m = m.max(sample(k, j));
                 }
-                m
+                let last = sample(k + 1, 0);
+                first = last;
+                m.max(last)
             })
             .collect();
         let mut levels = vec![base];
