@@ -633,11 +633,10 @@ pub struct StoredStop {
 /// fraction and at the smallest one still fail. Stores the limits in each block (the least
 /// violating ones where none passes) and returns the choices.
 ///
-/// Measured (`vpop_start_cost`, lab set 1): 0.66 s for the trident's 229 block ends and 4.8 s
-/// for the butterfly's 955, against 1.5 and 16.9 s when every fraction was tried from the
-/// largest at every block end; 82 and 664 stored stops instead of 68 and 603 (the arena they
-/// take is the price: 4,308 instead of 4,145 on the 100 random polylines of
-/// `random_polylines_have_a_stop_within_the_limits_at_every_boundary`).
+/// Measured (`cargo bench -p nurbs-planner --features linuxcnc --bench start -- "vpop start"`,
+/// lab set 1): 0.33 s for the trident's 192 block ends, 128 of them stored, and 1.8 s for the
+/// butterfly's 848, 784 stored (trying every fraction from the largest at every block end took
+/// 2-3.5 times as long, with fewer stored: the arena they take is the price).
 pub fn choose_block_stops(
     toolpath: &Toolpath,
     limits: &Limits,
@@ -873,16 +872,12 @@ fn planned_then_brake(
     (end, resume_at): (usize, usize),
     memo: &mut BrakeMemo,
 ) -> Result<Vec<PathPoint>, usize> {
-    // VPOp's constraints use its own (power-basis) evaluation of the curve; the module plays the
-    // positions from its own (de Boor): the deceleration aims a hair inside the limits so that
-    // the finite differences of the played positions stay within them.
-    let scale = |v: &[f64]| v.iter().map(|x| x * (1.0 - BRAKE_MARGIN)).collect::<Vec<f64>>();
-    let inside = Limits {
-        velocity: scale(&limits.velocity),
-        acceleration: scale(&limits.acceleration),
-        jerk: scale(&limits.jerk),
-        ..limits.clone()
-    };
+    // The deceleration is chosen within the limits themselves, as VPOp's plan is: the module
+    // plays its positions from its own (de Boor) evaluation of the curve, which differs from
+    // VPOp's power basis by rounding, and the check of the played positions allows that
+    // ([`SLACK`]). A margin inside the limits would make the plan's own states, which ride
+    // them, unsafe to brake from: with 1e-5 the search walked on along the plan for a state
+    // that brakes, and the stops took 2.5 times as long to find.
     let first = resume_at.max(end.max(1) - 1);
     let mut i = first;
     while i < count.saturating_sub(1) {
@@ -896,7 +891,7 @@ fn planned_then_brake(
             _ => {
                 let last = [point(i.saturating_sub(2)), point(i.saturating_sub(1)), point(i)];
                 match last {
-                    [Some(a), Some(b), Some(c)] => brake_points(path, &inside, SearchOptions::default(), [a, b, c])
+                    [Some(a), Some(b), Some(c)] => brake_points(path, limits, SearchOptions::default(), [a, b, c])
                         .ok()
                         .flatten(),
                     _ => None,
@@ -942,9 +937,6 @@ impl BrakeMemo {
         }
     }
 }
-
-/// Relative margin of the stored decelerations to the axis limits.
-const BRAKE_MARGIN: f64 = 1e-5;
 
 /// [`planned_then_brake`] after the first `end` of the `count` planned positions known
 /// (searching from `resume_at`), checked as the module runs it (each position the curve point
