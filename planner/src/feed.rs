@@ -607,36 +607,35 @@ fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
     blocks
 }
 
-/// A stop sequence chosen after a record or block: its positions (path points, from the period
-/// after `from`), the choice it makes, and the tangential choice it replaces (kept if the
-/// sequence does not fit the channel).
+/// A stop sequence chosen after a block: its positions (path points, from the period after
+/// `from`) and the choice it makes.
 #[derive(Clone, Debug)]
 pub struct StoredStop {
     pub from: PathPoint,
     pub points: Vec<PathPoint>,
     pub choice: StopChoice,
-    pub tangential: StopChoice,
 }
 
 /// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
-/// every block end, the module's stop ([`block_stop`]) with jerk fractions of the tangential
-/// limits there and deceleration shares 1, 1/2, 1/4, 1/10 of each, looking for the largest
-/// fraction with a share that stays within the axis limits by finite differences, as
-/// [`StopChooser`] does for segment records, then bisects towards the next larger fraction (the
-/// tangential limits hold for the direction at the block end only, so the largest stop that
-/// passes is often just below them). The search starts at the fraction that passed at the last
-/// block end that had one ([`StopSearch::starting_at`]; the first searches from the largest).
-/// Where none passes, VPOp's own deceleration sequence from the block end ([`brake_points`])
-/// is checked the same way and taken if it does better (it is stored with the geometry;
-/// returned with the tangential choice it replaces). Within a run of such block ends the
-/// sequence is tried first, and taken if it passes while the tangential stops at that last
-/// fraction and at the smallest one still fail. Stores the limits in each block (the least
-/// violating ones where none passes) and returns the choices.
+/// every block end, VPOp's own deceleration sequence from there ([`brake_points`], after the
+/// plan's next positions where the block end's state has none), checked as the module plays
+/// it by finite differences continuing the motion; it is stored with the geometry. Where it
+/// does not pass (or cannot be stored: the last block), the module's tangential stop
+/// ([`block_stop`]) with jerk fractions of the tangential limits there and deceleration shares
+/// 1, 1/2, 1/4, 1/10 of each, looking for the largest fraction with a share that stays within
+/// the axis limits by finite differences, as [`StopChooser`] does for segment records, then
+/// bisecting towards the next larger fraction (the tangential limits hold for the direction at
+/// the block end only, so the largest stop that passes is often just below them); that search
+/// starts at the fraction that passed at the last block end that had one
+/// ([`StopSearch::starting_at`]; the first searches from the largest). Stores the limits in
+/// each block (the least violating ones where none passes) and returns the choices.
 ///
-/// Measured (`cargo bench -p nurbs-planner --features linuxcnc --bench start -- "vpop start"`,
-/// lab set 1): 0.33 s for the trident's 192 block ends, 128 of them stored, and 1.8 s for the
-/// butterfly's 848, 784 stored (trying every fraction from the largest at every block end took
-/// 2-3.5 times as long, with fewer stored: the arena they take is the price).
+/// The sequence first, because it is the cheaper to find and check: VPOp's plan checks most
+/// of its states safe to brake from, with the same sequences. Measured (`cargo bench -p
+/// nurbs-planner --features linuxcnc --bench start -- "vpop start"`, lab set 1), the trident's
+/// 192 block ends and the butterfly's 848: 0.35 s and 2.0 s with the tangential stop first
+/// (128 and 784 stored), against 0.24 s and 1.3 s with the sequence first (all stored; the
+/// arena they take, 20 % and 3 % more values, is the price).
 pub fn choose_block_stops(
     toolpath: &Toolpath,
     limits: &Limits,
@@ -654,10 +653,9 @@ pub fn choose_block_stops(
     let mut fd = FiniteDifferences::new(tip, dt);
     let mut choices = Vec::with_capacity(blocks.len());
     // Whether a search has run (the next starts from `last_passed`, the fraction index of the
-    // last tangential stop that passed), and whether the last block end's stop is stored.
+    // last tangential stop that passed).
     let mut searched = false;
     let mut last_passed = 0;
-    let mut in_stored_run = false;
     let mut brakes = BrakeMemo::default();
     // The module's evaluation of a block's points (see `Interpolator::point_at`).
     let mut spans = SpanCache::new();
@@ -714,33 +712,19 @@ pub fn choose_block_stops(
             .ok()
             .flatten()
         };
-        // In a run of block ends with no tangential stop within the limits (a tight turn), the
-        // stored sequence first: if it passes and the tangential stops at the last fraction
-        // that passed and at the smallest still do not, it is the choice, with the least
-        // violating tangential stop tried as its fallback (searching every fraction at each of
-        // them was most of the cost).
-        let mut chosen = None;
-        if in_stored_run && can_store {
-            let untried = StopChoice::tangential((1.0, 1.0), (a_max, j_max), f64::INFINITY);
-            if let Some(mut stored) = store(untried, &mut brakes) {
-                let gentlest = fractions.len() - 1;
-                if stored.choice.ratio <= 1.0 + SLACK
-                    && search.first_share(last_passed).is_none()
-                    && search.first_share(gentlest).is_none()
-                {
-                    let fallback = search.best.unwrap_or(untried);
-                    stored.choice = StopChoice {
-                        ratio: stored.choice.ratio,
-                        stored: stored.points.len(),
-                        ..fallback
-                    };
-                    stored.tangential = fallback;
-                    chosen = Some((stored.choice, Some(stored)));
-                }
-            }
-        }
-        let (best, sequence) = match chosen {
-            Some((choice, stored)) => (Some(choice), stored),
+        // VPOp's own deceleration first (the plan's states mostly brake at once: one sequence
+        // and its check), the module's tangential stop where it does not pass.
+        let stored = can_store
+            .then(|| {
+                store(
+                    StopChoice::tangential((1.0, 1.0), (a_max, j_max), f64::INFINITY),
+                    &mut brakes,
+                )
+            })
+            .flatten()
+            .filter(|s| s.choice.ratio <= 1.0 + SLACK);
+        let (best, sequence) = match stored {
+            Some(stored) => (Some(stored.choice), Some(stored)),
             None => {
                 // From the last fraction that passed: 4 ms later the state is nearly the same.
                 let found = if searched {
@@ -752,24 +736,13 @@ pub fn choose_block_stops(
                 if let Some((k, _)) = found {
                     last_passed = k;
                 }
-                let mut best = match found {
+                let best = match found {
                     Some((k, share)) => Some(search.refine(k, share)),
                     None => search.best,
                 };
-                // No tangential stop within the limits (near a tight turn, where VPOp balances
-                // the tangential jerk against the curvature terms): VPOp's own deceleration
-                // sequence.
-                let mut sequence = None;
-                if let (Some(tangential), true) = (best, can_store) {
-                    if tangential.ratio > 1.0 + SLACK {
-                        sequence = store(tangential, &mut brakes);
-                        best = sequence.as_ref().map(|s| s.choice).or(best);
-                    }
-                }
-                (best, sequence)
+                (best, None)
             }
         };
-        in_stored_run = sequence.is_some();
         sequences.push(sequence);
         if let Some(c) = best {
             b.stop_accel = c.accel;
@@ -941,8 +914,8 @@ impl BrakeMemo {
 /// [`planned_then_brake`] after the first `end` of the `count` planned positions known
 /// (searching from `resume_at`), checked as the module runs it (each position the curve point
 /// at its `u`) by finite differences continuing `fd` (the motion up to `from`, the last
-/// position before the stop): `Some` if it does better than `tangential`, the best tangential
-/// stop there; `Err` as from [`planned_then_brake`].
+/// position before the stop): `Some` if it does better than `tangential` (whose fields the
+/// choice keeps but its ratio); `Err` as from [`planned_then_brake`].
 fn stored_stop(
     path: &JointPath,
     curves: &PathCurves,
@@ -978,7 +951,6 @@ fn stored_stop(
             ..tangential
         },
         points,
-        tangential,
     }))
 }
 

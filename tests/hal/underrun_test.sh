@@ -8,8 +8,8 @@
 # later) or frozen (SIGSTOP, by its pid; later continued with SIGCONT and it must notice the
 # published stop point by itself). nurbs_interp runs out of records mid-path and stops on the path
 # at the end of the last group it has, with the stop the planner made and checked there (the
-# next segment re-planned to rest; VPOp: the module's stop from the block end, or a stored
-# sequence). The planner then plans the rest of the path from rest at the stop point and queues
+# next segment re-planned to rest; VPOp: its stored deceleration sequence from the block end,
+# or the module's tangential stop). The planner then plans the rest of the path from rest at the stop point and queues
 # it; `setp nurbs_interp.resume 1` runs it. Checks (check_underrun.py, nurbs-plan verify): the
 # samples are the offline plan (erwinski: `nurbs-plan plan --stream`, what the machine runs) up
 # to the cut, then a stop whose feed, once it falls, never rises and that ends at rest, no
