@@ -15,6 +15,10 @@ pub struct Limits {
     pub chord_tolerance: f64,
     /// Interpolation (servo) period (s).
     pub period: f64,
+    /// Share of every axis' jerk limit the Erwinski planner leaves unused (0 <= r < 1), so that
+    /// a hold can brake at once where the plan would otherwise ride an axis' jerk limit through
+    /// the curvature; the stops and every check keep the full limits ([`Limits::planned`]).
+    pub hold_reserve: f64,
 }
 
 /// A limit set that cannot be planned with.
@@ -38,6 +42,7 @@ impl Limits {
             jerk: vec![jerk; axes],
             chord_tolerance,
             period,
+            hold_reserve: 0.0,
         }
     }
 
@@ -64,6 +69,12 @@ impl Limits {
                 return Err(LimitsError(format!("{name} {x} must be a finite number > 0")));
             }
         }
+        if !(0.0..1.0).contains(&self.hold_reserve) {
+            return Err(LimitsError(format!(
+                "hold reserve {} must be at least 0 and below 1",
+                self.hold_reserve
+            )));
+        }
         Ok(Limits {
             feed: self.feed,
             velocity: spread("velocity", &self.velocity)?,
@@ -71,7 +82,21 @@ impl Limits {
             jerk: spread("jerk", &self.jerk)?,
             chord_tolerance: self.chord_tolerance,
             period: self.period,
+            hold_reserve: self.hold_reserve,
         })
+    }
+
+    /// The limits a plan is made within: every axis' jerk less the hold reserve (the limits
+    /// themselves where it is 0).
+    pub fn planned(&self) -> Limits {
+        if self.hold_reserve == 0.0 {
+            return self.clone();
+        }
+        Limits {
+            jerk: self.jerk.iter().map(|j| j * (1.0 - self.hold_reserve)).collect(),
+            hold_reserve: 0.0,
+            ..self.clone()
+        }
     }
 
     /// Smallest acceleration and jerk over the axes: the tangential values a plan starts from

@@ -33,6 +33,7 @@ impl Preset {
             jerk: self.jerk.to_vec(),
             chord_tolerance: self.chord_tolerance,
             period: self.period,
+            hold_reserve: 0.0,
         }
     }
 

@@ -191,8 +191,14 @@ pub fn job(name: &str) -> Job {
 
 /// [`job`] of a file anywhere.
 pub fn job_at(path: &Path) -> Job {
-    let prepared = prepare(path, Some(RoundCorners::Auto), &chord_tolerance(0.001)).unwrap();
-    job_of(prepared.toolpath)
+    job_of(prepared(path))
+}
+
+/// The toolpath of a file as `nurbs-plan` prepares it (corners rounded).
+pub fn prepared(path: &Path) -> Toolpath {
+    prepare(path, Some(RoundCorners::Auto), &chord_tolerance(0.001))
+        .unwrap()
+        .toolpath
 }
 
 /// [`job_at`] with the runs of short G1 pieces fitted (`--round-corners smooth`).
@@ -217,6 +223,11 @@ pub fn dense_g1(lines: usize, dir: &Path) -> PathBuf {
 
 pub fn job_of(toolpath: Toolpath) -> Job {
     let limits = lab1(toolpath.tip_dim()).for_axes(toolpath.tip_dim()).unwrap();
+    job_within(toolpath, limits)
+}
+
+/// [`job_of`] with other limits.
+pub fn job_within(toolpath: Toolpath, limits: Limits) -> Job {
     let groups = plan_groups(&toolpath, &limits, None).unwrap();
     let records: Vec<_> = groups.iter().flat_map(|g| g.slots.iter().map(|s| s.record)).collect();
     let samples = setpoints(&PathCurves::new(&toolpath), &limits, &records);

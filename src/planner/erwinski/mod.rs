@@ -409,7 +409,7 @@ impl Planner {
             return Err(PlanError::EmptyPath);
         }
         let tip = curves.tip_dim();
-        let limits = limits.for_axes(tip)?;
+        let limits = limits.for_axes(tip)?.planned();
         let target_override = options.feed_override;
         let previous_override = options.moving.map_or(target_override, |m| m.feed_override);
         if ![target_override, previous_override]
