@@ -286,7 +286,9 @@ fn stream_plan_once(
         StreamStart::Rest(from) => (from.map(|p| plan_start(&mut curves, &p)), None, None),
         StreamStart::After { end, .. } => (Some(end.start(&mut curves)), Some(end.moving(brake_share)), None),
         StreamStart::Cut { from, .. } => {
-            let cut = match cut_into(&mut curves, limits, from, feed_override, (cut_ramp, skip)) {
+            // The ramp is the new plan's first record: within the limits it plans in (less the
+            // hold reserve), as the plan after it.
+            let cut = match cut_into(&mut curves, &limits.planned(), from, feed_override, (cut_ramp, skip)) {
                 Ok(cut) => cut,
                 Err(e) if last_try => {
                     emit(PlanEvent::Failed(format!(

@@ -7,7 +7,8 @@
 //! tool decelerates: the first sample from which its feed falls at every sample to rest, where
 //! that comes before the plan is left (a hold while the plan itself brakes into
 //! sharp curvature at the jerk limit follows that braking to the next stop). `HOLD_INSTANTS`
-//! (default 12 per path) selects a longer run; docs/testing.md records one of 1,000.
+//! (default 12 per path) selects a longer run, `HOLD_RESERVE` plans every path with that hold
+//! reserve (`--hold-reserve`); docs/testing.md records one of 1,000.
 
 mod common;
 

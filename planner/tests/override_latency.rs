@@ -5,8 +5,8 @@
 //! a checked hold stop ([`nurbs_planner::cut`]) or joining at a group end. Every run stays
 //! within the axis limits (the project's check over every sample), and the latency from the
 //! change to the first sample that leaves the plan at 100 % is collected and its distribution
-//! printed. `OVERRIDE_INSTANTS` (default 2 per path) selects a longer run; docs/testing.md
-//! records one.
+//! printed. `OVERRIDE_INSTANTS` (default 2 per path) selects a longer run, `HOLD_RESERVE` plans
+//! every path with that hold reserve (`--hold-reserve`); docs/testing.md records one.
 
 mod common;
 

@@ -221,8 +221,13 @@ pub fn dense_g1(lines: usize, dir: &Path) -> PathBuf {
     path
 }
 
+/// Planned at lab set 1; with the environment's `HOLD_RESERVE` where it is set (measurement
+/// runs of the hold and feed-override tests with a hold reserve, `--hold-reserve`).
 pub fn job_of(toolpath: Toolpath) -> Job {
-    let limits = lab1(toolpath.tip_dim()).for_axes(toolpath.tip_dim()).unwrap();
+    let mut limits = lab1(toolpath.tip_dim()).for_axes(toolpath.tip_dim()).unwrap();
+    if let Some(r) = std::env::var("HOLD_RESERVE").ok().and_then(|v| v.parse().ok()) {
+        limits.hold_reserve = r;
+    }
     job_within(toolpath, limits)
 }
 
