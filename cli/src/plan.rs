@@ -464,6 +464,9 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     };
     let axes = path.axes();
     let limits = limits.for_axes(axes)?;
+    if limits.hold_reserve > 0.0 {
+        eprintln!("{}", nurbs_motion::planner::vpop::HOLD_RESERVE_IGNORED);
+    }
     let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
     if five {
         let joints = args.machine.kinematics().joint_names().join(",");

@@ -700,31 +700,26 @@ pub fn choose_block_stops(
         };
         let point = |i: usize| points.get(i).copied();
         let can_store = !b.is_last() && end >= 1;
-        let store = |tangential: StopChoice, brakes: &mut BrakeMemo| {
-            let from = (end, points[end - 1], 0);
-            stored_stop(
-                &path,
-                &curves,
-                limits,
-                (fd, &point, points.len()),
-                from,
-                tangential,
-                brakes,
-            )
-            .ok()
-            .flatten()
-        };
         // VPOp's own deceleration first (the plan's states mostly brake at once: one sequence
         // and its check), the module's tangential stop where it does not pass.
         let stored = can_store
             .then(|| {
-                store(
-                    StopChoice::tangential((1.0, 1.0), (a_max, j_max), f64::INFINITY),
-                    &mut brakes,
-                )
+                let from = (end, points[end - 1], 0);
+                stored_stop(&path, &curves, limits, (fd, &point, points.len()), from, &mut brakes)
             })
+            .and_then(Result::ok)
             .flatten()
-            .filter(|s| s.choice.ratio <= 1.0 + SLACK);
+            .filter(|s| s.ratio <= 1.0 + SLACK)
+            .map(|s| StoredStop {
+                // The block keeps the tangential limits there (the module's stop, were it to
+                // need one) and the stored sequence's ratio.
+                choice: StopChoice {
+                    stored: s.points.len(),
+                    ..StopChoice::tangential((1.0, 1.0), (a_max, j_max), s.ratio)
+                },
+                from: s.from,
+                points: s.points,
+            });
         let (best, sequence) = match stored {
             Some(stored) => (Some(stored.choice), Some(stored)),
             None => {
@@ -916,17 +911,16 @@ impl BrakeMemo {
 /// [`planned_then_brake`] after the first `end` of the `count` planned positions known
 /// (searching from `resume_at`), checked as the module runs it (each position the curve point
 /// at its `u`) by finite differences continuing `fd` (the motion up to `from`, the last
-/// position before the stop): `Some` if it does better than `tangential` (whose fields the
-/// choice keeps but its ratio); `Err` as from [`planned_then_brake`].
+/// position before the stop): its positions and worst ratio to an axis limit, `None` where it
+/// would step back over an element; `Err` as from [`planned_then_brake`].
 fn stored_stop(
     path: &JointPath,
     curves: &PathCurves,
     limits: &Limits,
     (fd, point, count): (FiniteDifferences, &dyn Fn(usize) -> Option<PathPoint>, usize),
     (end, from, resume_at): (usize, PathPoint, usize),
-    tangential: StopChoice,
     memo: &mut BrakeMemo,
-) -> Result<Option<StoredStop>, usize> {
+) -> Result<Option<CheckedStop>, usize> {
     let points = planned_then_brake(path, limits, (point, count), (end, resume_at), memo)?;
     // Elements only onwards, one at a time (the module checks each step).
     let onwards = points.iter().try_fold(from.element, |e, p| {
@@ -944,16 +938,18 @@ fn stored_stop(
         f.push(&point[..tip], limits);
     }
     f.finish(limits);
-    let ratio = f.worst_ratio(limits);
-    Ok((ratio < tangential.ratio).then_some(StoredStop {
+    Ok(Some(CheckedStop {
         from,
-        choice: StopChoice {
-            ratio,
-            stored: points.len(),
-            ..tangential
-        },
         points,
+        ratio: f.worst_ratio(limits),
     }))
+}
+
+/// A stored stop sequence as [`stored_stop`] checked it.
+struct CheckedStop {
+    from: PathPoint,
+    points: Vec<PathPoint>,
+    ratio: f64,
 }
 
 /// The arena values of the stored stop `points` that follow `from`: a [`StopRun`] per element,

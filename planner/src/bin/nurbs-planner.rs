@@ -114,6 +114,9 @@ fn start_motion<'a>(
             let first = from.map_or(0, |p| feed::plan_start(&mut PathCurves::new(path), p).curve);
             let tip = path.tip_dim();
             let path = Arc::clone(path);
+            if limits.hold_reserve > 0.0 {
+                say!("nurbs-planner: {}", nurbs_motion::planner::vpop::HOLD_RESERVE_IGNORED);
+            }
             // The whole VPOp plan and its stop checks come before the motion: in a thread, so
             // that a signal still ends the planner at once.
             let (plan_limits, start, fraction) = (limits.clone(), from.copied(), args.stop_fraction);

@@ -103,6 +103,11 @@ pub fn run(path: &JointPath, limits: &Limits, options: SearchOptions) -> Result<
     Ok(run.with_points(points))
 }
 
+/// What the command lines say where VPOp is given a hold reserve ([`Limits::hold_reserve`]):
+/// VPOp plans at the limits themselves (its stops come at every path block's end).
+pub const HOLD_RESERVE_IGNORED: &str =
+    "the hold reserve applies to the Erwinski planner: VPOp plans at the limits themselves";
+
 /// What a streamed plan came to; its points went to the caller as they became final.
 #[derive(Clone, Debug)]
 pub struct VpopRun {
