@@ -146,7 +146,10 @@ impl<'a> GeometryWriter<'a> {
         }
     }
 
-    /// Where `n` values can go now (physical offset), without wrapping inside them.
+    /// Where `n` values can go now (physical offset), without wrapping inside them: after the
+    /// last write, else at the arena's start, where no value the module may still read lies.
+    /// (Where the writing has come round to the oldest value held, the arena is full: the two
+    /// positions alone cannot tell that from an empty arena, so every held range is looked at.)
     fn room(&self, n: usize) -> Result<usize, WriteError> {
         let capacity = self.arena_values;
         if n > capacity {
@@ -154,20 +157,14 @@ impl<'a> GeometryWriter<'a> {
                 "{n} values do not fit the channel's arena of {capacity}"
             )));
         }
-        let Some(oldest) = self.held.front().map(|h| h.start) else {
-            return Ok(if self.write + n <= capacity { self.write } else { 0 });
+        let free = |at: usize| {
+            at + n <= capacity
+                && self
+                    .held
+                    .iter()
+                    .all(|h| h.start == h.end || h.end <= at || at + n <= h.start)
         };
-        if self.write >= oldest {
-            if self.write + n <= capacity {
-                return Ok(self.write);
-            }
-            if n <= oldest {
-                return Ok(0);
-            }
-        } else if self.write + n <= oldest {
-            return Ok(self.write);
-        }
-        Err(WriteError::Full)
+        [self.write, 0].into_iter().find(|&at| free(at)).ok_or(WriteError::Full)
     }
 
     /// Writes `values` into the arena to stay until `release`; returns their offset.

@@ -11,7 +11,7 @@ use common::*;
 use nurbs_hal::channel::{CurveDesc, GeometryHeader, CURVE_SLOTS};
 use nurbs_hal::module::{FaultCode, VALIDATION_VALUES_PER_PERIOD};
 use nurbs_planner::feed::{Source, Streamer};
-use nurbs_planner::writer::{GeometryWriter, WriteError};
+use nurbs_planner::writer::{GeometryWriter, Release, WriteError};
 
 /// Many small curves (a 150-line G1 program, 299 elements) and one curve larger than a
 /// period's slice: the module checks at most [`VALIDATION_VALUES_PER_PERIOD`] values per
@@ -149,6 +149,30 @@ fn bad_curves_and_streams_are_refused() {
 /// [`CURVE_SLOTS`] and the whole arena): the curves go in as the records need them and reuse
 /// slots and values the module has passed; the module plays the offline streamed setpoints bit
 /// for bit.
+/// The arena is written round and round: values go after the last ones written, or at its
+/// start, never over values the module may still read. Written round to exactly the oldest
+/// value held, it is full (a writer that compared the two positions took that for empty and
+/// wrote over a curve in use: garbage positions on a long G1 program through a small arena).
+#[test]
+fn an_arena_written_round_to_its_oldest_value_is_full() {
+    let _guard = lock_module();
+    let l = load();
+    let mut w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    w.limit(100, 64);
+    let kept = Release::Slot(1_000_000);
+    assert_eq!(w.put(&[1.0; 30], Release::Slot(0)), Ok(0));
+    assert_eq!(w.put(&[2.0; 70], kept), Ok(30));
+    // The first 30 are released once the module has taken slot 2.
+    w.reclaim(2);
+    assert_eq!(w.put(&[3.0; 30], kept), Ok(0));
+    // 30..100 and 0..30 are held: nothing fits anywhere, not even one value.
+    assert_eq!(w.put(&[4.0; 10], kept), Err(WriteError::Full));
+    assert_eq!(w.put(&[4.0; 1], kept), Err(WriteError::Full));
+    // Nothing was written over.
+    let read = &l.channel.geometry.values()[..100];
+    assert!(read[..30].iter().all(|&v| v == 3.0) && read[30..].iter().all(|&v| v == 2.0));
+}
+
 #[test]
 fn a_program_longer_than_the_channel_reuses_it() {
     let _guard = lock_module();
