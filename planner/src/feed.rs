@@ -1253,7 +1253,7 @@ pub struct Replanner {
     /// late.
     lead: f64,
     /// How long the last re-plan took from its start until it was ready to join (s); before
-    /// the first, how long the first plan took to plan [`START_AHEAD`] of motion.
+    /// the first, how long the first plan took to plan [`FIRST_LEAD_PLANNED`] of motion.
     ready_after: Option<f64>,
     /// When the override the next re-plan is for was asked for, where earlier re-plans at it
     /// came too late.
@@ -1323,11 +1323,18 @@ const REPLAN_LOW_WATER: f64 = 0.05;
 /// checked hold stop there (a cut into the record), else at the first group end with that much
 /// motion queued before it. Where it comes too late, the lead doubles, up to
 /// [`JOIN_LEAD_MAX`].
-const JOIN_LEAD: f64 = 0.02;
+/// Below 30 ms most cuts into the butterfly and a G1 zigzag came too late (their re-plans are
+/// ready in 15-35 ms), and a late one costs a second try further ahead (60-100 ms).
+const JOIN_LEAD: f64 = 0.03;
 const JOIN_LEAD_MAX: f64 = 0.32;
 
 /// ... and asks the module only while at least this much is (s).
 const SPLICE_LAST_CALL: f64 = 0.005;
+
+/// Motion (s) a re-plan must plan before it is ready to join, as first estimated: at the leads
+/// it joins with (30-60 ms) the motion before the join makes up the rest of [`START_AHEAD`].
+/// Its first plan's time to plan this much is the first re-plan's expected time.
+const FIRST_LEAD_PLANNED: f64 = 0.5 * START_AHEAD;
 
 impl Source {
     /// The Erwinski plan of `path` (from its start, or from rest at the stop point `from`) at
@@ -1650,9 +1657,9 @@ impl<'a> Streamer<'a> {
                 Ok(PlanEvent::Group(g)) => {
                     self.planned += g.time;
                     self.groups_planned += 1;
-                    if let (true, Some(r)) = (self.planned >= START_AHEAD, replanner.as_deref_mut()) {
+                    if let (true, Some(r)) = (self.planned >= FIRST_LEAD_PLANNED, replanner.as_deref_mut()) {
                         // What a re-plan of this path will take to be ready, until one has been:
-                        // what its first plan took to plan as much.
+                        // what its first plan took to plan as much as a re-plan must.
                         r.ready_after.get_or_insert(self.began.elapsed().as_secs_f64());
                     }
                     *queued += g.time;

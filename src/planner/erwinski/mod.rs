@@ -283,6 +283,11 @@ pub struct Planner {
     /// the feed each starts with.
     records: Window<SegmentRecord>,
     states: Window<SimState>,
+    /// Samples of the motion before the plan's first record (a plan that continues another's).
+    start_samples: usize,
+    /// Stop chains that failed since the settle at `.0`, by [`Planner::chain_inputs`]: the
+    /// same chain is not tried again (a back-tracking cascade brings the front back over them).
+    failed_chains: (usize, Vec<Vec<u64>>),
     start_feeds: Window<f64>,
     /// Segment being planned.
     k: usize,
@@ -495,6 +500,8 @@ impl Planner {
             peak_caps: Window::default(),
             end_known: false,
             records: Window::default(),
+            start_samples: first_state.samples,
+            failed_chains: (0, Vec::new()),
             states: Window::from_vec(vec![first_state]),
             start_feeds: Window::from_vec(vec![first_feed]),
             first_seq,
@@ -825,7 +832,9 @@ impl Planner {
     /// aiming at the feed a backward pass from rest allows: the stop after the records before
     /// `j` where no single segment can stop (the short segments of a dense G1 program). Each
     /// segment is solved and checked as every segment is, and the machine holding after the
-    /// last; `None` if one fails. Returns the records with the state after each.
+    /// last; where one cannot start as fast as the one before it ends, that one is solved again
+    /// to end slower (step 9 within the chain, at most [`CHAIN_BACK_STEPS`] times). `None` if
+    /// one still fails. Returns the records with the state after each.
     fn stop_chain(&self, j: usize, work_budget: u64, kind: StopKind) -> Option<Vec<(SegmentRecord, SimState)>> {
         let v0 = self.start_feeds[j];
         let braking = 2.0 * ramp_distance(v0, 0.0, self.accel, self.jerk);
@@ -853,17 +862,31 @@ impl Planner {
                 cap,
             ));
         }
-        let (mut v, mut state) = (v0, self.states[j]);
-        let mut chain = Vec::with_capacity(m - j);
-        for i in j..m {
+        let mut chain: Vec<(SegmentRecord, SimState)> = Vec::with_capacity(m - j);
+        let (mut i, mut back_steps) = (j, 0);
+        while i < m {
+            let (v, state) = match chain.last() {
+                Some((record, state)) => (record.profile().table().end().v.max(0.0), *state),
+                None => (v0, self.states[j]),
+            };
             let ctx = kind.context(self.context(i, work_budget), v);
-            let (record, next) = solve_segment(&ctx, v, kind.end_feed(targets[i - j + 1], v), &state).ok()?;
-            if i + 1 == m && !holds_after(&ctx, &state, record) {
-                return None;
+            match solve_segment(&ctx, v, kind.end_feed(targets[i - j + 1], v), &state) {
+                Ok((record, next)) => {
+                    if i + 1 == m && !holds_after(&ctx, &state, record) {
+                        return None;
+                    }
+                    chain.push((record, next));
+                    i += 1;
+                }
+                // Step 9 within the chain: the segment before ends slower.
+                Err(SegmentFailure::StartTooFast(max)) if i > j && max < v && back_steps < CHAIN_BACK_STEPS => {
+                    back_steps += 1;
+                    targets[i - j] = targets[i - j].min(max);
+                    chain.pop();
+                    i -= 1;
+                }
+                Err(_) => return None,
             }
-            v = record.profile().table().end().v.max(0.0);
-            state = next;
-            chain.push((record, next));
         }
         Some(chain)
     }
@@ -900,16 +923,28 @@ impl Planner {
     /// waiting for the whole run.
     fn settle_on_a_chain(&mut self, budget: u64) {
         // The first record waits for the machine: a chain closer to the front settles it.
-        let behind = if self.settled == 0 {
-            FIRST_CHAIN_LOOK_BEHIND
+        // So does the rest of its first run, and a re-plan's (a feed override joins the motion
+        // once that much is final).
+        let final_time = (self.states[self.settled].samples - self.start_samples) as f64 * self.limits.period;
+        let (behind, after) = if self.settled == 0 {
+            (FIRST_CHAIN_LOOK_BEHIND, 0.0)
+        } else if final_time < EARLY_RUN {
+            (FIRST_CHAIN_LOOK_BEHIND, EARLY_CHAIN_AFTER)
         } else {
-            CHAIN_LOOK_BEHIND
+            (CHAIN_LOOK_BEHIND, CHAIN_AFTER)
         };
         let Some(j) = self.k.checked_sub(behind).filter(|&j| j > self.settled) else {
             return;
         };
         let unsettled: f64 = (self.settled..j).map(|i| self.records[i].profile().total_time()).sum();
-        if unsettled < CHAIN_AFTER && self.settled > 0 {
+        if unsettled < after {
+            return;
+        }
+        if self.failed_chains.0 != self.settled {
+            self.failed_chains = (self.settled, Vec::new());
+        }
+        let key = self.chain_inputs(j);
+        if key.as_ref().is_some_and(|key| self.failed_chains.1.contains(key)) {
             return;
         }
         if let Some(chain) = self.stop_chain(j, budget, StopKind::Plan) {
@@ -917,7 +952,40 @@ impl Planner {
             self.settled = j;
             self.settled_stop = chain.iter().map(|(r, _)| *r).collect();
             self.chain = Some((j, chain));
+        } else if let Some(key) = key {
+            if self.failed_chains.1.len() >= FAILED_CHAINS_KEPT {
+                self.failed_chains.1.remove(0);
+            }
+            self.failed_chains.1.push(key);
         }
+    }
+
+    /// Everything [`Planner::stop_chain`] from `j` depends on (but the work budget), as bits:
+    /// the records since the last settle (the state at `j` and its start feed follow from
+    /// them), and the nodes, lengths, feed caps and peak caps of the segments it would re-plan
+    /// (with whether one of them is the path's last). `None` where it would not solve a segment.
+    fn chain_inputs(&self, j: usize) -> Option<Vec<u64>> {
+        let braking = 2.0 * ramp_distance(self.start_feeds[j], 0.0, self.accel, self.jerk);
+        let (mut m, mut room) = (j, 0.0);
+        while room < braking {
+            if m + 1 >= self.bounds.len() || m >= j + StopKind::Plan.chain_max() {
+                return None;
+            }
+            room += self.lengths[m];
+            m += 1;
+        }
+        let mut key = vec![j as u64, u64::from(self.end_known), self.bounds.len().min(m + 3) as u64];
+        for i in self.settled..j {
+            key.extend(self.records[i].to_words());
+        }
+        for i in j..m {
+            key.extend([self.lengths[i], self.feeds[i + 1], self.peak_caps[i]].map(f64::to_bits));
+            for n in [self.bounds[i], self.bounds[i + 1]] {
+                key.extend([n.end_u, n.end_s, n.start_u, n.start_s, n.cap].map(f64::to_bits));
+                key.extend([n.start_curve as u64, u64::from(n.hard)]);
+            }
+        }
+        Some(key)
     }
 
     /// Plans segment `k` once: accepted (on to the next), split, or back-tracked.

@@ -17,6 +17,11 @@ pub(super) const CHAIN_LOOK_BEHIND: usize = 64;
 /// The same before the first record: the motion waits for it.
 pub(super) const FIRST_CHAIN_LOOK_BEHIND: usize = 16;
 
+/// Motion time (s) of a plan's first records settled by chains [`FIRST_CHAIN_LOOK_BEHIND`]
+/// behind the front, each once [`EARLY_CHAIN_AFTER`] of motion waits (`EARLY_RUN`).
+pub(super) const EARLY_RUN: f64 = 0.1;
+pub(super) const EARLY_CHAIN_AFTER: f64 = 0.025;
+
 /// Motion time (s) from a stop to the next one offered inside a run of records settled
 /// together, and between tries where one fails (most fail on dense G1 programs: a short segment
 /// in a rounded corner that brakes exceeds an axis' jerk). On the dense G1 program of
@@ -38,6 +43,12 @@ pub(super) const INNER_STOP_ATTEMPTS: usize = 3;
 /// program take a few hundred; without a bound of its own, a stop that cannot pass could take
 /// the plan's whole budget (minutes, on some random curves of the property test).
 pub(super) const INNER_STOP_WORK: u64 = 20_000;
+
+/// Failed stop chains remembered (not tried again while their inputs are the same).
+pub(super) const FAILED_CHAINS_KEPT: usize = 16;
+
+/// Segments of a stop chain solved again to end slower where the next cannot start as fast.
+pub(super) const CHAIN_BACK_STEPS: usize = 16;
 
 /// Most segments of a stop chain.
 pub(super) const CHAIN_MAX: usize = 256;
