@@ -16,7 +16,7 @@ use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Instant;
 
-use crate::cut::{cut_into, CutFrom, CutPlace, CUT_RAMPS};
+use crate::cut::{cut_into, CutFrom, CutPlace, ElementTables, CUT_RAMPS};
 use crate::hold_stops::{HoldStops, RecordStops};
 use crate::say;
 use crate::shared_path::SharedPath;
@@ -234,6 +234,7 @@ pub fn stream_plan(
         1
     };
     let (mut refusals, mut skip) = (Vec::new(), 0);
+    let mut tables = ElementTables::default();
     for round in 0..rounds {
         let mut next_skip = usize::MAX;
         for (k, &(share, ramp)) in tries.iter().enumerate() {
@@ -250,7 +251,7 @@ pub fn stream_plan(
                 limits,
                 &start,
                 (feed_override, share, (ramp, skip)),
-                last_try,
+                (last_try, &mut tables),
                 emit,
             ) {
                 Ok(()) => return,
@@ -279,7 +280,7 @@ fn stream_plan_once(
     limits: &Limits,
     start: &StreamStart,
     (feed_override, brake_share, (cut_ramp, skip)): (f64, f64, (usize, usize)),
-    last_try: bool,
+    (last_try, tables): (bool, &mut ElementTables),
     emit: &mut dyn FnMut(PlanEvent) -> bool,
 ) -> Result<(), (String, Option<usize>)> {
     let (plan_from, moving, cut) = match start {
@@ -288,7 +289,14 @@ fn stream_plan_once(
         StreamStart::Cut { from, .. } => {
             // The ramp is the new plan's first record: within the limits it plans in (less the
             // hold reserve), as the plan after it.
-            let cut = match cut_into(&mut curves, &limits.planned(), from, feed_override, (cut_ramp, skip)) {
+            let cut = match cut_into(
+                &mut curves,
+                &limits.planned(),
+                from,
+                feed_override,
+                (cut_ramp, skip),
+                tables,
+            ) {
                 Ok(cut) => cut,
                 Err(e) if last_try => {
                     emit(PlanEvent::Failed(format!(
