@@ -1330,9 +1330,9 @@ const REPLAN_LOW_WATER: f64 = 0.05;
 /// module, and as far as the last re-plan took to be ready ([`Replanner::lead`]): at the first
 /// checked hold stop there (a cut into the record), else at the first group end with that much
 /// motion queued before it. Where it comes too late, the lead doubles, up to
-/// [`JOIN_LEAD_MAX`].
-/// Below 30 ms most cuts into the butterfly and a G1 zigzag came too late (their re-plans are
-/// ready in 15-35 ms), and a late one costs a second try further ahead (60-100 ms).
+/// [`JOIN_LEAD_MAX`]. Below 30 ms most first cuts into the butterfly and a G1 zigzag came too
+/// late (their re-plans are ready in 15-35 ms), and a late one costs a second try further
+/// ahead (60-100 ms after the change).
 const JOIN_LEAD: f64 = 0.03;
 const JOIN_LEAD_MAX: f64 = 0.32;
 
