@@ -837,15 +837,7 @@ impl Planner {
     /// one still fails. Returns the records with the state after each.
     fn stop_chain(&self, j: usize, work_budget: u64, kind: StopKind) -> Option<Vec<(SegmentRecord, SimState)>> {
         let v0 = self.start_feeds[j];
-        let braking = 2.0 * ramp_distance(v0, 0.0, self.accel, self.jerk);
-        let (mut m, mut room) = (j, 0.0);
-        while room < braking {
-            if m + 1 >= self.bounds.len() || m >= j + kind.chain_max() {
-                return None;
-            }
-            room += self.lengths[m];
-            m += 1;
-        }
+        let (m, room, braking) = self.chain_end(j, kind)?;
         if matches!(kind, StopKind::Inner) && room > 2.0 * braking {
             // Never faster than where it starts, it would crawl over the room left.
             return None;
@@ -960,20 +952,29 @@ impl Planner {
         }
     }
 
-    /// Everything [`Planner::stop_chain`] from `j` depends on (but the work budget), as bits:
-    /// the records since the last settle (the state at `j` and its start feed follow from
-    /// them), and the nodes, lengths, feed caps and peak caps of the segments it would re-plan
-    /// (with whether one of them is the path's last). `None` where it would not solve a segment.
-    fn chain_inputs(&self, j: usize) -> Option<Vec<u64>> {
+    /// The node a stop chain of `kind` from `j` comes to rest at: the first with twice the
+    /// braking distance from the start feed (nominal tangential limits) behind it, with that
+    /// room and that twice-braking distance; `None` where the nodes known, or the chain's most
+    /// segments, end first.
+    fn chain_end(&self, j: usize, kind: StopKind) -> Option<(usize, f64, f64)> {
         let braking = 2.0 * ramp_distance(self.start_feeds[j], 0.0, self.accel, self.jerk);
         let (mut m, mut room) = (j, 0.0);
         while room < braking {
-            if m + 1 >= self.bounds.len() || m >= j + StopKind::Plan.chain_max() {
+            if m + 1 >= self.bounds.len() || m >= j + kind.chain_max() {
                 return None;
             }
             room += self.lengths[m];
             m += 1;
         }
+        Some((m, room, braking))
+    }
+
+    /// Everything [`Planner::stop_chain`] from `j` depends on (but the work budget), as bits:
+    /// the records since the last settle (the state at `j` and its start feed follow from
+    /// them), and the nodes, lengths, feed caps and peak caps of the segments it would re-plan
+    /// (with whether one of them is the path's last). `None` where it would not solve a segment.
+    fn chain_inputs(&self, j: usize) -> Option<Vec<u64>> {
+        let (m, _, _) = self.chain_end(j, StopKind::Plan)?;
         let mut key = vec![j as u64, u64::from(self.end_known), self.bounds.len().min(m + 3) as u64];
         for i in self.settled..j {
             key.extend(self.records[i].to_words());
