@@ -872,15 +872,5 @@ const LANDING: f64 = 1e-9;
 /// axes of the limit over the axis' share of the unit tangent.
 pub fn tangential_limits(curves: &PathCurves, limits: &Limits, e: usize, u: f64) -> (f64, f64) {
     let tip = limits.velocity.len();
-    let d = curves.view(e).derivatives(u, 1)[1];
-    let norm = d[..tip].iter().map(|x| x * x).sum::<f64>().sqrt();
-    let (mut a, mut j) = (f64::INFINITY, f64::INFINITY);
-    for ((di, ai), ji) in d.iter().zip(&limits.acceleration).zip(&limits.jerk).take(tip) {
-        let share = if norm > 0.0 { (di / norm).abs() } else { 1.0 };
-        if share > 0.0 {
-            a = a.min(ai / share);
-            j = j.min(ji / share);
-        }
-    }
-    (a.max(limits.min_accel()), j.max(limits.min_jerk()))
+    limits.along(&curves.view(e).derivatives(u, 1)[1][..tip])
 }

@@ -145,7 +145,7 @@ fn bad_curves_and_streams_are_refused() {
 }
 
 /// A G1 program longer than what the writer may use (here limited to 64 descriptors in flight
-/// and 3,000 arena values, some 100 curves: as a program longer than the channel runs through
+/// and 6,000 arena values: as a program longer than the channel runs through
 /// [`CURVE_SLOTS`] and the whole arena): the curves go in as the records need them and reuse
 /// slots and values the module has passed; the module plays the offline streamed setpoints bit
 /// for bit.
@@ -188,14 +188,17 @@ fn a_program_longer_than_the_channel_reuses_it() {
         Instant::now(),
     )
     .unwrap();
-    s.writer().limit(3000, 64);
+    // An arena far smaller than the machine's, but one that holds the group running and the
+    // next one, each with its curves and stored hold stops (up to 7 curves a group here): with
+    // less, the next group waits for the running one to end, and the module underruns there.
+    s.writer().limit(6000, 64);
     let got = run(&mut s, job.samples.len() + 100, &mut |_| {}, &mut |_| {
         bit("nurbs_interp.done") || bit("nurbs_interp.fault") || bit("nurbs_interp.held")
     });
     assert_exact("zigzag 400", &got, &job.samples, 2);
     assert_eq!(u32_pin("nurbs_interp.underruns"), 0);
     println!(
-        "{} elements through 64 descriptor slots and 3,000 arena values ({} of {CURVE_SLOTS} slots and the whole arena on the machine)",
+        "{} elements through 64 descriptor slots and 6,000 arena values ({} of {CURVE_SLOTS} slots and the whole arena on the machine)",
         job.toolpath.elements.len(),
         64
     );

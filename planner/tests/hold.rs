@@ -476,12 +476,15 @@ fn hold_at_stored_stop(job: &Job, pick: &Pick) -> (usize, usize) {
 
 /// On straight elements the planner accepts a hold stop from its profile alone
 /// (`HoldStops::passes_on_line`); simulated through the interpolator and checked by finite
-/// differences instead, every one of them passes and no other does: the same stops, sample for
-/// sample, on a long line and on G1 programs (lines between rounded corners).
+/// differences instead, every one of them passes, with the same deceleration and jerk, on a
+/// long line and on G1 programs (lines between rounded corners). The profile is the stricter
+/// judge: it refuses a stop whose feed peaks above the cap between two samples, which the
+/// samples do not show (where the plan accelerates at the limits along a line up to the cap);
+/// such a sample gets a stored stop instead, or none. At most 1 % of the stops differ so.
 #[test]
 fn stops_on_lines_accepted_by_their_profile_pass_the_simulation() {
     use nurbs_motion::planner::PathCurves;
-    use nurbs_planner::hold_stops::HoldStops;
+    use nurbs_planner::hold_stops::{HoldStops, RecordStops};
     for (name, job) in [
         ("2000 mm line", job_of(line(2000.0))),
         ("star_g1", job("star_g1.ngc")),
@@ -490,15 +493,28 @@ fn stops_on_lines_accepted_by_their_profile_pass_the_simulation() {
         let curves = PathCurves::new(&job.toolpath);
         let mut shortcut = HoldStops::new(&job.limits);
         let mut simulated = HoldStops::new(&job.limits).simulating_lines();
-        let mut stops = 0;
+        let (mut stops, mut refused) = (0, 0);
         for slot in job.groups.iter().flat_map(|g| &g.slots) {
             let ends_group = slot.has_stop == 1;
-            let a = shortcut.after(&slot.record, ends_group, &curves);
-            let b = simulated.after(&slot.record, ends_group, &curves);
-            assert_eq!(a, b, "{name}: record {}", slot.record.seq);
-            stops += a.count;
+            let a = shortcut.after(&slot.record, ends_group, &curves).without_stored();
+            let b = simulated.after(&slot.record, ends_group, &curves).without_stored();
+            let triples = |r: &RecordStops| r.values.chunks_exact(3).map(|t| (t[0], t[1], t[2])).collect::<Vec<_>>();
+            let (a, b) = (triples(&a), triples(&b));
+            for t in &a {
+                assert!(
+                    b.contains(t),
+                    "{name}: record {}: stop {t:?} not in {b:?}",
+                    slot.record.seq
+                );
+            }
+            stops += b.len();
+            refused += b.len() - a.len();
         }
         assert!(stops > 10, "{name}: {stops} stops");
-        println!("{name}: {stops} stops, the same either way");
+        assert!(
+            refused * 100 <= stops,
+            "{name}: {refused} of {stops} stops refused by the profile alone"
+        );
+        println!("{name}: {stops} S-curve stops simulated, {refused} of them refused by the profile alone");
     }
 }

@@ -107,4 +107,20 @@ impl Limits {
     pub fn min_jerk(&self) -> f64 {
         self.jerk.iter().copied().fold(f64::INFINITY, f64::min)
     }
+
+    /// Tangential acceleration and jerk the axes allow along `direction` (of any length, one
+    /// entry per tool-tip axis): each axis sees its share of them, so the axis that runs out
+    /// first sets them. Never below [`Self::min_accel`] and [`Self::min_jerk`].
+    pub fn along(&self, direction: &[f64]) -> (f64, f64) {
+        let norm = direction.iter().map(|x| x * x).sum::<f64>().sqrt();
+        let (mut accel, mut jerk) = (f64::INFINITY, f64::INFINITY);
+        for ((d, a), j) in direction.iter().zip(&self.acceleration).zip(&self.jerk) {
+            let share = if norm > 0.0 { (d / norm).abs() } else { 1.0 };
+            if share > 0.0 {
+                accel = accel.min(a / share);
+                jerk = jerk.min(j / share);
+            }
+        }
+        (accel.max(self.min_accel()), jerk.max(self.min_jerk()))
+    }
 }

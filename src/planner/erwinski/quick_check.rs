@@ -14,6 +14,10 @@ use nurbs_rtcore::Vector;
 /// Axis count covered (tool-tip coordinates).
 const AXES: usize = 3;
 
+/// Curvature (1/mm) at or below which a path counts as straight: a line's tabulated curvature
+/// is zero up to rounding.
+const STRAIGHT_CURVATURE: f64 = 1e-12;
+
 /// Arc-length derivatives of the tool tip on a dense grid of one curve.
 #[derive(Clone, Debug, Default)]
 pub struct ArcGrid {
@@ -71,6 +75,22 @@ impl ArcGrid {
             }
         }
         Some(k2.sqrt())
+    }
+
+    /// The unit tangent where the path is straight over arc lengths `[s0, s1]` (no curvature
+    /// tabulated there, the grid points around the interval included); `None` where it bends
+    /// or the grid does not reach `s1` yet.
+    pub fn straight_tangent(&self, s0: f64, s1: f64) -> Option<[f64; AXES]> {
+        // A segment to the element's end may end a rounding past the grid's trapezoidal sum.
+        let end = *self.s.last()?;
+        let s1 = if s1 > end && s1 <= end + 1e-9 * end.max(1.0) {
+            end
+        } else {
+            s1
+        };
+        let mut hint = self.s.partition_point(|&x| x < s0).saturating_sub(1);
+        let curvature = self.max_curvature(s0, s1, &mut hint)?;
+        (curvature <= STRAIGHT_CURVATURE).then(|| self.d[hint][0])
     }
 
     /// Derivatives at arc length `s`, linearly interpolated; `hint` is a starting index that

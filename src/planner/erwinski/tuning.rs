@@ -76,6 +76,18 @@ pub(super) const CONTINUED_WORK_BUDGET_BASE: u64 = 500_000;
 /// Relative headroom of the planned feed below the programmed feed.
 pub(super) const FEED_HEADROOM: f64 = 1e-7;
 
+/// Relative excess of a nominal trial over an acceleration or jerk limit taken for rounding
+/// ([`super::just_inside`]).
+pub(super) const ROUNDING_EXCESS: f64 = 1e-5;
+
+/// Share of the limits a profile that would ride them exactly aims at instead (the retry of
+/// [`super::just_inside`], the tangential limits along a line): a hold stop from any of its
+/// samples starts just inside the limits (0.1 %) and lands just after a sample with a jerk
+/// up to some 0.05 % lower; with less jerk than the plan's to take an acceleration back, the
+/// stop would run past the feed the plan reaches at the cap (on a 2000 mm line at the full
+/// limits, no stop for 39 samples near the end of the acceleration).
+pub(super) const STOP_ROOM: f64 = 0.998;
+
 /// Margin of the estimate: the searches aim this far inside the limits, so that the exact check
 /// of their choice usually passes.
 pub(super) const ESTIMATE_MARGIN: f64 = 0.995;
