@@ -737,7 +737,7 @@ impl Planner {
         let element = self.nodes.element(self.bounds[k].start_curve);
         let start = self.bounds[k].start_s;
         let (accel, jerk) = match element.grid.straight_tangent(start, start + self.lengths[k]) {
-            Some(tangent) => self.along(&tangent),
+            Some(tangent) => self.straight_limits(&tangent),
             None => (self.accel, self.jerk),
         };
         SegmentContext {
@@ -763,7 +763,7 @@ impl Planner {
     /// them, so the axis that runs out first sets them (a line along one axis takes that axis'
     /// limits, a diagonal more than any one axis'), less the room a hold stop needs
     /// ([`STOP_ROOM`]). Never below the nominal ones, which hold in any direction.
-    fn along(&self, tangent: &[f64]) -> (f64, f64) {
+    fn straight_limits(&self, tangent: &[f64]) -> (f64, f64) {
         let (accel, jerk) = self.limits.along(tangent);
         ((STOP_ROOM * accel).max(self.accel), (STOP_ROOM * jerk).max(self.jerk))
     }
