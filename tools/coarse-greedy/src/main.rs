@@ -9,7 +9,13 @@
 //! `nurbs-plan verify` to judge.
 //!
 //! Usage: coarse-greedy CURVE.json --limits PRESET [--step K] [--sub N] [--margin M]
-//!        [--table N] --out SETPOINTS.csv
+//!        [--table N] [--bisections N] [--probe-settings N] [--adaptive-release] --out SETPOINTS.csv
+//!
+//! `--bisections`: probes between the stop's own step and the largest step (default 4);
+//! `--probe-settings`: deceleration settings a probe between them tries (default all five; the
+//! largest step is always tried with all); `--adaptive-release`: a stop releases its deceleration
+//! with the share of the tangential jerk the axes have left after the curvature terms at each
+//! state, instead of a share of the whole.
 
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs};
 use nurbs_motion::planner::erwinski::flf::{arc_derivatives, flf_of};
@@ -35,21 +41,34 @@ impl Jets {
         let len = table.total();
         let ds = len / n as f64;
         let view = curve.view();
-        let rows = (0..=n)
-            .map(|k| {
-                let u = table.parameter_at(curve, (k as f64 * ds).min(len));
-                let x = arc_derivatives(&view, dim, u);
-                let f = flf_of(&x, dim, limits);
-                let mut r = [0.0; 3 * MAX_AXES + 1];
-                for i in 0..dim {
-                    r[i] = x[1][i];
-                    r[MAX_AXES + i] = x[2][i];
-                    r[2 * MAX_AXES + i] = x[3][i];
-                }
-                r[3 * MAX_AXES] = f.feed.min(f.chord);
-                r
-            })
-            .collect();
+        let breaks = curve.breakpoints();
+        let (u_end, speed) = (breaks[breaks.len() - 1], |u: f64| view.speed(u, dim));
+        // Arc length of [a, b] by 3-point Gauss-Legendre (the steps are short).
+        let arc = |a: f64, b: f64| {
+            let (m, h) = (0.5 * (a + b), 0.5 * (b - a));
+            let k = h * (0.6f64).sqrt();
+            h * (5.0 * speed(m - k) + 8.0 * speed(m) + 5.0 * speed(m + k)) / 9.0
+        };
+        // March along the curve: each row's parameter from the last by one Newton step on the
+        // arc length (the rows need not sit exactly at k ds: they only bound the constraints).
+        let (mut u, mut rows) = (breaks[0], Vec::with_capacity(n + 1));
+        for k in 0..=n {
+            if k > 0 {
+                let guess = (u + ds / speed(u).max(1e-12)).min(u_end);
+                let short = ds - arc(u, guess);
+                u = (guess + short / speed(guess).max(1e-12)).clamp(u, u_end);
+            }
+            let x = arc_derivatives(&view, dim, u);
+            let f = flf_of(&x, dim, limits);
+            let mut r = [0.0; 3 * MAX_AXES + 1];
+            for i in 0..dim {
+                r[i] = x[1][i];
+                r[MAX_AXES + i] = x[2][i];
+                r[2 * MAX_AXES + i] = x[3][i];
+            }
+            r[3 * MAX_AXES] = f.feed.min(f.chord);
+            rows.push(r);
+        }
         Jets { ds, n, rows }
     }
 
@@ -112,6 +131,8 @@ struct Planner<'j> {
     h: f64,
     sub: usize,
     bisections: usize,
+    probe_settings: usize,
+    adaptive_release: bool,
     evals: u64,
     brake_runs: u64,
     brake_steps: u64,
@@ -167,6 +188,8 @@ impl Planner<'_> {
             if dv > 0.0 {
                 hi = hi.min(ug + (e[3 * MAX_AXES] - y.v) / dv);
                 lo = lo.max(ug - y.v / dv);
+                // Not past the path end.
+                hi = hi.min(ug + (self.len - y.s) / (dv * tau / 3.0));
             }
             for i in 0..self.dim {
                 let (q1, q2, q3) = (e[i], e[MAX_AXES + i], e[2 * MAX_AXES + i]);
@@ -239,7 +262,20 @@ impl Planner<'_> {
                 aw = aw.min(amax / d);
             }
         }
-        let jr = rf * jw;
+        let jr = if self.adaptive_release {
+            // The tangential jerk the axes have left after the curvature terms at this state.
+            let mut left = f64::INFINITY;
+            for i in 0..self.dim {
+                let (q1, q2, q3) = (e[i], e[MAX_AXES + i], e[2 * MAX_AXES + i]);
+                if q1.abs() > 0.0 {
+                    let used = (q3 * x.v * x.v * x.v + 3.0 * q2 * x.v * x.a).abs();
+                    left = left.min((self.jmax[i] - used).max(0.0) / q1.abs());
+                }
+            }
+            rf * left.max(0.05 * jw)
+        } else {
+            rf * jw
+        };
         let (jw, aw) = (bf * jw, bf * aw);
         let ok = |u: f64| {
             let y = adv(x, u, t);
@@ -317,7 +353,12 @@ impl Planner<'_> {
 
     /// The first setting (from `first` on, round) whose sequence brings `x` to rest.
     fn safe(&mut self, x: St, first: usize) -> Option<usize> {
-        (0..BRAKES.len())
+        self.safe_among(x, first, BRAKES.len())
+    }
+
+    /// [`Self::safe`] trying only `count` settings.
+    fn safe_among(&mut self, x: St, first: usize, count: usize) -> Option<usize> {
+        (0..count)
             .map(|k| (first + k) % BRAKES.len())
             .find(|&b| self.brakes_with(x, b))
     }
@@ -384,7 +425,7 @@ impl Planner<'_> {
             for _ in 0..bisections {
                 let mid = 0.5 * (good + bad);
                 let ok = if self.feasible(x, mid, self.h) {
-                    self.safe(adv(x, mid, self.h), good_b)
+                    self.safe_among(adv(x, mid, self.h), good_b, self.probe_settings)
                 } else {
                     None
                 };
@@ -419,13 +460,17 @@ struct Args {
     margin: f64,
     table: usize,
     bisections: usize,
+    probe_settings: usize,
+    adaptive_release: bool,
     out: String,
 }
 
 fn parse() -> Result<Args, Box<dyn Error>> {
     let mut it = std::env::args().skip(1);
     let (mut curve, mut limits_name, mut out) = (None, None, None);
-    let (mut step, mut sub, mut margin, mut table, mut bisections) = (8usize, 4usize, 0.005f64, 20_000usize, 10usize);
+    let (mut step, mut sub, mut margin, mut table, mut bisections) = (8usize, 4usize, 0.005f64, 20_000usize, 4usize);
+    let mut probe_settings = BRAKES.len();
+    let mut adaptive_release = false;
     while let Some(a) = it.next() {
         let mut value = || it.next().ok_or_else(|| format!("{a} needs a value"));
         match a.as_str() {
@@ -435,6 +480,8 @@ fn parse() -> Result<Args, Box<dyn Error>> {
             "--margin" => margin = value()?.parse()?,
             "--table" => table = value()?.parse()?,
             "--bisections" => bisections = value()?.parse()?,
+            "--probe-settings" => probe_settings = value()?.parse()?,
+            "--adaptive-release" => adaptive_release = true,
             "--out" => out = Some(value()?),
             _ if !a.starts_with("--") && curve.is_none() => curve = Some(a),
             _ => return Err(format!("unknown argument {a}").into()),
@@ -450,6 +497,8 @@ fn parse() -> Result<Args, Box<dyn Error>> {
         margin,
         table,
         bisections,
+        probe_settings,
+        adaptive_release,
         out: out.ok_or("--out FILE is needed")?,
     })
 }
@@ -485,6 +534,8 @@ fn main() -> Result<(), Box<dyn Error>> {
         h: args.step as f64 * limits.period,
         sub: args.sub,
         bisections: args.bisections,
+        probe_settings: args.probe_settings.clamp(1, BRAKES.len()),
+        adaptive_release: args.adaptive_release,
         evals: 0,
         brake_runs: 0,
         brake_steps: 0,
