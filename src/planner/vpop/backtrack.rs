@@ -74,18 +74,39 @@ impl Default for SearchOptions {
 
 /// How a deceleration sequence brakes: each step aims at the jerk-limited switching curve of
 /// `brake_fraction` of the tangential acceleration and jerk estimated from the joint limits,
-/// and releases the deceleration assuming `switch_fraction` of that jerk (margins for the
-/// curvature terms of the axis jerk, which the estimate leaves out).
+/// and releases the deceleration assuming `switch_fraction` of the jerk `release` names
+/// (margins for the curvature terms of the axis jerk, which the estimate leaves out).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BrakeSetting {
     pub brake_fraction: f64,
     pub switch_fraction: f64,
+    pub release: Release,
+}
+
+/// The tangential jerk a deceleration sequence plans its release with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Release {
+    /// The whole tangential jerk the joint limits allow along the path there.
+    Whole,
+    /// What the joint limits leave after the curvature terms of the axis jerk at the state
+    /// (q''' ṡ³ + 3 q'' ṡ s̈, by derivatives along the path): near a sharp turn those take most
+    /// of the jerk, and a release planned with the whole runs out of it and fails there.
+    Left,
 }
 
 const fn brake(brake_fraction: f64, switch_fraction: f64) -> BrakeSetting {
     BrakeSetting {
         brake_fraction,
         switch_fraction,
+        release: Release::Whole,
+    }
+}
+
+const fn brake_left(brake_fraction: f64, switch_fraction: f64) -> BrakeSetting {
+    BrakeSetting {
+        brake_fraction,
+        switch_fraction,
+        release: Release::Left,
     }
 }
 
@@ -94,16 +115,30 @@ const fn brake(brake_fraction: f64, switch_fraction: f64) -> BrakeSetting {
 /// the axis jerk small where a hard one overruns them. A state that any of them brings to rest
 /// is safe, and the more states count as safe the later the planner has to brake; each setting
 /// also costs a deceleration sequence on every state none of them saves. Measured on the
-/// trident at the VPOp limits: the first setting alone 1.950 s, these five 1.680 s with 3.0 ×
-/// its deceleration checks. Nine settings (0.1 to 1.0) gave 1.680 s too, with 5.3 ×; the first
-/// four alone also 1.680 s, but the fan at lab set 1 2.994 s instead of 2.910 s.
-pub const BRAKES: [BrakeSetting; 5] = [
+/// trident at the VPOp limits: the first setting alone 1.950 s, the first five 1.680 s with 3.0 ×
+/// its deceleration checks (nine settings 0.1 to 1.0 of the whole jerk gave 1.680 s too, with
+/// 5.3 ×). The same five releasing with the jerk left after the curvature terms
+/// ([`Release::Left`]) save states the first five do not, near sharp turns at speed: with all
+/// ten (2026-12-05, lab set 1 unless named) the butterfly 3.3923 -> 3.3140 s, at F250 A2000
+/// J2e4 4.8628 -> 4.7743 s, the trident 0.7708 -> 0.7460 s, the fan 2.8948 -> 2.8915 s, the
+/// open pocket 0.9310 -> 0.9228 s, a 1,000-line dense G1 program 6.970 -> 6.653 s, the trident
+/// at the VPOp limits the same 1.680 s; planning takes 2.0-2.5 times as long. The five with
+/// the jerk left alone: the trident at the VPOp limits 1.722 s, the fan 2.9035 s.
+pub const BRAKES: [BrakeSetting; 10] = [
     brake(0.9, 0.5),
     brake(1.0, 0.8),
     brake(0.3, 0.3),
     brake(0.1, 0.05),
     brake(0.7, 0.3),
+    brake_left(0.9, 0.5),
+    brake_left(1.0, 0.8),
+    brake_left(0.3, 0.3),
+    brake_left(0.1, 0.05),
+    brake_left(0.7, 0.3),
 ];
+
+/// Least share of the whole tangential jerk a [`Release::Left`] plans its release with.
+const LEAST_RELEASE: f64 = 0.05;
 
 pub struct Search<'s, 'p> {
     pub stepper: &'s Stepper<'p>,
@@ -296,6 +331,7 @@ impl Search<'_, '_> {
         let BrakeSetting {
             brake_fraction,
             switch_fraction,
+            release,
         } = self.options.brakes[b];
         let dt = self.stepper.limits.period;
         let [p2, p1, p0] = h.p;
@@ -316,8 +352,24 @@ impl Search<'_, '_> {
             }
         }
         let full = jw;
+        let released = match release {
+            Release::Whole => full,
+            Release::Left => {
+                let (q2, q3) = self.stepper.path.higher_derivatives(p0.w);
+                let mut left = f64::INFINITY;
+                for i in 0..self.stepper.path.axes() {
+                    let d = dq[i].abs();
+                    if d > 0.0 {
+                        let used = (q3[i] * v * v * v + 3.0 * q2[i] * v * a).abs();
+                        left = left.min((l.jerk[i] - used).max(0.0) / d);
+                    }
+                }
+                // Never more than the whole, never so little that the stop cannot end.
+                left.clamp(LEAST_RELEASE * full, full)
+            }
+        };
         let (jw, aw) = (brake_fraction * jw, brake_fraction * aw);
-        let a_next = stop_acceleration(v, a, jw, aw, switch_fraction * jw, dt);
+        let a_next = stop_acceleration(v, a, jw, aw, switch_fraction * brake_fraction * released, dt);
         let v_next = v + a_next * dt;
         let w = if v_next <= 0.0 { p0.w } else { p0.w + v_next * dt };
         (w, full)

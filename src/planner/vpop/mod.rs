@@ -11,7 +11,7 @@ mod backtrack;
 pub mod constraints;
 pub mod path;
 
-pub use backtrack::{BrakeSetting, SearchOptions, SearchStats, BRAKES};
+pub use backtrack::{BrakeSetting, Release, SearchOptions, SearchStats, BRAKES};
 pub use path::{CurvatureTables, JointPath, PathPoint};
 
 use crate::geometry::Toolpath;

@@ -501,6 +501,30 @@ impl JointPath {
         (dq, dt)
     }
 
+    /// Second and third derivatives of the joints by `w` at `w`: central differences of
+    /// [`Self::derivative`] within `w`'s element (the third zero at its ends). For estimates
+    /// only (a deceleration sequence's release), never for a check.
+    pub fn higher_derivatives(&self, w: f64) -> ([f64; MAX_AXES], [f64; MAX_AXES]) {
+        const STEP: f64 = 1e-5;
+        let e = element_of(w) as f64;
+        let (lo, hi) = ((w - STEP).max(e), (w + STEP).min(e + 1.0 - 1e-9));
+        let mut second = [0.0; MAX_AXES];
+        let mut third = [0.0; MAX_AXES];
+        if hi <= lo {
+            return (second, third);
+        }
+        let (at, _) = self.derivative(w);
+        let (below, _) = self.derivative(lo);
+        let (above, _) = self.derivative(hi);
+        for i in 0..MAX_AXES {
+            second[i] = (above[i] - below[i]) / (hi - lo);
+            if w > lo && hi > w {
+                third[i] = 2.0 * ((above[i] - at[i]) / (hi - w) - (at[i] - below[i]) / (w - lo)) / (hi - lo);
+            }
+        }
+        (second, third)
+    }
+
     /// Upper estimate of the tool-tip curvature on `[w0, w1]` (tabulated maxima of the cells
     /// the interval touches).
     pub fn max_curvature(&self, w0: f64, w1: f64) -> f64 {
