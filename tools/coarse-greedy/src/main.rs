@@ -20,6 +20,7 @@
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs};
 use nurbs_motion::planner::erwinski::flf::{arc_derivatives, flf_of};
 use nurbs_motion::planner::presets::preset;
+use nurbs_motion::planner::vpop::{BrakeSetting, BRAKES as VPOP_BRAKES};
 use nurbs_motion::planner::Limits;
 use nurbs_motion::readers::read_toolpath;
 use std::error::Error;
@@ -118,8 +119,9 @@ struct Piece {
     dur: f64,
 }
 
-/// VPOp's deceleration settings (brake fraction, release fraction).
-const BRAKES: [(f64, f64); 5] = [(0.9, 0.5), (1.0, 0.8), (0.3, 0.3), (0.1, 0.05), (0.7, 0.3)];
+/// VPOp's deceleration settings that release with a share of the whole jerk (its first five;
+/// `--adaptive-release` plays the part of the others here).
+const BRAKES: &[BrakeSetting] = VPOP_BRAKES.split_at(5).0;
 
 struct Planner<'j> {
     jets: &'j Jets,
@@ -252,7 +254,11 @@ impl Planner<'_> {
     /// (within `bf` of the tangential limits the axes allow here) after which releasing it with
     /// `rf` of the tangential jerk still stops before the speed crosses zero.
     fn brake_u(&mut self, x: St, b: usize, t: f64) -> f64 {
-        let (bf, rf) = BRAKES[b];
+        let BrakeSetting {
+            brake_fraction: bf,
+            switch_fraction: rf,
+            ..
+        } = BRAKES[b];
         let e = self.jets.at(x.s);
         let (mut jw, mut aw) = (f64::INFINITY, f64::INFINITY);
         for ((q1, jmax), amax) in e[..self.dim].iter().zip(&self.jmax).zip(&self.amax) {
