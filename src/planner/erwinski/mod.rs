@@ -1693,6 +1693,9 @@ fn solve_segment(
     let (mut stalled, mut stop_tried) = (0usize, false);
     // End-feed lowerings so far (step 8).
     let mut lowerings = 0usize;
+    // Lowerings in a row that the estimate found hopeless without getting much better, and
+    // its worst ratio at the last.
+    let (mut hopeless_stalled, mut last_estimate) = (0usize, f64::INFINITY);
     for attempt in 0..ctx.attempts {
         if ctx.work.get() > ctx.work_budget {
             return Err(SegmentFailure::OutOfWork);
@@ -1769,6 +1772,20 @@ fn solve_segment(
         // The estimate was not enough: the same searches on exact trials, unless the estimate
         // already shows this end feed to be out of reach (they agree to about 1 %).
         if estimated_ratio > HOPELESS_ESTIMATE {
+            // A lower end feed that leaves the estimate where it was will not pass either: the
+            // excess comes from the start (the state the previous segment leaves), which only a
+            // lower start feed cures. Say so now rather than after the rest of the attempts, each
+            // with two golden-section searches: on dense G1 programs nearly every attempt was
+            // such a lowering, in segments that then failed all forty.
+            hopeless_stalled = if estimated_ratio >= STALL_PROGRESS * last_estimate {
+                hopeless_stalled + 1
+            } else {
+                0
+            };
+            last_estimate = estimated_ratio;
+            if hopeless_stalled >= HOPELESS_STALLED {
+                break;
+            }
             if v1 > 0.0 {
                 v1 = lowered_end_feed(v1, lowerings);
                 lowerings += 1;
