@@ -1693,8 +1693,9 @@ fn solve_segment(
     let (mut stalled, mut stop_tried) = (0usize, false);
     // End-feed lowerings so far (step 8).
     let mut lowerings = 0usize;
-    // Lowerings in a row that the estimate found hopeless without getting much better, and
-    // its worst ratio at the last.
+    // Hopeless lowerings in a row (of the end feed, or at rest of the peak) that left the
+    // estimate no better, and its worst ratio at the last; any other attempt starts the count
+    // again.
     let (mut hopeless_stalled, mut last_estimate) = (0usize, f64::INFINITY);
     for attempt in 0..ctx.attempts {
         if ctx.work.get() > ctx.work_budget {
@@ -1766,6 +1767,7 @@ fn solve_segment(
                 ratio_at_peak_lowering = ratio;
                 ctx.peak_cap = PEAK_STEP_INSIDE * ctx.peak_cap.min(peak);
                 v1 = v1.min(ctx.peak_cap);
+                (hopeless_stalled, last_estimate) = (0, f64::INFINITY);
                 continue;
             }
         }
@@ -1794,6 +1796,7 @@ fn solve_segment(
             }
             continue;
         }
+        (hopeless_stalled, last_estimate) = (0, f64::INFINITY);
         if let Some(t) = exact_searches(ctx, from, v0, v1) {
             return Ok((t.record, t.state));
         }
