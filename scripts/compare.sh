@@ -1,23 +1,37 @@
 #!/bin/bash
-# Side by side in one run: every bundled curve with both lab sets of Erwinski et al. 2022 (and the trident
-# with the VPOp limits), planned by `--planner erwinski` and `--planner vpop`, each output checked
-# by `nurbs-plan verify`. Prints the README's comparison table (plan times: wall time of one run),
-# then the open pocket on the 5-axis machine with VPOp's Table 1 joint limits (VPOp only: the
-# Erwinski planner has no joint kinematics).
+# Side by side in one run: every benchmark case of figures.sh (every bundled curve at both lab
+# sets of Erwinski et al. 2022, the three Table III sets on the butterfly, the trident at the
+# VPOp limits) planned by `--planner erwinski`, `vpop` and `reach`, each output checked by
+# `nurbs-plan verify`. Prints the comparison table of docs/planners.md: motion time, its ratio to
+# the best known plan where there is one (../shared/curves), planning time of one run and its
+# share of the motion. The 5-axis curves are planned by their tool tip, but by VPOp, which plans
+# their joints (x, y, z, a, c at the same limits): its times there answer another problem.
+# Then the open pocket on the 5-axis machine with VPOp's Table 1 joint limits (VPOp only).
 # Usage: scripts/compare.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
-cases=("trident|VPOp limits|$vpop_limits")
-for curve in trident butterfly fan open_pocket fan_5axis; do
-  cases+=("$curve|lab set 1|$lab1" "$curve|lab set 2|$lab2")
-done
-echo "| curve | limits | Erwinski motion (s) | plan (ms) | verify | VPOp motion (s) | plan (ms) | verify |"
-echo "|---|---|---|---|---|---|---|---|"
-for c in "${cases[@]}"; do
+declare -A best=(
+  ["butterfly|lab set 1"]=3.163 ["butterfly|F250 A2000 J2e4"]=4.562 ["trident|VPOp limits"]=1.668
+)
+cell() {
+  local t=$1 p=$2 v=$3 b=$4
+  if [ "$t" = refused ]; then echo "refused"; return; fi
+  python3 -c "
+t, p, b = float('$t'), float('$p'), '$b'
+r = f' = {t / float(b):.3f} x' if b else ''
+print(f'{t:.4f}{r}, {p:.0f} ms ({100 * p / 1e3 / t:.1f} %), $v')"
+}
+echo "| curve | limits | Erwinski | VPOp | reach |"
+echo "|---|---|---|---|---|"
+for c in "${bench_cases[@]}"; do
   IFS='|' read -r curve name lim <<<"$c"
-  IFS='|' read -r et ep ev <<<"$(plan_verified erwinski "$curve" "$lim")"
-  IFS='|' read -r vt vp vv <<<"$(plan_verified vpop "$curve" "$lim")"
-  echo "| $curve | $name | $et | $ep | $ev | $vt | $vp | $vv |"
+  b=${best[$curve|$name]:-}
+  row="| $curve | $name"
+  for planner in erwinski vpop reach; do
+    IFS='|' read -r t p v <<<"$(plan_verified "$planner" "$curve" "$lim")"
+    row="$row | $(cell "$t" "$p" "$v" "$b")"
+  done
+  echo "$row |"
 done
 IFS='|' read -r vt vp vv <<<"$(plan_verified vpop open_pocket "$table1")"
 echo

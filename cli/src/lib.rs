@@ -59,8 +59,10 @@ enum Command {
         /// Summary JSON (motion time, plan time, peaks per axis).
         #[arg(long)]
         summary: Option<PathBuf>,
-        /// Feedrate planner: `erwinski` (segment records, streaming) or `vpop` (constraint
-        /// intersection at the servo period, VPOp).
+        /// Feedrate planner: `erwinski` (segment records, streaming), `vpop` (constraint
+        /// intersection at the servo period, VPOp) or `reach` (third-order reachability over
+        /// arc-length stations: near time-optimal, tool tip, rest to rest between tangent
+        /// breaks).
         #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
         planner: PlannerKind,
         /// Erwinski planner: plan as a stream, each segment final as soon as back-tracking can
@@ -148,6 +150,8 @@ impl From<Interp> for nurbs_motion::planner::simulate::Interpolation {
 pub enum PlannerKind {
     Erwinski,
     Vpop,
+    /// Third-order reachability over arc-length stations.
+    Reach,
 }
 
 /// Runs the command line; errors are printed to stderr with a non-zero exit code.

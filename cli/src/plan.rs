@@ -82,6 +82,16 @@ fn plot_title(args: &PlanArgs, planner: &str, limits: &nurbs_motion::planner::Li
 }
 
 pub fn run(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
+    if args.planner == PlannerKind::Reach {
+        if args.interp != Interpolation::Rk2pc {
+            return Err(
+                "--interp is for the erwinski planner (the reach planner plans the positions themselves)".into(),
+            );
+        }
+        args.machine
+            .refuse("the reach planner plans the tool tip; joint planning on a machine is --planner vpop")?;
+        return run_reach(args);
+    }
     if args.planner == PlannerKind::Vpop {
         if args.interp != Interpolation::Rk2pc {
             return Err("--interp is for the erwinski planner (VPOp plans the positions themselves)".into());
@@ -579,6 +589,113 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
             flf: !five,
             critical_points: &[],
             title: plot_title(&args, "VPOp planner", &plan.limits, plan.motion_time),
+        };
+        write_png(path, &profile)?;
+        eprintln!("plot written to {}", path.display());
+    }
+    Ok(())
+}
+
+/// `--planner reach`: the tool-tip path planned by third-order reachability over arc-length
+/// stations (same CSV columns and summary keys as the other planners). The path is read as it
+/// is planned; every setpoint is written once its stretch (rest to rest) passed the
+/// finite-difference check.
+fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
+    use nurbs_motion::planner::reach::{run, ReachOptions};
+    use nurbs_motion::planner::vpop::constraints::tip_distance;
+    let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
+    let mut program = stream.program()?;
+    let mut curves = PathCurves::streamed(stream.take_elements())?;
+    let tip = curves.tip_dim();
+    let limits = args.limits.limits(tip)?.for_axes(tip)?;
+    let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
+    writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
+    let mut check = FiniteDifferences::new(tip, limits.period);
+    let mut deviation = Deviation::default();
+    let mut prev: Option<[f64; 3]> = None;
+    let mut points = Vec::new();
+    let mut rows = 0usize;
+    let mut write_error = None;
+    let mut write = |p: &nurbs_motion::planner::vpop::PathPoint| -> std::io::Result<()> {
+        let feed = prev.map_or(0.0, |a| tip_distance(&p.tip, &a, tip) / limits.period);
+        if args.plot.is_some() {
+            let mut q = [0.0; MAX_AXES];
+            q[..tip].copy_from_slice(&p.q[..tip]);
+            points.push(PlotSample {
+                curve: p.element,
+                u: p.u,
+                feed,
+                q,
+            });
+        }
+        write!(out, "{:?},{:?}", rows as f64 * limits.period, p.u)?;
+        for c in &p.tip[..tip] {
+            write!(out, ",{c:?}")?;
+        }
+        writeln!(out, ",{feed:?},{}", p.element)?;
+        check.push(&p.q[..tip], &limits);
+        deviation.push(&mut program, &p.tip[..tip]);
+        prev = Some(p.tip);
+        rows += 1;
+        Ok(())
+    };
+    let options = ReachOptions::default();
+    let planned = run(&mut curves, &limits, &options, None, &mut |p| {
+        write(p).map_err(|e| {
+            write_error = Some(format!("writing {}: {e}", args.out.display()));
+            "the setpoints could not be written".into()
+        })
+    });
+    if let Some(e) = write_error {
+        return Err(e.into());
+    }
+    let (limits, stats, plan_time) = planned?;
+    check.finish(&limits);
+    out.flush()?;
+    let motion_time = rows.saturating_sub(1) as f64 * limits.period;
+    eprintln!(
+        "reach: motion {motion_time:.6} s ({rows} setpoints), planning {:.3} ms (first setpoints after {:.3} ms), {} stretches, {} stations, {} passes, {} re-plans",
+        plan_time * 1e3,
+        stats.first_points_time * 1e3,
+        stats.stretches,
+        stats.stations,
+        stats.passes,
+        stats.repairs
+    );
+    let deviation = deviation.finish(&program);
+    let rounding = stream.rounding();
+    if let Some(line) = describe(rounding, deviation, limits.chord_tolerance) {
+        eprintln!("{line}");
+    }
+    if let Some(path) = args.summary {
+        let summary = with_fields(
+            summary_common(&args, "reach", &limits, &check, tip),
+            serde_json::json!({
+                "motion_time_s": motion_time,
+                "plan_time_s": plan_time,
+                "setpoints": rows,
+                "first_points_time_s": stats.first_points_time,
+                "stretches": stats.stretches,
+                "stations": stats.stations,
+                "passes": stats.passes,
+                "replans": stats.repairs,
+                "axes": "tool tip",
+            }),
+        );
+        let summary = with_fields(summary, summary_fields(rounding, deviation));
+        std::fs::write(path, serde_json::to_string_pretty(&summary)?)?;
+    }
+    if let Some(path) = args.plot {
+        let whole = prepare(args.toolpath, args.round_corners, args.limits)?;
+        let profile = Profile {
+            toolpath: &whole.toolpath,
+            limits: &limits,
+            axes: &AXIS_NAMES[..tip],
+            rotary_from: tip,
+            samples: &points,
+            flf: true,
+            critical_points: &[],
+            title: plot_title(&args, "reachability planner", &limits, motion_time),
         };
         write_png(path, &profile)?;
         eprintln!("plot written to {}", path.display());

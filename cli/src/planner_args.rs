@@ -27,13 +27,14 @@ pub struct PlannerArgs {
     /// still bound every feed.
     #[arg(long)]
     pub max_feed_override: Option<f64>,
-    /// VPOp: largest tangential deceleration and jerk of the module's stop after a path block,
-    /// as a fraction of what the axes allow along the path there. The planner runs the stop
-    /// from every block end and lowers it where the axis limits need it.
+    /// VPOp and reach: largest tangential deceleration and jerk of the module's stop after a
+    /// path block, as a fraction of what the axes allow along the path there. The planner runs
+    /// the stop from every block end and lowers it where the axis limits need it.
     #[arg(long, default_value_t = 1.0)]
     pub stop_fraction: f64,
-    /// Planner: `erwinski` (S-curve segments, streamed as records) or `vpop` (per-period
-    /// positions of 2-/3-axis tool-tip paths, streamed as path blocks).
+    /// Planner: `erwinski` (S-curve segments, streamed as records), `vpop` or `reach`
+    /// (per-period positions of 2-/3-axis tool-tip paths, planned whole before the motion and
+    /// sent as path blocks).
     #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
     pub planner: PlannerKind,
     /// G1 corners: `auto` rounds the corners of every run of straight lines within the chord

@@ -63,7 +63,12 @@ fn bench_start(c: &mut Criterion) {
         g.bench_function(format!("block stops ({name})"), |b| {
             // Planned here: a run filtered to other benchmarks does not plan it.
             let plan = vpop_plan(&toolpath, &limits, None).unwrap();
-            b.iter(|| block_plan(&toolpath, &plan, None, 1.0).unwrap().blocks.len())
+            b.iter(|| {
+                block_plan(&toolpath, (&plan.points, &plan.limits), None, 1.0)
+                    .unwrap()
+                    .blocks
+                    .len()
+            })
         });
     }
     g.finish();

@@ -45,7 +45,7 @@ fn bench_update(c: &mut Criterion) {
         let vpop = blocks.then(|| vpop_plan(&toolpath, &limits, None).unwrap());
         let source = || match (&groups, &vpop) {
             (Some(g), _) => Source::groups(g.clone()),
-            (_, Some(p)) => Source::blocks(block_plan(&toolpath, p, None, 1.0).unwrap()),
+            (_, Some(p)) => Source::blocks(block_plan(&toolpath, (&p.points, &p.limits), None, 1.0).unwrap()),
             _ => unreachable!(),
         };
 

@@ -28,6 +28,7 @@ use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
+use nurbs_motion::planner::reach::{self, ReachOptions, ReachPlan};
 use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
@@ -1073,12 +1074,13 @@ impl BlockPlan {
     }
 }
 
-/// The blocks of `plan` with their checked stops (jerk fractions up to `max_fraction`), in
-/// groups, and the data their stops need. `anchor`: the stop point a re-plan starts from (its
-/// arc length is kept exactly).
+/// The blocks of a plan of one point per period (`points`, planned within `limits`: VPOp's or
+/// the reachability planner's) with their checked stops (jerk fractions up to
+/// `max_fraction`), in groups, and the data their stops need. `anchor`: the stop point a
+/// re-plan starts from (its arc length is kept exactly).
 pub fn block_plan(
     toolpath: &Toolpath,
-    plan: &VpopPlan,
+    (points, limits): (&[PathPoint], &Limits),
     anchor: Option<&StopPoint>,
     max_fraction: f64,
 ) -> Result<BlockPlan, String> {
@@ -1091,18 +1093,18 @@ pub fn block_plan(
         let start = plan_start(&mut PathCurves::new(toolpath), a);
         arcs.set_anchor(start.curve, start.u, start.s);
     }
-    let mut blocks = pack_blocks(&arcs, &plan.points);
-    let points: Vec<Vec<f64>> = block_stop_points(toolpath, &blocks, plan.limits.period)
+    let mut blocks = pack_blocks(&arcs, points);
+    let stop_points: Vec<Vec<f64>> = block_stop_points(toolpath, &blocks, limits.period)
         .iter()
         .map(|list| list.iter().flat_map(|&(s, cap)| [s, cap]).collect())
         .collect();
     let (choices, sequences) = choose_block_stops(
         toolpath,
-        &plan.limits,
+        limits,
         &mut blocks,
-        &points,
+        &stop_points,
         &fractions(max_fraction),
-        &plan.points,
+        points,
     );
     // From the last block back: a block ends its group where its stop passed (or at the path
     // end); the group's curves reach as far as the stored stop at its end.
@@ -1128,9 +1130,9 @@ pub fn block_plan(
     Ok(BlockPlan {
         blocks,
         stored,
-        points,
+        points: stop_points,
         choices,
-        period: plan.limits.period,
+        period: limits.period,
         curves: toolpath.elements.iter().map(|e| e.curve.clone()).collect(),
     })
 }
@@ -1146,6 +1148,20 @@ pub fn vpop_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>)
         ..SearchOptions::default()
     };
     plan_tip(toolpath, limits, options).map_err(|e| match from {
+        None => e.to_string(),
+        Some(_) => format!("re-plan from the stop point: {e}"),
+    })
+}
+
+/// The reachability plan of `toolpath` (tool tip), from its start or from rest at the stop
+/// point `from`.
+pub fn reach_plan(toolpath: &Toolpath, limits: &Limits, from: Option<&StopPoint>) -> Result<ReachPlan, String> {
+    check_tip_path(toolpath)?;
+    let start = from.map(|p| {
+        let start = plan_start(&mut PathCurves::new(toolpath), p);
+        (start.curve, start.u)
+    });
+    reach::plan_tip(toolpath, limits, &ReachOptions::default(), start).map_err(|e| match from {
         None => e.to_string(),
         Some(_) => format!("re-plan from the stop point: {e}"),
     })

@@ -44,7 +44,7 @@ fn block_job(toolpath: Toolpath) -> BlockJob {
 }
 
 fn blocks_of(toolpath: &Toolpath, plan: &VpopPlan, from: Option<&StopPoint>) -> BlockPlan {
-    block_plan(toolpath, plan, from, 1.0).unwrap()
+    block_plan(toolpath, (&plan.points, &plan.limits), from, 1.0).unwrap()
 }
 
 fn block_streamer<'a>(l: &'a Loaded, bj: &'a BlockJob, blocks: BlockPlan, first: usize) -> Streamer<'a> {

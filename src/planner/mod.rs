@@ -8,6 +8,7 @@ pub mod erwinski;
 pub mod fit;
 mod limits;
 pub mod presets;
+pub mod reach;
 pub mod simulate;
 pub mod verify;
 pub mod vpop;

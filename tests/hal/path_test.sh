@@ -1,6 +1,6 @@
 #!/bin/bash
 # path_test.sh TOOLPATH [PLANNER [FLAGS]]: the product end to end in real LinuxCNC. nurbs-planner
-# plans TOOLPATH (with PLANNER, erwinski or vpop; default erwinski, compared with the offline
+# plans TOOLPATH (with PLANNER, erwinski, vpop or reach; default erwinski, compared with the offline
 # `nurbs-plan plan --stream`; FLAGS go to nurbs-planner, the offline nurbs-plan plan and verify)
 # and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
 # thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full

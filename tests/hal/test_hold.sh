@@ -26,7 +26,7 @@ hal_session "$work/hold.hal" "$work/halrun.log"
 cat "$work/halrun.log"
 python3 "$here/check_hold.py" --expected "$work/offline.csv" --samples "$work/samples.txt" \
     --toolpath "$toolpath" --period $PERIOD --recorded-csv "$work/recorded.csv" \
-    $([ "$planner" = vpop ] && echo --jerk 6e4)
+    $([ "$planner" != erwinski ] && echo --jerk 6e4)
 verify=$(nurbs-plan verify "$work/recorded.csv" "$toolpath" $LIMITS --period $PERIOD || true)
 echo "$verify"
 if grep "^VIOLATION" <<<"$verify"; then

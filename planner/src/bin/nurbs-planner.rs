@@ -55,6 +55,7 @@ use nurbs_cli::{PlannerArgs as Args, PlannerKind};
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::{HAL_IN, HAL_OUT};
 use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::vpop::PathPoint;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
@@ -73,6 +74,37 @@ fn open_path(args: &Args) -> Result<SharedPath, String> {
 enum PathSource {
     Stream(SharedPath),
     Whole(Arc<Toolpath>),
+}
+
+/// A whole plan of one point per period, as VPOp or the reachability planner makes it.
+struct WholePlan {
+    points: Vec<PathPoint>,
+    limits: Limits,
+    motion_time: f64,
+    plan_time: f64,
+}
+
+/// Plans the whole tool-tip path (or its rest from `from`) period by period.
+fn whole_plan(
+    kind: PlannerKind,
+    path: &Toolpath,
+    limits: &Limits,
+    from: Option<&StopPoint>,
+) -> Result<WholePlan, String> {
+    match kind {
+        PlannerKind::Reach => feed::reach_plan(path, limits, from).map(|p| WholePlan {
+            points: p.points,
+            limits: p.limits,
+            motion_time: p.motion_time,
+            plan_time: p.plan_time,
+        }),
+        _ => feed::vpop_plan(path, limits, from).map(|p| WholePlan {
+            points: p.points,
+            limits: p.limits,
+            motion_time: p.motion_time,
+            plan_time: p.plan_time,
+        }),
+    }
 }
 
 /// Plans the path, or the rest of it from the module's stop point `from` (the Erwinski
@@ -117,13 +149,15 @@ fn start_motion<'a>(
             if limits.hold_reserve > 0.0 {
                 say!("nurbs-planner: {}", nurbs_motion::planner::vpop::HOLD_RESERVE_IGNORED);
             }
-            // The whole VPOp plan and its stop checks come before the motion: in a thread, so
-            // that a signal still ends the planner at once.
-            let (plan_limits, start, fraction) = (limits.clone(), from.copied(), args.stop_fraction);
+            // The whole plan and its stop checks come before the motion: in a thread, so that a
+            // signal still ends the planner at once.
+            let (plan_limits, start, fraction, kind) =
+                (limits.clone(), from.copied(), args.stop_fraction, args.planner);
             let (sender, receiver) = std::sync::mpsc::channel();
             std::thread::spawn(move || {
-                let planned = feed::vpop_plan(&path, &plan_limits, start.as_ref()).and_then(|plan| {
-                    feed::block_plan(&path, &plan, start.as_ref(), fraction).map(|blocks| (plan, blocks))
+                let planned = whole_plan(kind, &path, &plan_limits, start.as_ref()).and_then(|plan| {
+                    feed::block_plan(&path, (&plan.points, &plan.limits), start.as_ref(), fraction)
+                        .map(|blocks| (plan, blocks))
                 });
                 let _ = sender.send(planned);
             });
@@ -134,12 +168,13 @@ fn start_motion<'a>(
                         return Err("stopped by signal while planning".into())
                     }
                     Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-                    Err(e) => return Err(format!("the VPOp planner thread ended: {e}")),
+                    Err(e) => return Err(format!("the planner thread ended: {e}")),
                 }
             };
             let (ends, stored, worst) = blocks.stops();
             say!(
-                "nurbs-planner: VPOp: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
+                "nurbs-planner: {:?}: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
+                args.planner,
                 plan.points.len(),
                 blocks.blocks.len(),
                 plan.motion_time,
@@ -214,7 +249,7 @@ fn run(args: &Args) -> Result<&'static str, String> {
             let tip = shared.open()?.tip_dim();
             (PathSource::Stream(shared), tip)
         }
-        PlannerKind::Vpop => {
+        PlannerKind::Vpop | PlannerKind::Reach => {
             let prepared = prepare(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
             feed::check_tip_path(&prepared.toolpath)?;
             let tip = prepared.toolpath.tip_dim();

@@ -34,7 +34,7 @@ pub fn plans() -> &'static Plans {
         let limits = named("lab1").on(2);
         let groups = plan_groups(&toolpath, &limits, None).unwrap();
         let vpop = vpop_plan(&toolpath, &limits, None).unwrap();
-        let blocks = block_plan(&toolpath, &vpop, None, 1.0).unwrap();
+        let blocks = block_plan(&toolpath, (&vpop.points, &vpop.limits), None, 1.0).unwrap();
         Plans {
             toolpath,
             groups,

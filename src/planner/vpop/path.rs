@@ -556,7 +556,7 @@ fn element_of(w: f64) -> usize {
 }
 
 /// Whether the direction turns from `left` to `right` (first `n` coordinates).
-fn turns(left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize) -> bool {
+pub(crate) fn turns(left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize) -> bool {
     let unit = |d: &[f64; MAX_DIM]| {
         let len = d[..n].iter().map(|x| x * x).sum::<f64>().sqrt();
         let mut t = [0.0; MAX_DIM];
@@ -576,7 +576,7 @@ fn turns(left: &[f64; MAX_DIM], right: &[f64; MAX_DIM], n: usize) -> bool {
 /// interior knot of multiplicity >= degree (C0) whose tangents differ. Together with the
 /// element joins whose unit tangents differ these are the tangent breaks: a finite-jerk motion
 /// must stop there, and VPOp lands its last sample exactly on the point.
-fn interior_breaks(view: &CurveView, found: &mut dyn FnMut(f64)) {
+pub(crate) fn interior_breaks(view: &CurveView, found: &mut dyn FnMut(f64)) {
     let n = view.dim();
     let (p, knots, count) = (view.degree(), view.knots(), view.control_point_count());
     let mut i = p + 1;

@@ -1,0 +1,607 @@
+//! The reachability planner: near time-optimal feed along the tool-tip path with per-axis
+//! velocity, acceleration and jerk limits, planned over arc-length stations by third-order
+//! reachability analysis.
+//!
+//! The state at each station is (a, b) = (ṡ², s̈); each interval has one control c = s⃛/ṡ, so the
+//! dynamics along arc length are exact (a' = 2b, b' = c) and every constraint at a station or at
+//! a collocation point inside an interval is a linear row in (a, b, c) ([`rows`]; the axis jerk
+//! linearised from the inside). A backward pass computes the controllable set of every
+//! station, a convex polygon in (a, b); a forward pass takes the largest c whose successor stays
+//! in the next set ([`passes`]). Every accepted state can stop. A few passes re-linearise the
+//! jerk rows at the last plan, and the grid is laid again once from the planned speed. The
+//! plan is a chain of closed-form pieces in time ([`pieces`]), sampled at the servo period and
+//! checked there by finite differences ([`sampler`]); where a sample runs over, the limits of
+//! the intervals around it are tightened and the stretch planned again, so what leaves the
+//! planner passes the check.
+//!
+//! The method follows the time-optimal path parameterisation by reachability analysis
+//! (Pham & Pham 2018) carried to third order with the inner linearisation of the axis jerk of
+//! Wang et al. (the `copp` solver, 2026); the constraints are those of Erwinski et al. 2022
+//! and Beudaert et al. 2012.
+
+pub mod grid;
+pub mod passes;
+pub mod pieces;
+pub mod polygon;
+pub mod rows;
+pub mod sampler;
+
+use std::time::Instant;
+
+use crate::geometry::Toolpath;
+use crate::planner::vpop::PathPoint;
+use crate::planner::{Limits, LimitsError, PathCurves};
+use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
+use passes::{Begin, End, Motion, PassError, Passes};
+use rows::AxisLimits;
+use sampler::Check;
+
+const NC: usize = COLLOCATION.len();
+
+/// How hard the planner works.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReachOptions {
+    pub grid: GridOptions,
+    /// Backward and forward passes per stretch (the jerk rows re-linearised at each plan).
+    pub iterations: usize,
+    /// After which pass the grid is laid again from the planned speed (0: never).
+    pub regrid_after: usize,
+    /// Floor on a at every point, as a share of the (scaled) linearisation (0: none).
+    pub floor: f64,
+    /// The jerk rows are linearised at the last plan's a times `scale_early`, for the last
+    /// pass times `scale_last`. Above the plan the tangent gives up some jerk where the plan
+    /// is but lets the next plan rise further (the tangent of J/√a at a_l falls to zero at
+    /// 3·a_l); a linearisation at the plan itself keeps any dip where it is.
+    pub scale_early: f64,
+    pub scale_last: f64,
+    /// Most vertices of a controllable set.
+    pub max_vertices: usize,
+    /// Share of every limit kept unused from the start (rounding between collocation points).
+    pub margin: f64,
+    /// Most re-plans of a stretch whose samples ran over.
+    pub repairs: usize,
+}
+
+impl Default for ReachOptions {
+    fn default() -> Self {
+        ReachOptions {
+            grid: GridOptions::default(),
+            iterations: 4,
+            regrid_after: 1,
+            floor: 0.3,
+            scale_early: 2.5,
+            scale_last: 1.2,
+            max_vertices: 12,
+            margin: 1e-4,
+            repairs: 8,
+        }
+    }
+}
+
+/// A plan: one point per servo period, at rest before the first and after the last.
+#[derive(Clone, Debug)]
+pub struct ReachPlan {
+    pub points: Vec<PathPoint>,
+    pub limits: Limits,
+    pub motion_time: f64,
+    pub plan_time: f64,
+    pub stats: ReachStats,
+}
+
+/// What the planning took.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ReachStats {
+    pub stretches: usize,
+    pub stations: usize,
+    pub passes: usize,
+    /// Re-plans after samples ran over, and the worst ratio of a sample to its limit.
+    pub repairs: usize,
+    pub worst_ratio: f64,
+    /// Wall-clock time to the first points handed out (s).
+    pub first_points_time: f64,
+}
+
+/// Why no plan.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ReachError {
+    Limits(LimitsError),
+    Path(String),
+    Plan(String),
+}
+
+impl std::fmt::Display for ReachError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ReachError::Limits(e) => write!(f, "{e}"),
+            ReachError::Path(e) => write!(f, "invalid path: {e}"),
+            ReachError::Plan(e) => write!(f, "reachability planner: {e}"),
+        }
+    }
+}
+impl std::error::Error for ReachError {}
+
+/// Plans the tool-tip path of `toolpath`, from its start or from rest at `start` (element,
+/// curve parameter).
+pub fn plan_tip(
+    toolpath: &Toolpath,
+    limits: &Limits,
+    options: &ReachOptions,
+    start: Option<(usize, f64)>,
+) -> Result<ReachPlan, ReachError> {
+    let mut curves = PathCurves::new(toolpath);
+    let mut points = Vec::new();
+    let (limits, stats, plan_time) = run(&mut curves, limits, options, start, &mut |p| {
+        points.push(*p);
+        Ok(())
+    })?;
+    let motion_time = points.len().saturating_sub(1) as f64 * limits.period;
+    Ok(ReachPlan {
+        points,
+        limits,
+        motion_time,
+        plan_time,
+        stats,
+    })
+}
+
+/// Plans `curves` stretch by stretch (rest to rest between tangent breaks), from its start or
+/// from rest at `start` (element, curve parameter), handing every point to `emit` once its
+/// stretch passed the check. The limits as used, the figures and the planning time.
+pub fn run(
+    curves: &mut PathCurves,
+    limits: &Limits,
+    options: &ReachOptions,
+    start: Option<(usize, f64)>,
+    emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+) -> Result<(Limits, ReachStats, f64), ReachError> {
+    let started = Instant::now();
+    let first_element = start.map_or(0, |s| s.0);
+    if !curves.load(first_element) {
+        return Err(ReachError::Path(match start {
+            None => "no elements".into(),
+            Some((e, _)) => format!("no element {e} to start from"),
+        }));
+    }
+    let axes = curves.tip_dim();
+    let limits = limits.for_axes(axes).map_err(ReachError::Limits)?;
+    let planner = Planner::new(&limits, axes, options);
+    let mut stats = ReachStats::default();
+    let mut check = Check::new(&limits, axes);
+    // The first point: at rest at the path start.
+    let from_start = start.unwrap_or((0, curves.view(0).u_min()));
+    let first = {
+        let (element, u) = from_start;
+        let view = curves.view(element);
+        let p = view.point(u);
+        let mut tip = [0.0; TIP];
+        tip[..axes].copy_from_slice(&p[..axes]);
+        let mut q = [0.0; crate::planner::axial::MAX_AXES];
+        q[..axes].copy_from_slice(&p[..axes]);
+        PathPoint {
+            w: element as f64 + (u - view.u_min()) / (view.u_max() - view.u_min()),
+            element,
+            u,
+            q,
+            tip,
+        }
+    };
+    check.push(&first.tip);
+    emit(&first).map_err(ReachError::Plan)?;
+    let mut from = from_start;
+    let mut last = Some(first);
+    while let Some(stretch) = next_stretch(curves, from) {
+        let (grid, _motion, passes, repairs, points) = planner.plan_stretch(curves, &stretch, last, &mut check)?;
+        stats.stretches += 1;
+        stats.stations += grid.stations.len();
+        stats.passes += passes;
+        stats.repairs += repairs;
+        for p in &points {
+            emit(p).map_err(ReachError::Plan)?;
+        }
+        last = points.last().copied().or(last);
+        if stats.stretches == 1 {
+            stats.first_points_time = started.elapsed().as_secs_f64();
+        }
+        from = stretch.to;
+        if from.0 >= curves.len() - 1 && from.1 >= curves.view(from.0).u_max() {
+            break;
+        }
+        curves.release_before(from.0);
+    }
+    if let Some(e) = curves.error() {
+        return Err(ReachError::Path(e.to_string()));
+    }
+    stats.worst_ratio = check.worst;
+    Ok((limits, stats, started.elapsed().as_secs_f64()))
+}
+
+/// Where the path turns (a tangent break: the motion must stop there) after `from`, reading
+/// elements as far as it. `None` at the path end.
+fn next_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> {
+    let (mut e, mut u) = from;
+    if !curves.load(e) {
+        return None;
+    }
+    if u >= curves.view(e).u_max() {
+        if !curves.load(e + 1) {
+            return None;
+        }
+        e += 1;
+        u = curves.view(e).u_min();
+    }
+    let start = (e, u);
+    let axes = curves.tip_dim();
+    let mut length = 0.0;
+    loop {
+        let view = curves.view(e);
+        // A C0 knot inside the element whose tangents differ.
+        let mut end = view.u_max();
+        let mut inside = false;
+        crate::planner::vpop::path::interior_breaks(&view, &mut |k| {
+            if k > u && !inside {
+                end = k;
+                inside = true;
+            }
+        });
+        length += approximate_length(&view, u, end, axes);
+        if inside {
+            return Some(Stretch {
+                from: start,
+                to: (e, end),
+                rest_at_start: true,
+                rest_at_end: true,
+                length,
+            });
+        }
+        let end_tangent = view.derivatives(end, 1)[1];
+        if !curves.load(e + 1) {
+            return Some(Stretch {
+                from: start,
+                to: (e, end),
+                rest_at_start: true,
+                rest_at_end: true,
+                length,
+            });
+        }
+        let next = curves.view(e + 1);
+        let start_tangent = next.derivatives(next.u_min(), 1)[1];
+        if crate::planner::vpop::path::turns(&end_tangent, &start_tangent, axes) {
+            return Some(Stretch {
+                from: start,
+                to: (e, end),
+                rest_at_start: true,
+                rest_at_end: true,
+                length,
+            });
+        }
+        e += 1;
+        u = curves.view(e).u_min();
+    }
+}
+
+/// Arc length of `view` from `a` to `b`, knot span by knot span (eight pieces each).
+fn approximate_length(view: &nurbs_rtcore::CurveView, a: f64, b: f64, axes: usize) -> f64 {
+    let mut cuts = vec![a];
+    for &k in view.knots() {
+        if k > a && k < b && cuts.last() != Some(&k) {
+            cuts.push(k);
+        }
+    }
+    cuts.push(b);
+    cuts.windows(2)
+        .map(|w| {
+            (0..8)
+                .map(|i| {
+                    let h = (w[1] - w[0]) / 8.0;
+                    grid::piece_length(view, w[0] + h * i as f64, w[0] + h * (i + 1) as f64, axes)
+                })
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// What every stretch is planned with.
+struct Planner<'o> {
+    limits: Limits,
+    caps: Caps,
+    axis: AxisLimits,
+    period: f64,
+    options: &'o ReachOptions,
+}
+
+impl<'o> Planner<'o> {
+    fn new(limits: &Limits, axes: usize, options: &'o ReachOptions) -> Self {
+        let mut velocity = [f64::INFINITY; TIP];
+        let mut acceleration = [f64::INFINITY; TIP];
+        let mut jerk = [f64::INFINITY; TIP];
+        velocity[..axes].copy_from_slice(&limits.velocity[..axes]);
+        acceleration[..axes].copy_from_slice(&limits.acceleration[..axes]);
+        jerk[..axes].copy_from_slice(&limits.jerk[..axes]);
+        Planner {
+            limits: limits.clone(),
+            caps: Caps {
+                feed: limits.feed,
+                velocity,
+                // Just inside: the cap holds at the points where the grid looks, the samples
+                // fall between them.
+                chord_tolerance: limits.chord_tolerance * (1.0 - 1e-3),
+                period: limits.period,
+                axes,
+            },
+            axis: AxisLimits {
+                acceleration,
+                jerk,
+                axes,
+            },
+            period: limits.period,
+            options,
+        }
+    }
+
+    /// A speed no plan exceeds much at a point (the grid's first guess): the caps, and what
+    /// the acceleration and jerk allow through the curvature there.
+    fn speed_bound(&self, here: &Local) -> f64 {
+        let mut v = here.cap.sqrt();
+        for i in 0..self.axis.axes {
+            if here.q2[i].abs() > 1e-12 {
+                v = v.min((self.axis.acceleration[i] / here.q2[i].abs()).sqrt());
+            }
+            if here.q3[i].abs() > 1e-12 {
+                v = v.min((self.axis.jerk[i] / here.q3[i].abs()).cbrt());
+            }
+        }
+        v
+    }
+
+    /// Speed reachable from rest within `d` with the smallest axis jerk.
+    fn ramp(&self, d: f64) -> f64 {
+        let j = self.axis.jerk[..self.axis.axes]
+            .iter()
+            .copied()
+            .fold(f64::INFINITY, f64::min);
+        let t = (6.0 * d.max(0.0) / j).cbrt();
+        0.5 * j * t * t
+    }
+
+    /// Plans one rest-to-rest stretch: passes, a second grid, more passes, then sampled and
+    /// checked, tightened where samples ran over. The grid, the motion, the passes run, the
+    /// re-plans and the checked points.
+    fn plan_stretch(
+        &self,
+        curves: &PathCurves,
+        stretch: &Stretch,
+        before: Option<PathPoint>,
+        check: &mut Check,
+    ) -> Result<(Grid, Motion, usize, usize, Vec<PathPoint>), ReachError> {
+        let o = self.options;
+        let len = stretch.length;
+        let first_guess = |s: f64, here: &Local| self.speed_bound(here).min(self.ramp(s)).min(self.ramp(len - s));
+        let mut grid = Grid::build(curves, stretch, &self.caps, &o.grid, &first_guess);
+        if grid.len() < 3 {
+            // Too short for a start, a piece and a stop: lay it again finer.
+            let mut finer = o.grid;
+            finer.longest = stretch.length / 4.0;
+            finer.shortest = finer.shortest.min(stretch.length / 8.0);
+            grid = Grid::build(curves, stretch, &self.caps, &finer, &first_guess);
+        }
+        if grid.len() < 3 {
+            return Err(ReachError::Plan(format!(
+                "a stretch of {:.3e} mm is too short to plan",
+                stretch.length
+            )));
+        }
+        let mut lin = Linearisation::from_speed(&grid, &first_guess);
+        let mut tight = vec![1.0 - o.margin; grid.len()];
+        let mut floors: Option<Linearisation> = None;
+        let mut best: Option<(Grid, Motion, Linearisation)> = None;
+        let mut passes = 0;
+        let iterations = o.iterations.max(1);
+        for it in 0..iterations {
+            let motion = self.passes(&grid, &lin, floors.as_ref(), &tight, &mut passes)?;
+            let better = best.as_ref().is_none_or(|(_, m, _)| motion.time() < m.time());
+            // The next linearisation: the plan's a, scaled (above it early, so that the
+            // next plan may rise further; close to it last, where the tangent is exact).
+            let scale = if it + 2 >= iterations {
+                o.scale_last
+            } else {
+                o.scale_early
+            };
+            let plan = PlanSpeed {
+                grid: &grid,
+                motion: &motion,
+            };
+            let next = if it + 1 == o.regrid_after && it + 1 < iterations {
+                // Lay the grid again from the planned speed.
+                let vmax = motion.a.iter().fold(0.0f64, |m, a| m.max(*a)).sqrt();
+                let speed = |s: f64, here: &Local| {
+                    plan.a_at(s)
+                        .sqrt()
+                        .max(1e-3 * vmax)
+                        .min(self.speed_bound(here).max(1e-3 * vmax))
+                };
+                let new_grid = Grid::build(curves, stretch, &self.caps, &o.grid, &speed);
+                (new_grid.len() >= 3).then(|| {
+                    let lin = Linearisation::from_plan(&new_grid, &plan);
+                    (new_grid, lin)
+                })
+            } else {
+                None
+            };
+            let (next_grid, next_lin) = match next {
+                Some((g, l)) => (Some(g), l),
+                None => (None, Linearisation::from_plan(&grid, &plan)),
+            };
+            let next_lin = next_lin.scaled(scale);
+            floors = (o.floor > 0.0).then(|| next_lin.scaled(o.floor));
+            if better {
+                best = Some((grid.clone(), motion, lin));
+            }
+            if let Some(g) = next_grid {
+                grid = g;
+                tight = vec![1.0 - o.margin; grid.len()];
+            }
+            lin = next_lin;
+        }
+        let Some((grid, mut motion, lin)) = best else {
+            return Err(ReachError::Plan("no pass succeeded".into()));
+        };
+        // Sample, check, tighten where over, plan again.
+        let mut tight = vec![1.0 - o.margin; grid.len()];
+        let mut repairs = 0;
+        loop {
+            let mut trial = check.clone();
+            let sampled = sampler::sample(
+                curves,
+                &grid,
+                &motion,
+                &self.limits,
+                self.caps.axes,
+                before,
+                &mut trial,
+                1e-9,
+            );
+            if sampled.over.is_empty() {
+                *check = trial;
+                return Ok((grid, motion, passes, repairs, sampled.points));
+            }
+            if repairs >= o.repairs {
+                let (t, r) = sampled.over[0];
+                return Err(ReachError::Plan(format!(
+                    "the samples still run over a limit (ratio {r:.9} at {t:.4} s into a stretch) after {repairs} re-plans"
+                )));
+            }
+            repairs += 1;
+            // The intervals whose motion the finite differences over saw.
+            let mut starts = Vec::with_capacity(motion.durations.len() + 1);
+            let mut t = 0.0;
+            for d in &motion.durations {
+                starts.push(t);
+                t += d;
+            }
+            starts.push(t);
+            for &(t_over, ratio) in &sampled.over {
+                let (from, to) = (t_over - 3.5 * self.period, t_over + 0.5 * self.period);
+                for k in 0..grid.len() {
+                    if starts[k + 1] >= from && starts[k] <= to {
+                        tight[k] = tight[k].min(tight[k] / ratio * (1.0 - 1e-4));
+                    }
+                }
+            }
+            let floors = (o.floor > 0.0).then(|| lin.scaled(o.floor));
+            motion = self.passes(&grid, &lin, floors.as_ref(), &tight, &mut passes)?;
+        }
+    }
+
+    /// One backward and one forward pass (again without floors where they leave no plan).
+    fn passes(
+        &self,
+        grid: &Grid,
+        lin: &Linearisation,
+        floors: Option<&Linearisation>,
+        tight: &[f64],
+        count: &mut usize,
+    ) -> Result<Motion, ReachError> {
+        let run = |floors: Option<&Linearisation>| -> Result<Motion, PassError> {
+            let p = Passes {
+                grid,
+                limits: self.axis,
+                period: self.period,
+                lin_stations: &lin.stations,
+                lin_points: &lin.points,
+                floors: floors.map(|f| (&f.stations[..], &f.points[..])),
+                tight,
+                max_vertices: self.options.max_vertices,
+                jerk: true,
+            };
+            let sets = p.backward(1, End::Rest)?;
+            p.forward(&sets, Begin::Rest, End::Rest, grid.len())
+        };
+        let describe = |e: PassError| {
+            let (k, what) = match e {
+                PassError::Empty { station } => (station, "no state there can keep the limits and still stop"),
+                PassError::Stalls { interval } => (interval, "the motion would stand still there"),
+            };
+            let st = &grid.stations[k.min(grid.stations.len() - 1)];
+            ReachError::Plan(format!(
+                "{what} (element {}, u = {:.9}, curvature {:.3e} 1/mm): the path's geometry leaves no speed to plan with",
+                st.element,
+                st.u,
+                st.right.curvature()
+            ))
+        };
+        *count += 1;
+        match run(floors) {
+            Ok(m) => Ok(m),
+            Err(_) if floors.is_some() => {
+                *count += 1;
+                run(None).map_err(describe)
+            }
+            Err(e) => Err(describe(e)),
+        }
+    }
+}
+
+/// Values of a at every station and collocation point of a grid.
+#[derive(Clone, Debug)]
+struct Linearisation {
+    stations: Vec<f64>,
+    points: Vec<[f64; NC]>,
+}
+
+impl Linearisation {
+    fn from_speed(grid: &Grid, speed: &dyn Fn(f64, &Local) -> f64) -> Self {
+        let stations = grid.stations.iter().map(|st| speed(st.s, &st.right).powi(2)).collect();
+        let points = grid
+            .intervals
+            .iter()
+            .zip(&grid.stations)
+            .map(|(iv, st)| {
+                let mut p = [0.0; NC];
+                for (x, (theta, local)) in p.iter_mut().zip(&iv.points) {
+                    *x = speed(st.s + theta, local).powi(2);
+                }
+                p
+            })
+            .collect();
+        Linearisation { stations, points }
+    }
+
+    fn from_plan(grid: &Grid, plan: &PlanSpeed) -> Self {
+        let stations = grid.stations.iter().map(|st| plan.a_at(st.s)).collect();
+        let points = grid
+            .intervals
+            .iter()
+            .zip(&grid.stations)
+            .map(|(iv, st)| {
+                let mut p = [0.0; NC];
+                for (x, (theta, _)) in p.iter_mut().zip(&iv.points) {
+                    *x = plan.a_at(st.s + theta);
+                }
+                p
+            })
+            .collect();
+        Linearisation { stations, points }
+    }
+
+    fn scaled(&self, f: f64) -> Self {
+        Linearisation {
+            stations: self.stations.iter().map(|a| a * f).collect(),
+            points: self.points.iter().map(|p| p.map(|a| a * f)).collect(),
+        }
+    }
+}
+
+/// A motion's a = ṡ² at any arc length of its grid.
+struct PlanSpeed<'a> {
+    grid: &'a Grid,
+    motion: &'a Motion,
+}
+
+impl PlanSpeed<'_> {
+    fn a_at(&self, s: f64) -> f64 {
+        let st = &self.grid.stations;
+        let k = st.partition_point(|x| x.s <= s).clamp(1, self.grid.len()) - 1;
+        let length = self.grid.intervals[k].length;
+        self.motion.pieces[k].a_at((s - st[k].s).clamp(0.0, length), length)
+    }
+}

@@ -1,0 +1,582 @@
+//! The two passes over a grid: backward, the controllable set of every station (the states
+//! (a, b) from which some sequence of controls keeps every constraint and ends at rest);
+//! forward, the largest control c whose successor stays in the next station's set.
+//!
+//! Each controllable set is the projection onto (a, b) of the interval's rows in (a, b, c)
+//! together with the next set carried back through the exact dynamics. A row with γ > 0 bounds
+//! c from above, one with γ < 0 from below; the projection is where the highest lower bound
+//! stays below the lowest upper bound. It is built lazily: a polygon holding the state rows is
+//! cut, at its worst vertex, by the one pair of rows that binds there, until every vertex
+//! qualifies; a cut creates at most two vertices, and only those are evaluated again
+//! (O(vertices × rows) per cut). Every cut and the vertex cap ([`Passes::max_vertices`]) only
+//! shrink the set, so every accepted state can still stop.
+
+use super::grid::{Axes, Grid, Station, COLLOCATION, TIP};
+use super::pieces::Piece;
+use super::polygon::{HalfPlane, Polygon};
+use super::rows::{point_rows, successor_row, AxisLimits, Point, Row};
+
+/// Collocation points per interval.
+const NC: usize = COLLOCATION.len();
+
+/// How a stretch of the plan begins.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Begin {
+    /// At rest at station 0: the first interval is a constant-jerk start.
+    Rest,
+    /// In motion with state (a, b) at station 0.
+    Moving { a: f64, b: f64 },
+}
+
+/// How a stretch of the plan must be able to end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum End {
+    /// At rest at the last station: the last interval is a constant-jerk stop.
+    Rest,
+    /// Below a = `0` + rounding at the last station, decelerating: the end of a look-ahead
+    /// window, beyond which the path goes on.
+    Window,
+}
+
+/// Everything the passes read: the grid, the limits, the linearisation points, the floors
+/// and the per-interval tightening.
+pub struct Passes<'a> {
+    pub grid: &'a Grid,
+    pub limits: AxisLimits,
+    pub period: f64,
+    /// Linearisation point per station, and per interval at its collocation points.
+    pub lin_stations: &'a [f64],
+    pub lin_points: &'a [[f64; NC]],
+    /// Lowest a per station and collocation point (a floor that keeps the greedy forward pass
+    /// from nearly stopping), or none.
+    pub floors: Option<(&'a [f64], &'a [[f64; NC]])>,
+    /// Factor (≤ 1) on the limits of every interval: where a sampled plan ran over a limit.
+    pub tight: &'a [f64],
+    /// Most vertices a controllable set keeps.
+    pub max_vertices: usize,
+    /// Whether the axis jerk is a constraint (without it: the second-order problem, a quick
+    /// upper estimate of the feed).
+    pub jerk: bool,
+}
+
+/// The linearisation points of the jerk rows of one interval: at its start, its collocation
+/// points and its end.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageLin {
+    pub start: f64,
+    pub points: [f64; NC],
+    pub end: f64,
+}
+
+/// The controllable sets from station `first` on (earlier entries empty), and the
+/// linearisation each interval's rows were built with (the forward pass builds the same).
+pub struct Sets {
+    pub first: usize,
+    pub sets: Vec<Polygon>,
+    pub lins: Vec<StageLin>,
+}
+
+/// Why a pass found no plan.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PassError {
+    /// No state at this station can keep the constraints and stop (only with floors, or an
+    /// infeasible start).
+    Empty { station: usize },
+    /// The motion would come to a standstill inside the stretch.
+    Stalls { interval: usize },
+}
+
+/// The plan over a grid: the state at every station, the control of every interval, each
+/// interval as a piece in time with its duration.
+#[derive(Clone, Debug, Default)]
+pub struct Motion {
+    pub a: Vec<f64>,
+    pub b: Vec<f64>,
+    pub pieces: Vec<Piece>,
+    pub durations: Vec<f64>,
+    /// Stages where the chosen control left the rows' range by more than rounding.
+    pub off_range: usize,
+}
+
+impl Motion {
+    pub fn time(&self) -> f64 {
+        self.durations.iter().sum()
+    }
+}
+
+/// Jump of q'' at a station (a join where the curvature changes), if any.
+fn jump(st: &Station) -> Option<Axes> {
+    if st.left.q2 == st.right.q2 {
+        return None;
+    }
+    let mut d = [0.0; TIP];
+    for i in 0..TIP {
+        d[i] = st.right.q2[i] - st.left.q2[i];
+    }
+    Some(d)
+}
+
+impl Passes<'_> {
+    fn floor_station(&self, k: usize) -> f64 {
+        self.floors.map_or(0.0, |(s, _)| s[k])
+    }
+
+    /// The linearisation points given for interval `k`.
+    fn stage_lin(&self, k: usize) -> StageLin {
+        StageLin {
+            start: self.lin_stations[k],
+            points: self.lin_points[k],
+            end: self.lin_stations[k + 1],
+        }
+    }
+
+    /// The rows of interval `k` without the successor set.
+    pub fn stage_rows(&self, k: usize, lin: &StageLin, out: &mut Vec<Row>) {
+        out.clear();
+        let g = self.grid;
+        let (st0, st1, iv) = (&g.stations[k], &g.stations[k + 1], &g.intervals[k]);
+        let f = self.tight[k];
+        let lim = self.limits.scaled(f);
+        let cap = f * f;
+        let j0 = jump(st0);
+        let j1 = jump(st1);
+        // a(σ) = a + 2bσ + cσ² lies between the least and the largest of its Bernstein
+        // coefficients a, a + b·D, a(D) over the interval: the middle one is a row of its own
+        // (the others are rows at the two ends). Without it the motion could stop and turn
+        // back between collocation points.
+        let floor_mid = self.floor_station(k).min(self.floor_station(k + 1));
+        out.push(Row {
+            a: -1.0,
+            b: -iv.length,
+            c: 0.0,
+            d: -floor_mid,
+        });
+        // The same from above: a(σ) stays below the interval's lowest cap between its points.
+        let cap_mid = iv
+            .points
+            .iter()
+            .fold(st0.right.cap.min(st1.left.cap), |m, (_, p)| m.min(p.cap));
+        out.push(Row {
+            a: 1.0,
+            b: iv.length,
+            c: 0.0,
+            d: cap_mid * cap,
+        });
+        point_rows(
+            out,
+            &Point {
+                theta: 0.0,
+                local: &st0.right,
+                a_lin: lin.start,
+                state: true,
+                jerk: self.jerk,
+                jump: j0.as_ref(),
+                floor: self.floor_station(k),
+                jerk_cap: !self.jerk,
+            },
+            &lim,
+            cap,
+            self.period,
+        );
+        for (j, (theta, local)) in iv.points.iter().enumerate() {
+            point_rows(
+                out,
+                &Point {
+                    theta: *theta,
+                    local,
+                    a_lin: lin.points[j],
+                    state: true,
+                    jerk: self.jerk,
+                    jump: None,
+                    floor: self.floors.map_or(0.0, |(_, p)| p[k][j]),
+                    jerk_cap: !self.jerk,
+                },
+                &lim,
+                cap,
+                self.period,
+            );
+        }
+        point_rows(
+            out,
+            &Point {
+                theta: iv.length,
+                local: &st1.left,
+                a_lin: lin.end,
+                state: j1.is_some() || st1.left.cap != st1.right.cap,
+                jerk: self.jerk,
+                jump: j1.as_ref(),
+                floor: self.floor_station(k + 1),
+                jerk_cap: !self.jerk,
+            },
+            &lim,
+            cap,
+            self.period,
+        );
+    }
+
+    /// The largest tangential jerk over interval `k` (no curvature terms): what a
+    /// constant-jerk start or stop there may use.
+    fn piece_jerk(&self, k: usize) -> f64 {
+        let g = self.grid;
+        let lim = self.limits.scaled(self.tight[k]);
+        let mut jt = lim
+            .tangential_jerk(&g.stations[k].right.q1)
+            .min(lim.tangential_jerk(&g.stations[k + 1].left.q1));
+        for (_, p) in &g.intervals[k].points {
+            jt = jt.min(lim.tangential_jerk(&p.q1));
+        }
+        jt
+    }
+
+    /// The state rows of station `k` alone (θ = 0 of interval `k`, or the end station).
+    fn station_polygon(&self, k: usize, mut poly: Polygon, rows: &mut Vec<Row>) -> Polygon {
+        rows.clear();
+        let g = self.grid;
+        let f = self.tight[k.min(g.len() - 1)];
+        let st = &g.stations[k];
+        point_rows(
+            rows,
+            &Point {
+                theta: 0.0,
+                local: &st.right,
+                a_lin: self.lin_stations[k],
+                state: true,
+                jerk: false,
+                jump: None,
+                floor: self.floor_station(k),
+                jerk_cap: !self.jerk,
+            },
+            &self.limits.scaled(f),
+            f * f,
+            self.period,
+        );
+        for r in rows.iter() {
+            poly.clip(HalfPlane {
+                na: r.a,
+                nb: r.b,
+                d: r.d,
+            });
+        }
+        poly
+    }
+
+    /// The controllable sets from the end of the grid back to station `first`.
+    pub fn backward(&self, first: usize, end: End) -> Result<Sets, PassError> {
+        let g = self.grid;
+        let n = g.len();
+        let mut sets = vec![Polygon::default(); n + 1];
+        let mut rows = Vec::new();
+        let big = 1e12;
+        // The set the last c-piece must end in.
+        let last = match end {
+            End::Rest => {
+                // A constant-jerk stop over the last interval: a = −1.5·D·b, |b| ≤ b_e.
+                let d = g.intervals[n - 1].length;
+                let jt = self.piece_jerk(n - 1);
+                let be = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
+                let tol = 1e-9 * 1.5 * d * be;
+                let mut p = Polygon::rectangle(0.0, 1.5 * d * be * (1.0 + 1e-9), -be, 0.0);
+                p.clip(HalfPlane {
+                    na: 1.0,
+                    nb: 1.5 * d,
+                    d: tol,
+                });
+                p.clip(HalfPlane {
+                    na: -1.0,
+                    nb: -1.5 * d,
+                    d: tol,
+                });
+                sets[n - 1] = self.station_polygon(n - 1, p, &mut rows);
+                n - 1
+            }
+            End::Window => {
+                let st = &g.stations[n];
+                let eps = 1e-9 * st.left.cap.max(1.0);
+                let mut p = Polygon::rectangle(0.0, eps, -big, 0.0);
+                rows.clear();
+                let f = self.tight[n - 1];
+                point_rows(
+                    &mut rows,
+                    &Point {
+                        theta: 0.0,
+                        local: &st.left,
+                        a_lin: self.lin_stations[n],
+                        state: true,
+                        jerk: false,
+                        jump: None,
+                        floor: 0.0,
+                        jerk_cap: !self.jerk,
+                    },
+                    &self.limits.scaled(f),
+                    f * f,
+                    self.period,
+                );
+                for r in &rows {
+                    p.clip(HalfPlane {
+                        na: r.a,
+                        nb: r.b,
+                        d: r.d,
+                    });
+                }
+                sets[n] = p;
+                n
+            }
+        };
+        if sets[last].is_empty() {
+            return Err(PassError::Empty { station: last });
+        }
+        let mut projector = Projector::default();
+        let mut hp = Vec::new();
+        let mut lins = vec![StageLin::default(); n];
+        for k in (first..last).rev() {
+            sets[k + 1].half_planes(&mut hp);
+            let d = g.intervals[k].length;
+            let cap = g.stations[k].right.cap * self.tight[k] * self.tight[k];
+            let lin = self.stage_lin(k);
+            self.stage_rows(k, &lin, &mut rows);
+            rows.extend(hp.iter().map(|h| successor_row(h.na, h.nb, h.d, d)));
+            let mut poly = projector.project(&rows, Polygon::rectangle(0.0, cap.max(0.0), -big, big));
+            if poly.is_empty() {
+                return Err(PassError::Empty { station: k });
+            }
+            poly.simplify(self.max_vertices);
+            sets[k] = poly;
+            lins[k] = lin;
+        }
+        Ok(Sets { first, sets, lins })
+    }
+
+    /// The greedy forward pass from `begin` through the sets, to the end of the grid
+    /// (`End::Rest`: the last interval a constant-jerk stop) or to station `until` (then
+    /// `Motion` covers the intervals before it).
+    pub fn forward(&self, sets: &Sets, begin: Begin, end: End, until: usize) -> Result<Motion, PassError> {
+        let g = self.grid;
+        let n = g.len();
+        let mut m = Motion::default();
+        let mut rows = Vec::new();
+        let mut hp = Vec::new();
+        let (mut a, mut b, first) = match begin {
+            Begin::Rest => {
+                // The largest b1 on the start line (1.5·D·b1, b1) inside the set of station 1.
+                let d = g.intervals[0].length;
+                let jt = self.piece_jerk(0);
+                let bmax = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
+                let (pa, pb) = (1.5 * d * bmax, bmax);
+                sets.sets[1].half_planes(&mut hp);
+                let mut t: f64 = 1.0;
+                for h in &hp {
+                    let along = h.na * pa + h.nb * pb;
+                    if along > 0.0 {
+                        t = t.min(h.d / along);
+                    }
+                }
+                let t = t.max(0.0);
+                let (a1, b1) = (t * pa, t * pb);
+                let Some((piece, duration)) = Piece::start(a1, b1) else {
+                    return Err(PassError::Stalls { interval: 0 });
+                };
+                m.a.extend([0.0, a1]);
+                m.b.extend([0.0, b1]);
+                m.pieces.push(piece);
+                m.durations.push(duration);
+                (a1, b1, 1)
+            }
+            Begin::Moving { a, b } => {
+                m.a.push(a);
+                m.b.push(b);
+                (a, b, 0)
+            }
+        };
+        let stop_at = match end {
+            End::Rest if until >= n => n - 1,
+            _ => until.min(n),
+        };
+        for k in first..stop_at {
+            self.stage_rows(k, &sets.lins[k], &mut rows);
+            sets.sets[k + 1].half_planes(&mut hp);
+            let d = g.intervals[k].length;
+            rows.extend(hp.iter().map(|h| successor_row(h.na, h.nb, h.d, d)));
+            let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+            for r in &rows {
+                let rest = r.d - r.a * a - r.b * b;
+                if r.c > 0.0 {
+                    hi = hi.min(rest / r.c);
+                } else if r.c < 0.0 {
+                    lo = lo.max(rest / r.c);
+                }
+            }
+            let c = if lo <= hi {
+                if hi.is_finite() {
+                    hi
+                } else {
+                    lo
+                }
+            } else {
+                if lo - hi > 1e-7 * (lo.abs() + hi.abs()) {
+                    m.off_range += 1;
+                }
+                0.5 * (lo + hi)
+            };
+            let piece = Piece::quadratic(a, b, c);
+            let Some(duration) = piece.duration(d) else {
+                return Err(PassError::Stalls { interval: k });
+            };
+            a = (a + 2.0 * b * d + c * d * d).max(0.0);
+            b += c * d;
+            m.pieces.push(piece);
+            m.durations.push(duration);
+            m.a.push(a);
+            m.b.push(b);
+        }
+        if end == End::Rest && until >= n {
+            // The constant-jerk stop over the last interval (the state lies on its line up to
+            // the set's rounding).
+            match Piece::stop(a, b) {
+                Some((piece, duration, _)) => {
+                    m.pieces.push(piece);
+                    m.durations.push(duration);
+                }
+                None if a <= 1e-18 => {
+                    m.pieces.push(Piece::Start { jerk: 0.0 });
+                    m.durations.push(0.0);
+                }
+                None => return Err(PassError::Stalls { interval: n - 1 }),
+            }
+            m.a.push(0.0);
+            m.b.push(0.0);
+        }
+        Ok(m)
+    }
+}
+
+/// The lazy projection, with its buffers.
+#[derive(Default)]
+struct Projector {
+    upper: Vec<Row>,
+    lower: Vec<Row>,
+    cache: Vec<Eval>,
+}
+
+/// A vertex's worst pair: how far its lowest upper bound on c lies below its highest lower
+/// bound (`gap` > 0: the vertex does not qualify), and the two rows.
+#[derive(Clone, Copy, Debug)]
+struct Eval {
+    gap: f64,
+    scale: f64,
+    lower: usize,
+    upper: usize,
+}
+
+impl Projector {
+    fn eval(&self, v: [f64; 2]) -> Eval {
+        let (mut lo, mut li) = (f64::NEG_INFINITY, usize::MAX);
+        for (i, r) in self.lower.iter().enumerate() {
+            let x = r.a * v[0] + r.b * v[1] - r.d;
+            if x > lo {
+                lo = x;
+                li = i;
+            }
+        }
+        let (mut hi, mut ui) = (f64::INFINITY, usize::MAX);
+        for (j, r) in self.upper.iter().enumerate() {
+            let x = r.d - r.a * v[0] - r.b * v[1];
+            if x < hi {
+                hi = x;
+                ui = j;
+            }
+        }
+        Eval {
+            gap: lo - hi,
+            scale: lo.abs().max(hi.abs()),
+            lower: li,
+            upper: ui,
+        }
+    }
+
+    /// The states of `init` (clipped by the rows without c) for which some c keeps every row.
+    fn project(&mut self, rows: &[Row], mut poly: Polygon) -> Polygon {
+        self.upper.clear();
+        self.lower.clear();
+        for r in rows {
+            if r.c > 0.0 {
+                // c ≤ (d − a·A − b·B)/γ
+                self.upper.push(Row {
+                    a: r.a / r.c,
+                    b: r.b / r.c,
+                    c: 1.0,
+                    d: r.d / r.c,
+                });
+            } else if r.c < 0.0 {
+                // c ≥ (a·A + b·B − d)/(−γ)... stored as c ≥ a'·A + b'·B − d'
+                let g = -r.c;
+                self.lower.push(Row {
+                    a: r.a / g,
+                    b: r.b / g,
+                    c: -1.0,
+                    d: r.d / g,
+                });
+            } else {
+                poly.clip(HalfPlane {
+                    na: r.a,
+                    nb: r.b,
+                    d: r.d,
+                });
+            }
+        }
+        if poly.is_empty() || self.lower.is_empty() || self.upper.is_empty() {
+            return poly;
+        }
+        self.cache.clear();
+        for v in &poly.vertices {
+            let e = self.eval(*v);
+            self.cache.push(e);
+        }
+        let mut used: Vec<(usize, usize)> = Vec::new();
+        for _ in 0..4 * (rows.len() + 8) {
+            let Some((m, worst)) = self
+                .cache
+                .iter()
+                .enumerate()
+                .max_by(|x, y| x.1.gap.total_cmp(&y.1.gap))
+                .map(|(m, e)| (m, *e))
+            else {
+                break;
+            };
+            if worst.gap <= 1e-12 * worst.scale {
+                break;
+            }
+            let pair = (worst.lower, worst.upper);
+            if used.contains(&pair) {
+                // Cut by this pair already: what is left over is rounding.
+                self.cache[m].gap = f64::NEG_INFINITY;
+                continue;
+            }
+            used.push(pair);
+            let (l, u) = (self.lower[pair.0], self.upper[pair.1]);
+            // l.a·A + l.b·B − l.d ≤ u.d − u.a·A − u.b·B
+            let h = HalfPlane {
+                na: l.a + u.a,
+                nb: l.b + u.b,
+                d: l.d + u.d,
+            };
+            let before = poly.vertices.clone();
+            if !poly.clip(h) {
+                self.cache[m].gap = f64::NEG_INFINITY;
+                continue;
+            }
+            if poly.is_empty() {
+                return poly;
+            }
+            // Keep the evaluations of the vertices that survived; evaluate the new ones.
+            let mut cache = Vec::with_capacity(poly.vertices.len());
+            for v in &poly.vertices {
+                match before.iter().position(|p| p == v) {
+                    Some(i) => cache.push(self.cache[i]),
+                    None => cache.push(self.eval(*v)),
+                }
+            }
+            self.cache = cache;
+        }
+        poly
+    }
+}

@@ -1,0 +1,217 @@
+//! The plan sampled at the servo period: each period's arc length from the pieces in closed
+//! form, the curve parameter there by Newton's method on the arc length (from the period
+//! before, exact to rounding), and the finite-difference check of every sample against the
+//! limits, which says where a plan ran over so that the planner can tighten it there.
+
+use super::grid::{piece_length, Grid, TIP};
+use super::passes::Motion;
+use crate::planner::axial::MAX_AXES;
+use crate::planner::vpop::PathPoint;
+use crate::planner::{Limits, PathCurves};
+
+/// Finite differences of the samples, as `verify` takes them, that remember where they ran
+/// over: velocity, acceleration and jerk per axis from the last four positions.
+#[derive(Clone, Debug)]
+pub struct Check {
+    history: [[f64; TIP]; 3],
+    started: bool,
+    axes: usize,
+    period: f64,
+    velocity: [f64; TIP],
+    acceleration: [f64; TIP],
+    jerk: [f64; TIP],
+    /// Largest ratio of a difference to its limit seen.
+    pub worst: f64,
+}
+
+impl Check {
+    pub fn new(limits: &Limits, axes: usize) -> Self {
+        let mut c = Check {
+            history: [[0.0; TIP]; 3],
+            started: false,
+            axes,
+            period: limits.period,
+            velocity: [f64::INFINITY; TIP],
+            acceleration: [f64::INFINITY; TIP],
+            jerk: [f64::INFINITY; TIP],
+            worst: 0.0,
+        };
+        for i in 0..axes {
+            c.velocity[i] = limits.velocity[i];
+            c.acceleration[i] = limits.acceleration[i];
+            c.jerk[i] = limits.jerk[i];
+        }
+        c
+    }
+
+    /// Adds a position; the largest ratio of its differences to their limits.
+    pub fn push(&mut self, p: &[f64; TIP]) -> f64 {
+        if !self.started {
+            self.history = [*p; 3];
+            self.started = true;
+        }
+        let [q3, q2, q1] = self.history;
+        let dt = self.period;
+        let mut ratio: f64 = 0.0;
+        for i in 0..self.axes {
+            let v0 = (p[i] - q1[i]) / dt;
+            let v1 = (q1[i] - q2[i]) / dt;
+            let v2 = (q2[i] - q3[i]) / dt;
+            let a0 = (v0 - v1) / dt;
+            let a1 = (v1 - v2) / dt;
+            let j0 = (a0 - a1) / dt;
+            ratio = ratio
+                .max(v0.abs() / self.velocity[i])
+                .max(a0.abs() / self.acceleration[i])
+                .max(j0.abs() / self.jerk[i]);
+        }
+        self.history = [q2, q1, *p];
+        self.worst = self.worst.max(ratio);
+        ratio
+    }
+}
+
+/// Samples of one stretch, and where they ran over.
+pub struct Sampled {
+    pub points: Vec<PathPoint>,
+    /// (time into the stretch, ratio) of every sample over its limits.
+    pub over: Vec<(f64, f64)>,
+}
+
+/// Samples `motion` over `grid` from time `period` on (the stretch's start point is the
+/// previous sample, `before`), the last sample at the stretch's end, and checks each with
+/// `check`, and its feed and chord error against `limits`. A ratio counts as over above
+/// `1 + slack`.
+#[allow(clippy::too_many_arguments)]
+pub fn sample(
+    curves: &PathCurves,
+    grid: &Grid,
+    motion: &Motion,
+    limits: &Limits,
+    axes: usize,
+    before: Option<PathPoint>,
+    check: &mut Check,
+    slack: f64,
+) -> Sampled {
+    let period = limits.period;
+    let mut out = Sampled {
+        points: Vec::new(),
+        over: Vec::new(),
+    };
+    let total = motion.time();
+    let mut k = 0;
+    let mut t_k = 0.0;
+    // The last position found: interval, distance into it, curve parameter.
+    let mut last: Option<(usize, f64, f64)> = None;
+    let mut n = 1u64;
+    loop {
+        let t = n as f64 * period;
+        let (interval, sigma) = if t >= total {
+            (grid.len() - 1, grid.intervals[grid.len() - 1].length)
+        } else {
+            while k + 1 < motion.durations.len() && t >= t_k + motion.durations[k] {
+                t_k += motion.durations[k];
+                k += 1;
+            }
+            let length = grid.intervals[k].length;
+            (k, motion.pieces[k].at(t - t_k).0.clamp(0.0, length))
+        };
+        let st = &grid.stations[interval];
+        let next = &grid.stations[interval + 1];
+        let element = st.element;
+        let view = curves.view(element);
+        let u_end = if next.element == element { next.u } else { view.u_max() };
+        let length = grid.intervals[interval].length;
+        let u = if sigma >= length {
+            u_end
+        } else if sigma <= 0.0 {
+            st.u
+        } else {
+            let (mut u0, mut s0) = (st.u, 0.0);
+            if let Some((i, s, u)) = last {
+                if i == interval && s <= sigma {
+                    (u0, s0) = (u, s);
+                }
+            }
+            invert(&view, u0, s0, sigma, st.u, u_end, axes)
+        };
+        last = Some((interval, sigma, u));
+        let point = view.point(u);
+        let mut tip = [0.0; TIP];
+        tip[..axes].copy_from_slice(&point[..axes]);
+        let mut q = [0.0; MAX_AXES];
+        q[..axes].copy_from_slice(&point[..axes]);
+        let (a, b) = (view.u_min(), view.u_max());
+        let mut ratio = check.push(&tip);
+        if let Some(prev) = out.points.last().or(before.as_ref()) {
+            // The feed of the step (the limit, and the highest programmed feed of the elements
+            // it touches, as `verify` takes it) and its chord error (at the middle parameter of a
+            // step on one element: where a bulge of the curve is largest).
+            let step = (0..axes).map(|i| (tip[i] - prev.tip[i]).powi(2)).sum::<f64>().sqrt();
+            let mut feed = limits.feed;
+            if let (Some(f0), Some(f1)) = (curves.programmed_feed(prev.element), curves.programmed_feed(element)) {
+                feed = feed.min(f0.max(f1));
+            }
+            ratio = ratio.max(step / period / feed);
+            if prev.element == element {
+                let mut a = [0.0; nurbs_rtcore::MAX_DIM];
+                let mut b = [0.0; nurbs_rtcore::MAX_DIM];
+                a[..axes].copy_from_slice(&prev.tip[..axes]);
+                b[..axes].copy_from_slice(&tip[..axes]);
+                let mid = view.point(0.5 * (prev.u + u));
+                let error = crate::planner::verify::distance_to_chord(&mid, &a, &b, axes);
+                ratio = ratio.max(error / limits.chord_tolerance);
+            }
+        }
+        if ratio > 1.0 + slack {
+            out.over.push((t.min(total), ratio));
+        }
+        out.points.push(PathPoint {
+            w: element as f64 + (u - a) / (b - a),
+            element,
+            u,
+            q,
+            tip,
+        });
+        if t >= total {
+            break;
+        }
+        n += 1;
+    }
+    out
+}
+
+/// The parameter in `[lo, hi]` at arc length `target` from the interval start, from the
+/// known point `(u0, s0)` (Newton on the arc length, safeguarded by bisection).
+fn invert(view: &nurbs_rtcore::CurveView, u0: f64, s0: f64, target: f64, lo: f64, hi: f64, axes: usize) -> f64 {
+    let (mut lo_u, mut hi_u) = (u0.max(lo), hi);
+    let sp0 = view.speed(u0, axes);
+    let mut u = if sp0 > 0.0 {
+        (u0 + (target - s0) / sp0).clamp(lo_u, hi_u)
+    } else {
+        0.5 * (lo_u + hi_u)
+    };
+    for _ in 0..60 {
+        let s = s0 + piece_length(view, u0, u, axes);
+        let err = s - target;
+        if err.abs() <= 1e-14 * (1.0 + target) {
+            break;
+        }
+        if err > 0.0 {
+            hi_u = u;
+        } else {
+            lo_u = u;
+        }
+        let sp = view.speed(u, axes);
+        let newton = u - err / sp;
+        u = if sp > 0.0 && newton > lo_u && newton < hi_u {
+            newton
+        } else {
+            0.5 * (lo_u + hi_u)
+        };
+        if hi_u - lo_u <= 1e-16 * (1.0 + hi_u.abs()) {
+            break;
+        }
+    }
+    u
+}

@@ -1,0 +1,167 @@
+//! The reachability planner: every plan is checked with the project's verifier (finite
+//! differences at the servo period, relative slack 1e-6, at rest before the first and after the
+//! last row; feed; chord error; distance to the curve; end points), on every bundled curve and
+//! limit set and on seeded random curves; the motion times of the goals.
+
+mod common;
+
+use common::{example, random_cases, trident_vpop};
+use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::presets::named;
+use nurbs_motion::planner::reach::{plan_tip, ReachError, ReachOptions, ReachPlan};
+use nurbs_motion::planner::verify::{verify, Report, Row};
+use nurbs_motion::planner::{Limits, PathCurves};
+
+fn rows(plan: &ReachPlan, tip: usize) -> Vec<Row> {
+    plan.points
+        .iter()
+        .enumerate()
+        .map(|(j, p)| Row {
+            t: j as f64 * plan.limits.period,
+            curve: p.element,
+            u: p.u,
+            q: p.tip[..tip].to_vec(),
+        })
+        .collect()
+}
+
+fn check_with(tp: &Toolpath, plan: &ReachPlan, limits: &Limits) -> Report {
+    verify(&mut PathCurves::new(tp), limits, &rows(plan, tp.tip_dim()))
+}
+
+/// Plans and verifies (panics on a violation); the plan.
+fn plan_verified(tp: &Toolpath, limits: &Limits) -> ReachPlan {
+    let plan = plan_tip(tp, limits, &ReachOptions::default(), None).unwrap_or_else(|e| panic!("{e}"));
+    let report = check_with(tp, &plan, &plan.limits);
+    assert!(report.violations.is_empty(), "violations: {:?}", report.violations);
+    plan
+}
+
+fn preset(name: &str, tp: &Toolpath) -> Limits {
+    named(name).on(tp.tip_dim())
+}
+
+/// The three cases with a best known plan (`../shared/curves`): within 1.05 of it, above the
+/// physical lower bound, and using the jerk limit (1 % less fails).
+#[test]
+fn the_cases_with_a_best_known_plan() {
+    for (curve, limits, lower, best) in [
+        ("trident.json", "vpop-trident", 1.650, 1.668),
+        ("butterfly.json", "lab1", 2.404, 3.163),
+        ("butterfly.json", "table3-f250", 3.512, 4.562),
+    ] {
+        let tp = example(curve);
+        let limits = if limits == "vpop-trident" {
+            trident_vpop()
+        } else {
+            preset(limits, &tp)
+        };
+        let plan = plan_verified(&tp, &limits);
+        eprintln!(
+            "{curve} {}: {:.4} s = {:.3} x best known, planned in {:.1} ms",
+            limits.feed,
+            plan.motion_time,
+            plan.motion_time / best,
+            plan.plan_time * 1e3
+        );
+        assert!(
+            plan.motion_time >= lower,
+            "{curve}: {} below the lower bound",
+            plan.motion_time
+        );
+        assert!(plan.motion_time <= 1.05 * best, "{curve}: {} s", plan.motion_time);
+        let mut tighter = plan.limits.clone();
+        tighter.jerk = tighter.jerk.iter().map(|j| 0.99 * j).collect();
+        assert!(
+            !check_with(&tp, &plan, &tighter).violations.is_empty(),
+            "{curve}: jerk unused"
+        );
+    }
+}
+
+/// Every bundled curve (5-axis ones by their tool tip) at the papers' limit sets.
+#[test]
+fn every_bundled_curve_and_limit_set() {
+    for curve in [
+        "butterfly.json",
+        "trident.json",
+        "fan.json",
+        "open_pocket.json",
+        "fan_5axis.json",
+    ] {
+        let tp = example(curve);
+        for set in ["lab1", "lab2", "table3-f40", "table3-f300"] {
+            let plan = plan_verified(&tp, &preset(set, &tp));
+            eprintln!(
+                "{curve} {set}: {:.4} s, planned in {:.1} ms, {} stretches, {} re-plans, worst {:.6}",
+                plan.motion_time,
+                plan.plan_time * 1e3,
+                plan.stats.stretches,
+                plan.stats.repairs,
+                plan.stats.worst_ratio
+            );
+            assert!(plan.stats.worst_ratio <= 1.0 + 1e-9);
+        }
+    }
+}
+
+/// A re-plan from rest inside the path (what the machine does after a hold) starts exactly
+/// there and reaches the same end.
+#[test]
+fn a_plan_from_a_point_inside_the_path() {
+    let tp = example("trident.json");
+    let limits = preset("lab1", &tp);
+    let view = tp.elements[0].curve.view();
+    let u = view.u_min() + 0.37 * (view.u_max() - view.u_min());
+    let plan = plan_tip(&tp, &limits, &ReachOptions::default(), Some((0, u))).unwrap();
+    assert_eq!(plan.points[0].u, u);
+    assert_eq!(plan.points.last().unwrap().u, view.u_max());
+    let whole = plan_verified(&tp, &limits);
+    assert!(plan.motion_time < whole.motion_time);
+    // The rows from the start point verify as a motion from rest there.
+    let mut check = nurbs_motion::planner::axial::FiniteDifferences::new(2, limits.period);
+    for p in &plan.points {
+        check.push(&p.tip[..2], &limits);
+    }
+    check.finish(&limits);
+    assert!(check.worst_ratio(&limits) <= 1.0 + 1e-6);
+}
+
+/// Seeded random curves (degree 1-7, 2-D and 3-D, random limits): every plan made passes the
+/// verifier; a refusal must say why.
+#[test]
+fn random_curves() {
+    let cases: u64 = std::env::var("REACH_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(60);
+    let (mut planned, mut refused) = (0, 0);
+    let only: Option<u64> = std::env::var("REACH_CASE").ok().and_then(|v| v.parse().ok());
+    for (case, tp, limits) in random_cases(0x5eac4, 0..cases) {
+        if only.is_some_and(|o| o != case) {
+            continue;
+        }
+        if only.is_some() {
+            eprintln!("{limits:?}\n{:?}", tp.elements[0].curve);
+        }
+        match plan_tip(&tp, &limits, &ReachOptions::default(), None) {
+            Ok(plan) => {
+                let report = check_with(&tp, &plan, &plan.limits);
+                assert!(report.violations.is_empty(), "case {case}: {:?}", report.violations);
+                planned += 1;
+            }
+            Err(e @ (ReachError::Plan(_) | ReachError::Path(_) | ReachError::Limits(_))) => {
+                eprintln!("case {case}: refused: {e}");
+                assert!(!e.to_string().is_empty());
+                refused += 1;
+            }
+        }
+    }
+    eprintln!("{planned} planned and verified, {refused} refused");
+    // Measured: 52 of the first 60 planned; the refusals are curves with micro-geometry
+    // (control points 1e-8 mm apart: a cusp whose curvature leaves no speed) and thin
+    // controllable sets at extreme limit ratios. A regression plans fewer.
+    if only.is_none() && cases == 60 {
+        assert!(planned >= 52, "{refused} of {cases} refused");
+    }
+}
