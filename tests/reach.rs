@@ -158,10 +158,10 @@ fn random_curves() {
         }
     }
     eprintln!("{planned} planned and verified, {refused} refused");
-    // Measured: 52 of the first 60 planned; the refusals are curves with micro-geometry
+    // Measured: 53 of the first 60 planned; the refusals are curves with micro-geometry
     // (control points 1e-8 mm apart: a cusp whose curvature leaves no speed) and thin
     // controllable sets at extreme limit ratios. A regression plans fewer.
     if only.is_none() && cases == 60 {
-        assert!(planned >= 52, "{refused} of {cases} refused");
+        assert!(planned >= 53, "{refused} of {cases} refused");
     }
 }

@@ -42,8 +42,12 @@ const NC: usize = COLLOCATION.len();
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReachOptions {
     pub grid: GridOptions,
-    /// Backward and forward passes per stretch (the jerk rows re-linearised at each plan).
+    /// Backward and forward passes per stretch (the jerk rows re-linearised at each plan): at
+    /// least `iterations`, more while a pass still shortens the motion by more than `gain`
+    /// (a share), at most `most_iterations`.
     pub iterations: usize,
+    pub most_iterations: usize,
+    pub gain: f64,
     /// After which pass the grid is laid again from the planned speed (0: never).
     pub regrid_after: usize,
     /// Floor on a at every point, as a share of the (scaled) linearisation (0: none).
@@ -67,6 +71,8 @@ impl Default for ReachOptions {
         ReachOptions {
             grid: GridOptions::default(),
             iterations: 4,
+            most_iterations: 8,
+            gain: 0.03,
             regrid_after: 1,
             floor: 0.3,
             scale_early: 2.5,
@@ -395,22 +401,29 @@ impl<'o> Planner<'o> {
         let mut floors: Option<Linearisation> = None;
         let mut best: Option<(Grid, Motion, Linearisation)> = None;
         let mut passes = 0;
-        let iterations = o.iterations.max(1);
-        for it in 0..iterations {
+        let (least, most) = (o.iterations.max(1), o.most_iterations.max(o.iterations).max(1));
+        let mut last_pass = least == 1;
+        for it in 0.. {
             let motion = self.passes(&grid, &lin, floors.as_ref(), &tight, &mut passes)?;
-            let better = best.as_ref().is_none_or(|(_, m, _)| motion.time() < m.time());
-            // The next linearisation: the plan's a, scaled (above it early, so that the
-            // next plan may rise further; close to it last, where the tangent is exact).
-            let scale = if it + 2 >= iterations {
-                o.scale_last
-            } else {
-                o.scale_early
-            };
+            let best_time = best.as_ref().map_or(f64::INFINITY, |(_, m, _)| m.time());
+            let better = motion.time() < best_time;
+            if last_pass {
+                if better {
+                    best = Some((grid, motion, lin));
+                }
+                break;
+            }
+            // One more pass linearised close to the plan ends the search once the passes
+            // stop gaining (or at the most); until then the next linearisation lies above
+            // the plan, so that the next plan may rise further.
+            let gaining = motion.time() < (1.0 - o.gain) * best_time;
+            last_pass = it + 2 >= most || (it + 2 >= least && !gaining);
+            let scale = if last_pass { o.scale_last } else { o.scale_early };
             let plan = PlanSpeed {
                 grid: &grid,
                 motion: &motion,
             };
-            let next = if it + 1 == o.regrid_after && it + 1 < iterations {
+            let next = if it + 1 == o.regrid_after {
                 // Lay the grid again from the planned speed.
                 let vmax = motion.a.iter().fold(0.0f64, |m, a| m.max(*a)).sqrt();
                 let speed = |s: f64, here: &Local| {

@@ -417,6 +417,11 @@ impl Passes<'_> {
                 }
                 0.5 * (lo + hi)
             };
+            // Where the sets leave only a near-stop (a successor at rest, reached with the
+            // speed's minimum inside the interval), the rounding of c may let a(θ) dip below
+            // zero: take the least c that keeps it positive (the speed then passes a tiny
+            // minimum, in finite time) and let the checks judge the rest.
+            let c = c.max(no_dip(a, b, d));
             let piece = Piece::quadratic(a, b, c);
             let Some(duration) = piece.duration(d) else {
                 return Err(PassError::Stalls { interval: k });
@@ -447,6 +452,22 @@ impl Passes<'_> {
         }
         Ok(m)
     }
+}
+
+/// The least c that keeps a(θ) = a + 2bθ + cθ² ≥ 0 over [0, d].
+fn no_dip(a: f64, b: f64, d: f64) -> f64 {
+    // The end: a + 2bd + cd² ≥ 0.
+    let end = -(a + 2.0 * b * d) / (d * d);
+    // Decelerating with the minimum at θ = −b/c inside the interval: a − b²/c ≥ 0 too.
+    let c = if b >= 0.0 || end < -b / d {
+        end
+    } else if a > 0.0 {
+        (b * b / a).max(-b / d)
+    } else {
+        f64::INFINITY
+    };
+    // A hair above, so that the rounded minimum stays above zero.
+    c + 1e-9 * c.abs()
 }
 
 /// The lazy projection, with its buffers.
@@ -578,5 +599,33 @@ impl Projector {
             self.cache = cache;
         }
         poly
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::no_dip;
+
+    /// The least c keeping a(θ) ≥ 0 on [0, d]: with it a stays non-negative, with a little
+    /// less it dips below zero somewhere.
+    #[test]
+    fn no_dip_is_the_least_c_that_keeps_the_speed_real() {
+        for &(a, b, d) in &[
+            (0.158, -66.5, 2.38e-3),   // the minimum inside the interval
+            (1.0, -0.1, 1.0),          // the minimum past the end: the end decides
+            (1.0, 2.0, 0.5),           // accelerating: the end decides
+            (5.1e-11, 1.7e-7, 9.2e-5), // near rest
+        ] {
+            let c = no_dip(a, b, d);
+            let at = |c: f64, th: f64| a + 2.0 * b * th + c * th * th;
+            let lowest = |c: f64| {
+                (0..=10_000)
+                    .map(|i| at(c, d * i as f64 / 1e4))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            assert!(lowest(c) >= 0.0, "({a}, {b}, {d}): c = {c} dips to {}", lowest(c));
+            let less = c - 1e-4 * c.abs().max(1e-12);
+            assert!(lowest(less) < 0.0, "({a}, {b}, {d}): c = {c} is not the least");
+        }
     }
 }
