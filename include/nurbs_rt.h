@@ -20,9 +20,9 @@
 
 /**
  * Layout version; bump on any change to [`Channel`], the record types or what the module
- * accepts in them (15: stored stop runs may pass elements shorter than a step).
+ * accepts in them (16: a stream states the servo period it was planned for).
  */
-#define CHANNEL_VERSION 15
+#define CHANNEL_VERSION 16
 
 /**
  * Slots in the record ring (a power of two). A group of records that share one stop goes into
@@ -332,7 +332,11 @@ typedef struct GeometryHeader {
    * is reserved for 5-axis paths, which this build refuses).
    */
   uint32_t joints;
-  uint32_t reserved;
+  /**
+   * The servo period (ns) the plan was made for: its limits hold when its samples are
+   * played at that period, so the module refuses a stream made for another one.
+   */
+  uint32_t period_ns;
 } GeometryHeader;
 
 /**

@@ -36,8 +36,8 @@ pub const CHANNEL_KEY: i32 = 0x4E52_4230;
 /// "NRBS": written last by the creator, so a reader that sees it sees an initialised header.
 pub const CHANNEL_MAGIC: u32 = 0x4E52_4253;
 /// Layout version; bump on any change to [`Channel`], the record types or what the module
-/// accepts in them (15: stored stop runs may pass elements shorter than a step).
-pub const CHANNEL_VERSION: u32 = 15;
+/// accepts in them (16: a stream states the servo period it was planned for).
+pub const CHANNEL_VERSION: u32 = 16;
 /// Slots in the record ring (a power of two). A group of records that share one stop goes into
 /// the ring whole before the module takes its first record, so the longest group must fit.
 pub const SEGMENT_SLOTS: usize = 8192;
@@ -478,7 +478,9 @@ pub struct GeometryHeader {
     /// Machine joints the records drive directly (0: the tool-tip axes; up to [`MAX_JOINTS`]
     /// is reserved for 5-axis paths, which this build refuses).
     pub joints: u32,
-    pub reserved: u32,
+    /// The servo period (ns) the plan was made for: its limits hold when its samples are
+    /// played at that period, so the module refuses a stream made for another one.
+    pub period_ns: u32,
 }
 
 /// Why a geometry stream or one of its curves is refused.
@@ -505,12 +507,20 @@ fn slice_of(values: &[f64], offset: u32, len: u32) -> Option<&[f64]> {
     values.get(start..end)
 }
 
-/// Checks a stream's header: 2 or 3 tip axes, no joints.
+/// Checks a stream's header: 2 or 3 tip axes, no joints, a servo period.
 pub fn validate_header(header: &GeometryHeader) -> Result<(), GeometryFault> {
-    if !(2..=3).contains(&(header.tip_axes as usize)) || header.joints != 0 {
+    if !(2..=3).contains(&(header.tip_axes as usize)) || header.joints != 0 || header.period_ns == 0 {
         return Err(GeometryFault::Header);
     }
     Ok(())
+}
+
+/// Whether a plan made for `planned_ns` may run on a thread of period `thread_ns`: equal up to
+/// the rounding of a period in seconds to whole nanoseconds (1 ns, or a millionth of the period,
+/// the slack of the limit checks).
+pub fn period_matches(planned_ns: u32, thread_ns: i64) -> bool {
+    let slack = (thread_ns / 1_000_000).max(1);
+    (i64::from(planned_ns) - thread_ns).abs() <= slack
 }
 
 /// The knots, coordinates and weights of the curve `desc` describes, within `values` and with
@@ -1074,7 +1084,8 @@ mod tests {
         GeometryHeader {
             first_curve,
             tip_axes: 2,
-            ..GeometryHeader::default()
+            joints: 0,
+            period_ns: 250_000,
         }
     }
 
@@ -1110,6 +1121,10 @@ mod tests {
                 ..header(0)
             },
             GeometryHeader { joints: 5, ..header(0) },
+            GeometryHeader {
+                period_ns: 0,
+                ..header(0)
+            },
         ] {
             assert_eq!(g.begin(&bad), Err(PublishError::Invalid(GeometryFault::Header)));
         }

@@ -44,7 +44,7 @@ fn bench_update(c: &mut Criterion) {
         let groups = (!blocks).then(|| plan_groups(&toolpath, &limits, None).unwrap());
         let vpop = blocks.then(|| vpop_plan(&toolpath, &limits, None).unwrap());
         let source = || match (&groups, &vpop) {
-            (Some(g), _) => Source::groups(g.clone()),
+            (Some(g), _) => Source::groups(g.clone(), limits.period),
             (_, Some(p)) => Source::blocks(block_plan(&toolpath, (&p.points, &p.limits), None, 1.0).unwrap()),
             _ => unreachable!(),
         };

@@ -1203,6 +1203,8 @@ pub enum Source {
         /// How the plan is made again at another feed override (`None`: groups planned
         /// already, which keep theirs).
         replanner: Option<Box<Replanner>>,
+        /// The servo period the plan was made for (s).
+        period: f64,
     },
     /// A VPOp plan with its checked stops, sent block group by block group.
     Blocks {
@@ -1374,6 +1376,7 @@ impl Source {
             queued: 0.0,
             total: None,
             error: None,
+            period: limits.period,
             replanner: Some(Box::new(Replanner {
                 path,
                 limits,
@@ -1389,8 +1392,9 @@ impl Source {
         }
     }
 
-    /// Groups planned already (a whole streamed plan: [`plan_groups`]).
-    pub fn groups(groups: Vec<SegmentGroup>) -> Source {
+    /// Groups planned already (a whole streamed plan: [`plan_groups`]) for the servo period
+    /// `period` (s).
+    pub fn groups(groups: Vec<SegmentGroup>, period: f64) -> Source {
         let total = groups.iter().map(|g| g.time).sum();
         Source::Segments {
             events: None,
@@ -1399,6 +1403,15 @@ impl Source {
             total: Some(total),
             error: None,
             replanner: None,
+            period,
+        }
+    }
+
+    /// The servo period the plan was made for (s).
+    fn period(&self) -> f64 {
+        match self {
+            Source::Segments { period, .. } => *period,
+            Source::Blocks { plan, .. } => plan.period,
         }
     }
 
@@ -1521,7 +1534,7 @@ impl<'a> Streamer<'a> {
         began: Instant,
     ) -> Result<Self, String> {
         let first = u32::try_from(first_curve).map_err(|_| "path element index beyond 32 bits".to_string())?;
-        let writer = GeometryWriter::begin(channel, first, tip)?;
+        let writer = GeometryWriter::begin(channel, first, tip, source.period())?;
         channel.set_planned_time(0.0);
         // No motion runs, so no join of an earlier stream is open.
         channel.splice.reset();
@@ -1668,6 +1681,7 @@ impl<'a> Streamer<'a> {
             total,
             error,
             replanner,
+            ..
         } = &mut self.source
         else {
             return Ok(());

@@ -60,18 +60,23 @@ pub struct GeometryWriter<'a> {
 
 impl<'a> GeometryWriter<'a> {
     /// Begins a new stream (the module must run no motion: it refuses one that begins during
-    /// motion) whose first curve is path element `first_curve`.
-    pub fn begin(channel: &'a Channel, first_curve: u32, tip_axes: usize) -> Result<Self, String> {
+    /// motion) whose first curve is path element `first_curve`, planned for the servo period
+    /// `period` (s; the module refuses the stream on a thread of another period).
+    pub fn begin(channel: &'a Channel, first_curve: u32, tip_axes: usize, period: f64) -> Result<Self, String> {
         if first_curve > MAX_CURVE_INDEX {
             return Err(format!(
                 "path element {first_curve} is beyond the channel's {MAX_CURVE_INDEX}"
             ));
         }
+        let period_ns = (period * 1e9).round();
+        if !(period_ns >= 1.0 && period_ns <= f64::from(u32::MAX)) {
+            return Err(format!("a servo period of {period} s cannot be stated in the channel"));
+        }
         let header = GeometryHeader {
             first_curve,
             tip_axes: tip_axes as u32,
             joints: 0,
-            reserved: 0,
+            period_ns: period_ns as u32,
         };
         let generation = channel.geometry.begin(&header).map_err(|e| {
             format!("geometry stream refused: {e:?} (tool-tip axes {tip_axes}, at most {MAX_JOINTS} joints)")

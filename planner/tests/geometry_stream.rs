@@ -25,7 +25,7 @@ fn curves_are_checked_a_slice_per_period() {
         ("long spline", job_of(long_spline(3000))),
     ] {
         let l = load();
-        let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim()).unwrap();
+        let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim(), PERIOD).unwrap();
         let mut values = 0;
         for e in &job.toolpath.elements {
             let c = &e.curve;
@@ -73,12 +73,12 @@ fn bad_curves_and_streams_are_refused() {
     let _guard = lock_module();
     let job = job("trident.json");
     let l = load();
-    let w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let w = GeometryWriter::begin(l.channel, 0, 2, PERIOD).unwrap();
     let c = &job.toolpath.elements[0].curve;
     let mut weights = c.weights().to_vec();
     weights[2] = -1.0;
     assert!(matches!(
-        GeometryWriter::begin(l.channel, 0, 2).unwrap().publish_curve(
+        GeometryWriter::begin(l.channel, 0, 2, PERIOD).unwrap().publish_curve(
             c.degree(),
             c.dim(),
             c.knots(),
@@ -89,7 +89,7 @@ fn bad_curves_and_streams_are_refused() {
     ));
     drop(w);
     // The same curve past the writer's check, straight into the stream.
-    let w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let w = GeometryWriter::begin(l.channel, 0, 2, PERIOD).unwrap();
     let data: Vec<f64> = c.knots().iter().chain(c.points()).chain(&weights).copied().collect();
     l.channel.geometry.write_values(0, &data).unwrap();
     let (k, p) = (c.knots().len() as u32, c.points().len() as u32);
@@ -139,9 +139,44 @@ fn bad_curves_and_streams_are_refused() {
     let mut s = streamer(&l, &job.toolpath, job.groups.clone(), 0);
     run(&mut s, 100, &mut |_| {}, &mut |_| false);
     assert!(bit("nurbs_interp.active"));
-    let _w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let _w = GeometryWriter::begin(l.channel, 0, 2, PERIOD).unwrap();
     period();
     assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::GeometryChanged as u32);
+}
+
+/// A plan states the servo period it was made for; on a thread of another period the module
+/// refuses the whole stream (fault "period", no record taken, the position held) rather than
+/// play its samples faster or slower than planned. The period rounded to whole nanoseconds
+/// still runs.
+#[test]
+fn a_plan_for_another_servo_period_is_refused() {
+    let _guard = lock_module();
+    let job = job("trident.json");
+    for (planned, refused) in [(4.0 * PERIOD, true), (PERIOD * (1.0 + 1e-10), false)] {
+        let l = load();
+        let mut s = Streamer::new(
+            l.channel,
+            job.toolpath.tip_dim(),
+            Source::groups(job.groups.clone(), planned),
+            0,
+            0.25,
+            Instant::now(),
+        )
+        .unwrap();
+        let got = run(&mut s, 200, &mut |_| {}, &mut |_| false);
+        if refused {
+            assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::Period as u32);
+            assert_eq!(u32_pin("nurbs_interp.records"), 0);
+            assert!(got.is_empty(), "no sample of the refused plan is played");
+        } else {
+            assert!(
+                !bit("nurbs_interp.fault"),
+                "fault {}",
+                u32_pin("nurbs_interp.fault-code")
+            );
+            assert!(u32_pin("nurbs_interp.records") > 0);
+        }
+    }
 }
 
 /// A G1 program longer than what the writer may use (here limited to 64 descriptors in flight
@@ -157,7 +192,7 @@ fn bad_curves_and_streams_are_refused() {
 fn an_arena_written_round_to_its_oldest_value_is_full() {
     let _guard = lock_module();
     let l = load();
-    let mut w = GeometryWriter::begin(l.channel, 0, 2).unwrap();
+    let mut w = GeometryWriter::begin(l.channel, 0, 2, PERIOD).unwrap();
     w.limit(100, 64);
     let kept = Release::Slot(1_000_000);
     assert_eq!(w.put(&[1.0; 30], Release::Slot(0)), Ok(0));
@@ -182,7 +217,7 @@ fn a_program_longer_than_the_channel_reuses_it() {
     let mut s = Streamer::new(
         l.channel,
         job.toolpath.tip_dim(),
-        Source::groups(job.groups.clone()),
+        Source::groups(job.groups.clone(), PERIOD),
         0,
         0.2,
         Instant::now(),

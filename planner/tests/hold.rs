@@ -433,7 +433,7 @@ fn hold_at_stored_stop(job: &Job, pick: &Pick) -> (usize, usize) {
     let mut streamer = nurbs_planner::feed::Streamer::new(
         l.channel,
         job.toolpath.tip_dim(),
-        nurbs_planner::feed::Source::groups(rest),
+        nurbs_planner::feed::Source::groups(rest, job.limits.period),
         from.curve,
         f64::INFINITY,
         std::time::Instant::now(),

@@ -258,7 +258,7 @@ fn an_underrun_resumes_from_the_stop_point_on_command() {
         let mut s = Streamer::new(
             l.channel,
             job.toolpath.tip_dim(),
-            Source::groups(rest),
+            Source::groups(rest, job.limits.period),
             from.curve,
             f64::INFINITY,
             Instant::now(),
@@ -360,7 +360,7 @@ fn hold_and_abort_stop_at_the_group_end_within_the_limits() {
             let mut s = Streamer::new(
                 l.channel,
                 job.toolpath.tip_dim(),
-                Source::groups(rest),
+                Source::groups(rest, job.limits.period),
                 from.curve,
                 f64::INFINITY,
                 Instant::now(),
@@ -407,7 +407,7 @@ fn hold_and_abort_stop_at_the_group_end_within_the_limits() {
 
 /// The raw stream of a job: every curve published, nothing else.
 fn raw_stream<'a>(l: &'a Loaded, job: &Job) -> GeometryWriter<'a> {
-    let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim()).unwrap();
+    let mut w = GeometryWriter::begin(l.channel, 0, job.toolpath.tip_dim(), PERIOD).unwrap();
     for e in &job.toolpath.elements {
         let c = &e.curve;
         w.publish_curve(c.degree(), c.dim(), c.knots(), c.points(), c.weights())

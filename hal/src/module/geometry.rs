@@ -72,7 +72,12 @@ impl RtGeometry {
     /// Takes a new stream of `stream` (only while no motion runs: `Err(GeometryChanged)`
     /// otherwise), and checks up to [`VALIDATION_VALUES_PER_PERIOD`] more values of the
     /// published curves, in path order. Bounded work, allocation-free, panic-free.
-    pub(super) fn follow(&mut self, stream: &'static GeometryStream, in_motion: bool) -> Result<Followed, FaultCode> {
+    pub(super) fn follow(
+        &mut self,
+        stream: &'static GeometryStream,
+        in_motion: bool,
+        period_ns: i64,
+    ) -> Result<Followed, FaultCode> {
         let generation = stream.generation();
         let mut followed = Followed::Same;
         if generation != self.generation && generation != 0 && generation & 1 == 0 {
@@ -84,6 +89,9 @@ impl RtGeometry {
                 return Ok(Followed::Same); // begun again meanwhile: next period
             }
             validate_header(&header).map_err(|_| FaultCode::Geometry)?;
+            if !period_matches(header.period_ns, period_ns) {
+                return Err(FaultCode::Period);
+            }
             *self = RtGeometry {
                 generation,
                 header,

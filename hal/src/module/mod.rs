@@ -57,8 +57,8 @@ use nurbs_rtcore::interpolator::{CurveSet, Interpolator, Sample, Step};
 use nurbs_rtcore::{CurveView, StopRun};
 
 use crate::channel::{
-    check_curve, stop_points, trusted_curve, validate_header, Channel, GeometryHeader, GeometryStream, Report,
-    StopPoint, ValueCursor, AT_RECORD_END, CHANNEL_KEY, SPLICE_ACCEPTED, SPLICE_MISSED,
+    check_curve, period_matches, stop_points, trusted_curve, validate_header, Channel, GeometryHeader, GeometryStream,
+    Report, StopPoint, ValueCursor, AT_RECORD_END, CHANNEL_KEY, SPLICE_ACCEPTED, SPLICE_MISSED,
 };
 use crate::pins::Pin;
 use crate::slot::{PathBlock, Record, SegmentRecord, SegmentSlot, KIND_BLOCK};
@@ -113,6 +113,9 @@ pub enum FaultCode {
     /// The interpolator produced a position, feed or parameter that is not a finite number (a
     /// record that does not fit its curve): not written, the last position held.
     NonFinite = 10,
+    /// The geometry stream was planned for another servo period than the thread's: its samples
+    /// would run faster or slower than planned, so nothing of it is taken.
+    Period = 11,
 }
 
 crate::declare_pins! { "nurbs_interp", Pins, PINS,
@@ -251,8 +254,9 @@ pub struct Instance {
     resume_pin: bool,
     /// Which kind of record the current motion runs (set by its first record).
     mode: Mode,
-    /// Servo period of the current update (s).
+    /// Servo period of the current update (s, and as the thread gives it, ns).
     period: f64,
+    period_ns: i64,
     /// A path-block motion: the block being output, its stop points.
     block_player: BlockPlayer,
     /// The position pins hold a position of the path (its start, shown before the motion, or
@@ -290,6 +294,7 @@ impl Instance {
     /// One servo period. `period_ns` is the thread's period.
     pub fn update(&mut self, period_ns: i64) {
         self.period = period_ns as f64 / 1e9;
+        self.period_ns = period_ns;
         // SAFETY: the channel block stays mapped until rtapi_app_exit, after the last period.
         let channel: &'static Channel = unsafe { &*self.channel };
         if self.fault == FaultCode::None && channel.check().is_err() {
@@ -534,7 +539,7 @@ impl Instance {
     /// fault); the curves of the current one are checked a slice per period.
     fn follow_geometry(&mut self, channel: &'static Channel) {
         let in_motion = self.in_motion();
-        match self.geometry.follow(&channel.geometry, in_motion) {
+        match self.geometry.follow(&channel.geometry, in_motion, self.period_ns) {
             Ok(Followed::New) => self.start_stream(),
             Ok(Followed::Same) => {}
             Err(code) => self.fault = code,
@@ -783,6 +788,7 @@ unsafe fn create(comp_id: c_int) -> c_int {
     addr_of_mut!((*inst).mode).write(Mode::Undecided);
     addr_of_mut!((*inst).block_player).write(BlockPlayer::IDLE);
     addr_of_mut!((*inst).period).write(0.0);
+    addr_of_mut!((*inst).period_ns).write(0);
     addr_of_mut!((*inst).position_known).write(false);
     addr_of_mut!((*inst).start_shown).write(false);
     addr_of_mut!((*inst).handover).write(Handover::new());

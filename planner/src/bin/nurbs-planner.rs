@@ -8,7 +8,7 @@
 //!
 //! ```text
 //! nurbs-planner TOOLPATH --feed F --accel A[,A..] --jerk J[,J..] --chord-tol E [--vel V[,V..]]
-//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop]
+//!               (--period S | --ini FILE) [--margin S] [--planner erwinski|vpop|reach]
 //!               [--round-corners auto|on|off] [--stop-fraction F]
 //! ```
 //! The default `erwinski` planner runs as a stream in a thread of its own
@@ -21,8 +21,9 @@
 //! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_cli::LimitArgs`): with
 //! `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given
-//! on the command line win. The period must equal the servo thread's for the motion to be the
-//! one the planner checked.
+//! on the command line win. The period travels in the stream's header: the module refuses a
+//! plan made for another period than its thread's (fault 11), whose motion would not be the one
+//! the planner checked.
 //!
 //! Pins: `nurbs-planner.ready` (bit out: first records queued), `.running` (bit out: records
 //! remain to be sent), `.error` (bit out), `.records-sent` (u32 out), `.buffered` (float out,

@@ -72,7 +72,7 @@ pub fn play(data: &[u8]) {
     let channel = comp.attach_channel(Duration::ZERO).unwrap();
     mock::set_pin("nurbs_interp.enable", Value::Bit(true));
     let source = if mode & 1 == 0 {
-        Source::groups(p.groups.clone())
+        Source::groups(p.groups.clone(), p.blocks.period)
     } else {
         Source::blocks(p.blocks.clone())
     };

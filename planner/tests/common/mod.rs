@@ -250,7 +250,7 @@ pub fn streamer<'a>(l: &'a Loaded, toolpath: &'a Toolpath, groups: Vec<SegmentGr
     Streamer::new(
         l.channel,
         toolpath.tip_dim(),
-        Source::groups(groups),
+        Source::groups(groups, PERIOD),
         first,
         f64::INFINITY,
         Instant::now(),
