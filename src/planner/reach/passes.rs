@@ -470,47 +470,80 @@ fn no_dip(a: f64, b: f64, d: f64) -> f64 {
     c + 1e-9 * c.abs()
 }
 
+/// Rows bounding c from one side, as c ≤ d − a·A − b·B (upper) or c ≥ a·A + b·B − d (lower),
+/// kept column by column so that evaluating them all at a vertex vectorises.
+#[derive(Default)]
+struct Bounds {
+    a: Vec<f64>,
+    b: Vec<f64>,
+    d: Vec<f64>,
+}
+
+impl Bounds {
+    fn clear(&mut self) {
+        self.a.clear();
+        self.b.clear();
+        self.d.clear();
+    }
+
+    fn push(&mut self, a: f64, b: f64, d: f64) {
+        self.a.push(a);
+        self.b.push(b);
+        self.d.push(d);
+    }
+
+    fn is_empty(&self) -> bool {
+        self.a.is_empty()
+    }
+
+    /// The largest a·A + b·B − d over the rows at `v`.
+    fn max_at(&self, v: [f64; 2]) -> f64 {
+        let mut m = f64::NEG_INFINITY;
+        for ((a, b), d) in self.a.iter().zip(&self.b).zip(&self.d) {
+            m = m.max(a * v[0] + b * v[1] - d);
+        }
+        m
+    }
+
+    /// The first row where a·A + b·B − d takes the value `x` at `v`.
+    fn row_of(&self, v: [f64; 2], x: f64) -> usize {
+        (0..self.a.len())
+            .find(|&i| self.a[i] * v[0] + self.b[i] * v[1] - self.d[i] == x)
+            .unwrap_or(0)
+    }
+}
+
 /// The lazy projection, with its buffers.
 #[derive(Default)]
 struct Projector {
-    upper: Vec<Row>,
-    lower: Vec<Row>,
+    /// c ≤ u.d − u.a·A − u.b·B, stored negated: c ≤ −(a·A + b·B − d).
+    upper: Bounds,
+    lower: Bounds,
     cache: Vec<Eval>,
+    next_cache: Vec<Eval>,
+    before: Vec<[f64; 2]>,
+    used: Vec<(usize, usize)>,
 }
 
 /// A vertex's worst pair: how far its lowest upper bound on c lies below its highest lower
-/// bound (`gap` > 0: the vertex does not qualify), and the two rows.
+/// bound (`gap` > 0: the vertex does not qualify), and the two bounds.
 #[derive(Clone, Copy, Debug)]
 struct Eval {
     gap: f64,
     scale: f64,
-    lower: usize,
-    upper: usize,
+    lo: f64,
+    hi: f64,
 }
 
 impl Projector {
     fn eval(&self, v: [f64; 2]) -> Eval {
-        let (mut lo, mut li) = (f64::NEG_INFINITY, usize::MAX);
-        for (i, r) in self.lower.iter().enumerate() {
-            let x = r.a * v[0] + r.b * v[1] - r.d;
-            if x > lo {
-                lo = x;
-                li = i;
-            }
-        }
-        let (mut hi, mut ui) = (f64::INFINITY, usize::MAX);
-        for (j, r) in self.upper.iter().enumerate() {
-            let x = r.d - r.a * v[0] - r.b * v[1];
-            if x < hi {
-                hi = x;
-                ui = j;
-            }
-        }
+        let lo = self.lower.max_at(v);
+        let hi = -self.upper.max_at(v);
         Eval {
             gap: lo - hi,
             scale: lo.abs().max(hi.abs()),
-            lower: li,
-            upper: ui,
+            lo,
+            hi,
         }
     }
 
@@ -520,22 +553,12 @@ impl Projector {
         self.lower.clear();
         for r in rows {
             if r.c > 0.0 {
-                // c ≤ (d − a·A − b·B)/γ
-                self.upper.push(Row {
-                    a: r.a / r.c,
-                    b: r.b / r.c,
-                    c: 1.0,
-                    d: r.d / r.c,
-                });
+                // c ≤ (d − a·A − b·B)/γ, kept as a·A + b·B − d over γ (negated bound).
+                self.upper.push(r.a / r.c, r.b / r.c, r.d / r.c);
             } else if r.c < 0.0 {
-                // c ≥ (a·A + b·B − d)/(−γ)... stored as c ≥ a'·A + b'·B − d'
+                // c ≥ (a·A + b·B − d)/(−γ)
                 let g = -r.c;
-                self.lower.push(Row {
-                    a: r.a / g,
-                    b: r.b / g,
-                    c: -1.0,
-                    d: r.d / g,
-                });
+                self.lower.push(r.a / g, r.b / g, r.d / g);
             } else {
                 poly.clip(HalfPlane {
                     na: r.a,
@@ -552,7 +575,7 @@ impl Projector {
             let e = self.eval(*v);
             self.cache.push(e);
         }
-        let mut used: Vec<(usize, usize)> = Vec::new();
+        self.used.clear();
         for _ in 0..4 * (rows.len() + 8) {
             let Some((m, worst)) = self
                 .cache
@@ -566,21 +589,23 @@ impl Projector {
             if worst.gap <= 1e-12 * worst.scale {
                 break;
             }
-            let pair = (worst.lower, worst.upper);
-            if used.contains(&pair) {
+            let v = poly.vertices[m];
+            let pair = (self.lower.row_of(v, worst.lo), self.upper.row_of(v, -worst.hi));
+            if self.used.contains(&pair) {
                 // Cut by this pair already: what is left over is rounding.
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
             }
-            used.push(pair);
-            let (l, u) = (self.lower[pair.0], self.upper[pair.1]);
-            // l.a·A + l.b·B − l.d ≤ u.d − u.a·A − u.b·B
+            self.used.push(pair);
+            let (l, u) = pair;
+            // lower_l(A, B) ≤ upper_u(A, B): (l.a + u.a)·A + (l.b + u.b)·B ≤ l.d + u.d.
             let h = HalfPlane {
-                na: l.a + u.a,
-                nb: l.b + u.b,
-                d: l.d + u.d,
+                na: self.lower.a[l] + self.upper.a[u],
+                nb: self.lower.b[l] + self.upper.b[u],
+                d: self.lower.d[l] + self.upper.d[u],
             };
-            let before = poly.vertices.clone();
+            self.before.clear();
+            self.before.extend_from_slice(&poly.vertices);
             if !poly.clip(h) {
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
@@ -589,14 +614,15 @@ impl Projector {
                 return poly;
             }
             // Keep the evaluations of the vertices that survived; evaluate the new ones.
-            let mut cache = Vec::with_capacity(poly.vertices.len());
+            self.next_cache.clear();
             for v in &poly.vertices {
-                match before.iter().position(|p| p == v) {
-                    Some(i) => cache.push(self.cache[i]),
-                    None => cache.push(self.eval(*v)),
-                }
+                let e = match self.before.iter().position(|p| p == v) {
+                    Some(i) => self.cache[i],
+                    None => self.eval(*v),
+                };
+                self.next_cache.push(e);
             }
-            self.cache = cache;
+            std::mem::swap(&mut self.cache, &mut self.next_cache);
         }
         poly
     }

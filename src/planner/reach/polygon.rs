@@ -49,20 +49,23 @@ impl Polygon {
         if self.vertices.iter().all(|v| f(v) <= tol) {
             return false;
         }
-        let mut out = Vec::with_capacity(n + 1);
+        // The clipped polygon goes to the end of the same buffer (a convex polygon cut by one
+        // line gains at most one vertex), then replaces the old vertices: no allocation once
+        // the buffer has grown.
+        self.vertices.reserve(n + 1);
         for i in 0..n {
             let (p, q) = (self.vertices[i], self.vertices[(i + 1) % n]);
             let (fp, fq) = (f(&p), f(&q));
             if fp <= tol {
-                out.push(p);
+                self.vertices.push(p);
             }
             if (fp < -tol && fq > tol) || (fq < -tol && fp > tol) {
                 let t = fp / (fp - fq);
-                out.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
+                self.vertices.push([p[0] + t * (q[0] - p[0]), p[1] + t * (q[1] - p[1])]);
             }
         }
-        dedup(&mut out, ea, eb);
-        self.vertices = out;
+        self.vertices.drain(..n);
+        dedup(&mut self.vertices, ea, eb);
         true
     }
 
