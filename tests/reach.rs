@@ -158,10 +158,10 @@ fn random_curves() {
         }
     }
     eprintln!("{planned} planned and verified, {refused} refused");
-    // Measured: 53 of the first 60 planned; the refusals are curves with micro-geometry
-    // (control points 1e-8 mm apart: a cusp whose curvature leaves no speed) and thin
-    // controllable sets at extreme limit ratios. A regression plans fewer.
+    // Measured: 56 of the first 60 planned; the refusals are micro-geometry (a stretch of
+    // 1.3e-7 mm between two cusps) and controllable sets so thin at extreme limit ratios that
+    // the forward pass stands still. A regression plans fewer.
     if only.is_none() && cases == 60 {
-        assert!(planned >= 53, "{refused} of {cases} refused");
+        assert!(planned >= 56, "{refused} of {cases} refused");
     }
 }

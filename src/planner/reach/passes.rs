@@ -266,7 +266,13 @@ impl Passes<'_> {
         let n = g.len();
         let mut sets = vec![Polygon::default(); n + 1];
         let mut rows = Vec::new();
-        let big = 1e12;
+        // A box every feasible state lies in: |q'_i·b| ≤ A_i + |q''_i|·a with a's cap keeping
+        // |q''|·a ≤ A and some |q'_i| ≥ 1/√3, so |b| ≤ 2√3·A; ten times that. (A box far
+        // larger would set the polygons' rounding tolerances above a short stretch's states.)
+        let a_max = self.limits.acceleration[..self.limits.axes]
+            .iter()
+            .fold(0.0f64, |m, a| m.max(*a));
+        let big = 10.0 * 2.0 * 3f64.sqrt() * a_max;
         // The set the last c-piece must end in.
         let last = match end {
             End::Rest => {
