@@ -519,8 +519,8 @@ pub fn validate_header(header: &GeometryHeader) -> Result<(), GeometryFault> {
 /// the rounding of a period in seconds to whole nanoseconds (1 ns, or a millionth of the period,
 /// the slack of the limit checks).
 pub fn period_matches(planned_ns: u32, thread_ns: i64) -> bool {
-    let slack = (thread_ns / 1_000_000).max(1);
-    (i64::from(planned_ns) - thread_ns).abs() <= slack
+    let slack = (thread_ns / 1_000_000).max(1).unsigned_abs();
+    i64::from(planned_ns).abs_diff(thread_ns) <= slack
 }
 
 /// The knots, coordinates and weights of the curve `desc` describes, within `values` and with

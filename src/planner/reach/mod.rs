@@ -563,7 +563,16 @@ struct Linearisation {
 
 impl Linearisation {
     fn from_speed(grid: &Grid, speed: &dyn Fn(f64, &Local) -> f64) -> Self {
-        let stations = grid.stations.iter().map(|st| speed(st.s, &st.right).powi(2)).collect();
+        Self::from_a(grid, &|s, here| speed(s, here).powi(2))
+    }
+
+    fn from_plan(grid: &Grid, plan: &PlanSpeed) -> Self {
+        Self::from_a(grid, &|s, _| plan.a_at(s))
+    }
+
+    /// `a(s, here)` at every station and collocation point.
+    fn from_a(grid: &Grid, a: &dyn Fn(f64, &Local) -> f64) -> Self {
+        let stations = grid.stations.iter().map(|st| a(st.s, &st.right)).collect();
         let points = grid
             .intervals
             .iter()
@@ -571,24 +580,7 @@ impl Linearisation {
             .map(|(iv, st)| {
                 let mut p = [0.0; NC];
                 for (x, (theta, local)) in p.iter_mut().zip(&iv.points) {
-                    *x = speed(st.s + theta, local).powi(2);
-                }
-                p
-            })
-            .collect();
-        Linearisation { stations, points }
-    }
-
-    fn from_plan(grid: &Grid, plan: &PlanSpeed) -> Self {
-        let stations = grid.stations.iter().map(|st| plan.a_at(st.s)).collect();
-        let points = grid
-            .intervals
-            .iter()
-            .zip(&grid.stations)
-            .map(|(iv, st)| {
-                let mut p = [0.0; NC];
-                for (x, (theta, _)) in p.iter_mut().zip(&iv.points) {
-                    *x = plan.a_at(st.s + theta);
+                    *x = a(st.s + theta, local);
                 }
                 p
             })
