@@ -32,7 +32,7 @@ use crate::geometry::Toolpath;
 use crate::planner::vpop::PathPoint;
 use crate::planner::{Limits, LimitsError, PathCurves};
 use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
-use passes::{Begin, End, Motion, PassError, Passes};
+use passes::{Motion, PassError, Passes};
 use rows::AxisLimits;
 use sampler::Check;
 
@@ -526,8 +526,8 @@ impl<'o> Planner<'o> {
                 max_vertices: self.options.max_vertices,
                 jerk: true,
             };
-            let sets = p.backward(1, End::Rest)?;
-            p.forward(&sets, Begin::Rest, End::Rest, grid.len())
+            let sets = p.backward()?;
+            p.forward(&sets)
         };
         let describe = |e: PassError| {
             let (k, what) = match e {

@@ -19,25 +19,6 @@ use super::rows::{point_rows, successor_row, AxisLimits, Point, Row};
 /// Collocation points per interval.
 const NC: usize = COLLOCATION.len();
 
-/// How a stretch of the plan begins.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Begin {
-    /// At rest at station 0: the first interval is a constant-jerk start.
-    Rest,
-    /// In motion with state (a, b) at station 0.
-    Moving { a: f64, b: f64 },
-}
-
-/// How a stretch of the plan must be able to end.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum End {
-    /// At rest at the last station: the last interval is a constant-jerk stop.
-    Rest,
-    /// Below a = `0` + rounding at the last station, decelerating: the end of a look-ahead
-    /// window, beyond which the path goes on.
-    Window,
-}
-
 /// Everything the passes read: the grid, the limits, the linearisation points, the floors
 /// and the per-interval tightening.
 pub struct Passes<'a> {
@@ -68,10 +49,9 @@ pub struct StageLin {
     pub end: f64,
 }
 
-/// The controllable sets from station `first` on (earlier entries empty), and the
-/// linearisation each interval's rows were built with (the forward pass builds the same).
+/// The controllable sets of every station, and the linearisation each interval's rows were
+/// built with (the forward pass builds the same).
 pub struct Sets {
-    pub first: usize,
     pub sets: Vec<Polygon>,
     pub lins: Vec<StageLin>,
 }
@@ -260,8 +240,8 @@ impl Passes<'_> {
         poly
     }
 
-    /// The controllable sets from the end of the grid back to station `first`.
-    pub fn backward(&self, first: usize, end: End) -> Result<Sets, PassError> {
+    /// The controllable sets from rest at the end of the grid back to station 0.
+    pub fn backward(&self) -> Result<Sets, PassError> {
         let g = self.grid;
         let n = g.len();
         let mut sets = vec![Polygon::default(); n + 1];
@@ -273,68 +253,34 @@ impl Passes<'_> {
             .iter()
             .fold(0.0f64, |m, a| m.max(*a));
         let big = 10.0 * 2.0 * 3f64.sqrt() * a_max;
-        // The set the last c-piece must end in.
-        let last = match end {
-            End::Rest => {
-                // A constant-jerk stop over the last interval: a = −1.5·D·b, |b| ≤ b_e.
-                let d = g.intervals[n - 1].length;
-                let jt = self.piece_jerk(n - 1);
-                let be = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
-                let tol = 1e-9 * 1.5 * d * be;
-                let mut p = Polygon::rectangle(0.0, 1.5 * d * be * (1.0 + 1e-9), -be, 0.0);
-                p.clip(HalfPlane {
-                    na: 1.0,
-                    nb: 1.5 * d,
-                    d: tol,
-                });
-                p.clip(HalfPlane {
-                    na: -1.0,
-                    nb: -1.5 * d,
-                    d: tol,
-                });
-                sets[n - 1] = self.station_polygon(n - 1, p, &mut rows);
-                n - 1
-            }
-            End::Window => {
-                let st = &g.stations[n];
-                let eps = 1e-9 * st.left.cap.max(1.0);
-                let mut p = Polygon::rectangle(0.0, eps, -big, 0.0);
-                rows.clear();
-                let f = self.tight[n - 1];
-                point_rows(
-                    &mut rows,
-                    &Point {
-                        theta: 0.0,
-                        local: &st.left,
-                        a_lin: self.lin_stations[n],
-                        state: true,
-                        jerk: false,
-                        jump: None,
-                        floor: 0.0,
-                        jerk_cap: !self.jerk,
-                    },
-                    &self.limits.scaled(f),
-                    f * f,
-                    self.period,
-                );
-                for r in &rows {
-                    p.clip(HalfPlane {
-                        na: r.a,
-                        nb: r.b,
-                        d: r.d,
-                    });
-                }
-                sets[n] = p;
-                n
-            }
-        };
+        // The set the last c-piece must end in: a constant-jerk stop over the last interval,
+        // a = −1.5·D·b, |b| ≤ b_e.
+        let last = n - 1;
+        {
+            let d = g.intervals[last].length;
+            let jt = self.piece_jerk(last);
+            let be = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
+            let tol = 1e-9 * 1.5 * d * be;
+            let mut p = Polygon::rectangle(0.0, 1.5 * d * be * (1.0 + 1e-9), -be, 0.0);
+            p.clip(HalfPlane {
+                na: 1.0,
+                nb: 1.5 * d,
+                d: tol,
+            });
+            p.clip(HalfPlane {
+                na: -1.0,
+                nb: -1.5 * d,
+                d: tol,
+            });
+            sets[last] = self.station_polygon(last, p, &mut rows);
+        }
         if sets[last].is_empty() {
             return Err(PassError::Empty { station: last });
         }
         let mut projector = Projector::default();
         let mut hp = Vec::new();
         let mut lins = vec![StageLin::default(); n];
-        for k in (first..last).rev() {
+        for k in (0..last).rev() {
             sets[k + 1].half_planes(&mut hp);
             let d = g.intervals[k].length;
             let cap = g.stations[k].right.cap * self.tight[k] * self.tight[k];
@@ -349,55 +295,43 @@ impl Passes<'_> {
             sets[k] = poly;
             lins[k] = lin;
         }
-        Ok(Sets { first, sets, lins })
+        Ok(Sets { sets, lins })
     }
 
-    /// The greedy forward pass from `begin` through the sets, to the end of the grid
-    /// (`End::Rest`: the last interval a constant-jerk stop) or to station `until` (then
-    /// `Motion` covers the intervals before it).
-    pub fn forward(&self, sets: &Sets, begin: Begin, end: End, until: usize) -> Result<Motion, PassError> {
+    /// The greedy forward pass from rest at station 0 through the sets to rest at the end of
+    /// the grid (the first interval a constant-jerk start, the last a constant-jerk stop).
+    pub fn forward(&self, sets: &Sets) -> Result<Motion, PassError> {
         let g = self.grid;
         let n = g.len();
         let mut m = Motion::default();
         let mut rows = Vec::new();
         let mut hp = Vec::new();
-        let (mut a, mut b, first) = match begin {
-            Begin::Rest => {
-                // The largest b1 on the start line (1.5·D·b1, b1) inside the set of station 1.
-                let d = g.intervals[0].length;
-                let jt = self.piece_jerk(0);
-                let bmax = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
-                let (pa, pb) = (1.5 * d * bmax, bmax);
-                sets.sets[1].half_planes(&mut hp);
-                let mut t: f64 = 1.0;
-                for h in &hp {
-                    let along = h.na * pa + h.nb * pb;
-                    if along > 0.0 {
-                        t = t.min(h.d / along);
-                    }
+        // The largest b1 on the start line (1.5·D·b1, b1) inside the set of station 1.
+        let (mut a, mut b) = {
+            let d = g.intervals[0].length;
+            let jt = self.piece_jerk(0);
+            let bmax = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
+            let (pa, pb) = (1.5 * d * bmax, bmax);
+            sets.sets[1].half_planes(&mut hp);
+            let mut t: f64 = 1.0;
+            for h in &hp {
+                let along = h.na * pa + h.nb * pb;
+                if along > 0.0 {
+                    t = t.min(h.d / along);
                 }
-                let t = t.max(0.0);
-                let (a1, b1) = (t * pa, t * pb);
-                let Some((piece, duration)) = Piece::start(a1, b1) else {
-                    return Err(PassError::Stalls { interval: 0 });
-                };
-                m.a.extend([0.0, a1]);
-                m.b.extend([0.0, b1]);
-                m.pieces.push(piece);
-                m.durations.push(duration);
-                (a1, b1, 1)
             }
-            Begin::Moving { a, b } => {
-                m.a.push(a);
-                m.b.push(b);
-                (a, b, 0)
-            }
+            let t = t.max(0.0);
+            let (a1, b1) = (t * pa, t * pb);
+            let Some((piece, duration)) = Piece::start(a1, b1) else {
+                return Err(PassError::Stalls { interval: 0 });
+            };
+            m.a.extend([0.0, a1]);
+            m.b.extend([0.0, b1]);
+            m.pieces.push(piece);
+            m.durations.push(duration);
+            (a1, b1)
         };
-        let stop_at = match end {
-            End::Rest if until >= n => n - 1,
-            _ => until.min(n),
-        };
-        for k in first..stop_at {
+        for k in 1..n - 1 {
             self.stage_rows(k, &sets.lins[k], &mut rows);
             sets.sets[k + 1].half_planes(&mut hp);
             let d = g.intervals[k].length;
@@ -439,23 +373,21 @@ impl Passes<'_> {
             m.a.push(a);
             m.b.push(b);
         }
-        if end == End::Rest && until >= n {
-            // The constant-jerk stop over the last interval (the state lies on its line up to
-            // the set's rounding).
-            match Piece::stop(a, b) {
-                Some((piece, duration, _)) => {
-                    m.pieces.push(piece);
-                    m.durations.push(duration);
-                }
-                None if a <= 1e-18 => {
-                    m.pieces.push(Piece::Start { jerk: 0.0 });
-                    m.durations.push(0.0);
-                }
-                None => return Err(PassError::Stalls { interval: n - 1 }),
+        // The constant-jerk stop over the last interval (the state lies on its line up to the
+        // set's rounding).
+        match Piece::stop(a, b) {
+            Some((piece, duration, _)) => {
+                m.pieces.push(piece);
+                m.durations.push(duration);
             }
-            m.a.push(0.0);
-            m.b.push(0.0);
+            None if a <= 1e-18 => {
+                m.pieces.push(Piece::Start { jerk: 0.0 });
+                m.durations.push(0.0);
+            }
+            None => return Err(PassError::Stalls { interval: n - 1 }),
         }
+        m.a.push(0.0);
+        m.b.push(0.0);
         Ok(m)
     }
 }
