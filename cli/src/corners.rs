@@ -203,6 +203,25 @@ pub fn summary_fields(rounding: Option<Rounding>, deviation: Option<f64>) -> ser
     })
 }
 
+/// The largest distance of the setpoints to the programmed polyline, if it exceeds the
+/// tolerance (`verify` and `plan` judge it alike).
+pub fn deviation_over(deviation: Option<f64>, tolerance: f64) -> Option<f64> {
+    deviation.filter(|d| *d > tolerance * (1.0 + nurbs_motion::planner::verify::SLACK))
+}
+
+/// `plan`'s refusal of setpoints that leave the tolerance (written to `out`, for inspection
+/// only).
+pub fn refuse_deviation(deviation: Option<f64>, tolerance: f64, out: &Path) -> Result<(), String> {
+    match deviation_over(deviation, tolerance) {
+        Some(dev) => Err(format!(
+            "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}: \
+             the plan leaves the tolerance and must not run (setpoints written to {} for inspection)",
+            out.display()
+        )),
+        None => Ok(()),
+    }
+}
+
 /// One line for the console, or nothing when the program is not a polyline.
 pub fn describe(rounding: Option<Rounding>, deviation: Option<f64>, tolerance: f64) -> Option<String> {
     let dev = deviation?;
@@ -221,4 +240,24 @@ pub fn describe(rounding: Option<Rounding>, deviation: Option<f64>, tolerance: f
         ),
         None => format!("corners: not rounded; setpoints within {dev:.3e} mm of the programmed polyline"),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `plan` refuses setpoints beyond the tolerance (rounding slack only), and says where they
+    /// were written; within it, or without a polyline to measure against, it passes.
+    #[test]
+    fn setpoints_beyond_the_tolerance_are_refused() {
+        let out = Path::new("o.csv");
+        assert!(refuse_deviation(Some(0.01), 0.01, out).is_ok());
+        assert!(refuse_deviation(None, 0.01, out).is_ok());
+        let e = refuse_deviation(Some(0.027004), 0.01, out).unwrap_err();
+        assert!(
+            e.contains("0.027004 mm") && e.contains("--chord-tol 0.01") && e.contains("o.csv"),
+            "{e}"
+        );
+        assert!(refuse_deviation(Some(0.01 * (1.0 + 1e-3)), 0.01, out).is_err());
+    }
 }

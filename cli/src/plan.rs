@@ -1,4 +1,4 @@
-use super::corners::{describe, open, prepare, summary_fields, RoundCorners, Rounding};
+use super::corners::{describe, open, prepare, refuse_deviation, summary_fields, RoundCorners, Rounding};
 use super::machine::{is_five_axis, MachineArgs};
 use super::plot::{write_png, PlotSample, Profile};
 use super::{LimitArgs, PlannerKind};
@@ -217,7 +217,11 @@ fn run_erwinski(args: &PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if let (Some(path), Some(w)) = (args.plot, &whole) {
         run.write_plot(args, path, &w.toolpath)?;
     }
-    Ok(())
+    Ok(refuse_deviation(
+        run.out.deviation,
+        run.report.limits.chord_tolerance,
+        args.out,
+    )?)
 }
 
 impl ErwinskiRun {
@@ -593,7 +597,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         write_png(path, &profile)?;
         eprintln!("plot written to {}", path.display());
     }
-    Ok(())
+    Ok(refuse_deviation(deviation, plan.limits.chord_tolerance, args.out)?)
 }
 
 /// `--planner reach`: the tool-tip path planned by third-order reachability over arc-length
@@ -700,5 +704,5 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         write_png(path, &profile)?;
         eprintln!("plot written to {}", path.display());
     }
-    Ok(())
+    Ok(refuse_deviation(deviation, limits.chord_tolerance, args.out)?)
 }

@@ -257,7 +257,7 @@ fn check_program_deviation<'a>(
 
 /// A violation when the largest distance to the programmed polyline exceeds --chord-tol.
 fn report_deviation(deviation: Option<f64>, tolerance: f64, violations: &mut Vec<String>) {
-    if let Some(dev) = deviation.filter(|d| *d > tolerance * (1.0 + nurbs_motion::planner::verify::SLACK)) {
+    if let Some(dev) = crate::corners::deviation_over(deviation, tolerance) {
         violations.push(format!(
             "a setpoint is {dev:.6} mm from the programmed polyline, more than --chord-tol {tolerance}"
         ));

@@ -408,6 +408,9 @@ fn no_dip(a: f64, b: f64, d: f64) -> f64 {
     c + 1e-9 * c.abs()
 }
 
+/// Relative gap between the bounds on c that a vertex of a projection may keep (rounding).
+const PROJECTION_SLACK: f64 = 1e-3;
+
 /// Rows bounding c from one side, as c ≤ d − a·A − b·B (upper) or c ≥ a·A + b·B − d (lower),
 /// kept column by column so that evaluating them all at a vertex vectorises.
 #[derive(Default)]
@@ -514,6 +517,11 @@ impl Projector {
             self.cache.push(e);
         }
         self.used.clear();
+        // Whether a vertex was given up on beyond rounding (or the cuts ran out) before every
+        // one qualified.
+        let outside = |e: &Eval| e.gap > PROJECTION_SLACK * e.scale.max(1.0);
+        let mut gave_up = true;
+        let mut given_up = false;
         for _ in 0..4 * (rows.len() + 8) {
             let Some((m, worst)) = self
                 .cache
@@ -525,12 +533,14 @@ impl Projector {
                 break;
             };
             if worst.gap <= 1e-12 * worst.scale {
+                gave_up = given_up;
                 break;
             }
             let v = poly.vertices[m];
             let pair = (self.lower.row_of(v, worst.lo), self.upper.row_of(v, -worst.hi));
             if self.used.contains(&pair) {
                 // Cut by this pair already: what is left over is rounding.
+                given_up |= outside(&worst);
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
             }
@@ -545,6 +555,7 @@ impl Projector {
             self.before.clear();
             self.before.extend_from_slice(&poly.vertices);
             if !poly.clip(h) {
+                given_up |= outside(&worst);
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
             }
@@ -561,6 +572,24 @@ impl Projector {
                 self.next_cache.push(e);
             }
             std::mem::swap(&mut self.cache, &mut self.next_cache);
+        }
+        // The cuts above give up on a vertex where a cut leaves it (rounding, or rows whose c
+        // coefficient is tiny beside the others, whose bounds on c are huge): where one is
+        // still outside, cut by every pair of a lower and an upper bound (the exact projection
+        // the lazy one saves; on a few stations of long programs).
+        if gave_up && poly.vertices.iter().any(|v| outside(&self.eval(*v))) {
+            for l in 0..self.lower.a.len() {
+                for u in 0..self.upper.a.len() {
+                    poly.clip(HalfPlane {
+                        na: self.lower.a[l] + self.upper.a[u],
+                        nb: self.lower.b[l] + self.upper.b[u],
+                        d: self.lower.d[l] + self.upper.d[u],
+                    });
+                    if poly.is_empty() {
+                        return poly;
+                    }
+                }
+            }
         }
         poly
     }
