@@ -448,9 +448,9 @@ impl<'a> SetpointSink<'a> {
 /// the same as from the whole path, so `--stream` changes nothing here). A 5-axis path (its C
 /// angle is unwrapped along the whole path), machine flags and the plot read it whole.
 fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use nurbs_motion::planner::vpop::{constraints::tip_distance, run_streamed, JointPath, SearchOptions};
+    use nurbs_motion::planner::vpop::{run_streamed, JointPath, SearchOptions};
     let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
-    let mut program = stream.program()?;
+    let program = stream.program()?;
     let streamed = match args.plot.is_none() && args.machine.given().is_none() {
         true => Some(JointPath::streamed(stream.take_elements())?).filter(|p| !p.has_top_curve()),
         false => None,
@@ -481,61 +481,20 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     if limits.hold_reserve > 0.0 {
         eprintln!("{}", nurbs_motion::planner::vpop::HOLD_RESERVE_IGNORED);
     }
-    let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
-    if five {
-        let joints = args.machine.kinematics().joint_names().join(",");
-        writeln!(out, "t,u,{joints},tip_x,tip_y,tip_z,feed,element")?;
+    let columns = if five {
+        format!(
+            "{},tip_x,tip_y,tip_z",
+            args.machine.kinematics().joint_names().join(",")
+        )
     } else {
-        writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
-    }
-    let mut check = FiniteDifferences::new(axes, limits.period);
-    let mut deviation = Deviation::default();
-    let mut prev: Option<[f64; 3]> = None;
-    let mut points = Vec::new();
-    let mut rows = 0usize;
-    let mut write_error = None;
-    let mut write = |p: &nurbs_motion::planner::vpop::PathPoint| -> std::io::Result<()> {
-        let feed = prev.map_or(0.0, |a| tip_distance(&p.tip, &a, tip) / limits.period);
-        if args.plot.is_some() {
-            let mut q = [0.0; MAX_AXES];
-            q[..axes].copy_from_slice(&p.q[..axes]);
-            points.push(PlotSample {
-                curve: p.element,
-                u: p.u,
-                feed,
-                q,
-            });
-        }
-        write!(out, "{:?},{:?}", rows as f64 * limits.period, p.u)?;
-        if five {
-            for c in p.q[..5].iter().chain(&p.tip) {
-                write!(out, ",{c:?}")?;
-            }
-        } else {
-            for c in &p.tip[..tip] {
-                write!(out, ",{c:?}")?;
-            }
-        }
-        writeln!(out, ",{feed:?},{}", p.element)?;
-        check.push(&p.q[..axes], &limits);
-        deviation.push(&mut program, &p.tip[..tip]);
-        prev = Some(p.tip);
-        rows += 1;
-        Ok(())
+        ["x", "y", "z"][..tip].join(",")
     };
+    let mut writer = PointWriter::create(args.out, &columns, program, &limits, (tip, five), args.plot.is_some())?;
     // A failed write ends the plan; its error is the one to report.
-    let planned = run_streamed(&path, &limits, SearchOptions::default(), &mut |p| {
-        write(p).map_err(|e| {
-            write_error = Some(format!("writing {}: {e}", args.out.display()));
-            "the setpoints could not be written".into()
-        })
-    });
-    if let Some(e) = write_error {
-        return Err(e.into());
-    }
+    let planned = run_streamed(&path, &limits, SearchOptions::default(), &mut |p| writer.emit(p));
+    writer.write_error()?;
     let plan = planned?;
-    check.finish(&limits);
-    out.flush()?;
+    let (check, deviation, points, rows) = writer.finish()?;
     eprintln!(
         "VPOp: motion {:.6} s ({} setpoints), planning {:.3} ms (first setpoints final after {:.3} ms), {} dead ends, {} deceleration checks",
         plan.motion_time,
@@ -545,7 +504,6 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         plan.stats.dead_ends,
         plan.stats.brakes
     );
-    let deviation = deviation.finish(&program);
     let rounding = whole.as_ref().map_or_else(|| stream.rounding(), |w| w.rounding);
     let (elements, most_elements_held) = (path.end() as usize, path.most_elements_held());
     if let Some(line) = describe(rounding, deviation, plan.limits.chord_tolerance) {
@@ -606,56 +564,18 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// finite-difference check.
 fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     use nurbs_motion::planner::reach::{run, ReachOptions};
-    use nurbs_motion::planner::vpop::constraints::tip_distance;
     let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
-    let mut program = stream.program()?;
+    let program = stream.program()?;
     let mut curves = PathCurves::streamed(stream.take_elements())?;
     let tip = curves.tip_dim();
     let limits = args.limits.limits(tip)?.for_axes(tip)?;
-    let mut out = std::io::BufWriter::new(std::fs::File::create(args.out)?);
-    writeln!(out, "t,u,{},feed,element", ["x", "y", "z"][..tip].join(","))?;
-    let mut check = FiniteDifferences::new(tip, limits.period);
-    let mut deviation = Deviation::default();
-    let mut prev: Option<[f64; 3]> = None;
-    let mut points = Vec::new();
-    let mut rows = 0usize;
-    let mut write_error = None;
-    let mut write = |p: &nurbs_motion::planner::vpop::PathPoint| -> std::io::Result<()> {
-        let feed = prev.map_or(0.0, |a| tip_distance(&p.tip, &a, tip) / limits.period);
-        if args.plot.is_some() {
-            let mut q = [0.0; MAX_AXES];
-            q[..tip].copy_from_slice(&p.q[..tip]);
-            points.push(PlotSample {
-                curve: p.element,
-                u: p.u,
-                feed,
-                q,
-            });
-        }
-        write!(out, "{:?},{:?}", rows as f64 * limits.period, p.u)?;
-        for c in &p.tip[..tip] {
-            write!(out, ",{c:?}")?;
-        }
-        writeln!(out, ",{feed:?},{}", p.element)?;
-        check.push(&p.q[..tip], &limits);
-        deviation.push(&mut program, &p.tip[..tip]);
-        prev = Some(p.tip);
-        rows += 1;
-        Ok(())
-    };
+    let columns = ["x", "y", "z"][..tip].join(",");
+    let mut writer = PointWriter::create(args.out, &columns, program, &limits, (tip, false), args.plot.is_some())?;
     let options = ReachOptions::default();
-    let planned = run(&mut curves, &limits, &options, None, &mut |p| {
-        write(p).map_err(|e| {
-            write_error = Some(format!("writing {}: {e}", args.out.display()));
-            "the setpoints could not be written".into()
-        })
-    });
-    if let Some(e) = write_error {
-        return Err(e.into());
-    }
+    let planned = run(&mut curves, &limits, &options, None, &mut |p| writer.emit(p));
+    writer.write_error()?;
     let (limits, stats, plan_time) = planned?;
-    check.finish(&limits);
-    out.flush()?;
+    let (check, deviation, points, rows) = writer.finish()?;
     let motion_time = rows.saturating_sub(1) as f64 * limits.period;
     eprintln!(
         "reach: motion {motion_time:.6} s ({rows} setpoints), planning {:.3} ms (first setpoints after {:.3} ms), {} stretches, {} stations, {} passes, {} re-plans",
@@ -666,7 +586,6 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         stats.passes,
         stats.repairs
     );
-    let deviation = deviation.finish(&program);
     let rounding = stream.rounding();
     if let Some(line) = describe(rounding, deviation, limits.chord_tolerance) {
         eprintln!("{line}");
@@ -705,4 +624,101 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         eprintln!("plot written to {}", path.display());
     }
     Ok(refuse_deviation(deviation, limits.chord_tolerance, args.out)?)
+}
+
+/// The setpoints of a VPOp or reachability plan as the planner hands them out: the CSV, their
+/// finite differences, their distance to the programmed polyline and, for `--plot`, the
+/// samples.
+struct PointWriter<'a> {
+    out: std::io::BufWriter<std::fs::File>,
+    path: &'a Path,
+    program: ProgramPolyline,
+    limits: nurbs_motion::planner::Limits,
+    check: FiniteDifferences,
+    deviation: Deviation,
+    prev: Option<[f64; 3]>,
+    plot: Option<Vec<PlotSample>>,
+    rows: usize,
+    /// Tool-tip coordinates, and whether the joints of a 5-axis machine come first.
+    tip: usize,
+    five: bool,
+    error: Option<String>,
+}
+
+impl<'a> PointWriter<'a> {
+    /// The CSV at `path` with position columns `columns` between `t,u` and `feed,element`.
+    fn create(
+        path: &'a Path,
+        columns: &str,
+        program: ProgramPolyline,
+        limits: &nurbs_motion::planner::Limits,
+        (tip, five): (usize, bool),
+        plot: bool,
+    ) -> std::io::Result<Self> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(out, "t,u,{columns},feed,element")?;
+        Ok(PointWriter {
+            out,
+            path,
+            program,
+            limits: limits.clone(),
+            check: FiniteDifferences::new(limits.velocity.len(), limits.period),
+            deviation: Deviation::default(),
+            prev: None,
+            plot: plot.then(Vec::new),
+            rows: 0,
+            tip,
+            five,
+            error: None,
+        })
+    }
+
+    fn push(&mut self, p: &nurbs_motion::planner::vpop::PathPoint) -> std::io::Result<()> {
+        use nurbs_motion::planner::vpop::constraints::tip_distance;
+        let (tip, axes, period) = (self.tip, self.limits.velocity.len(), self.limits.period);
+        let feed = self.prev.map_or(0.0, |a| tip_distance(&p.tip, &a, tip) / period);
+        if let Some(samples) = &mut self.plot {
+            let mut q = [0.0; MAX_AXES];
+            q[..axes].copy_from_slice(&p.q[..axes]);
+            samples.push(PlotSample {
+                curve: p.element,
+                u: p.u,
+                feed,
+                q,
+            });
+        }
+        write!(self.out, "{:?},{:?}", self.rows as f64 * period, p.u)?;
+        let positions: &[f64] = if self.five { &p.q[..5] } else { &p.tip[..tip] };
+        for c in positions.iter().chain(if self.five { &p.tip[..] } else { &[][..] }) {
+            write!(self.out, ",{c:?}")?;
+        }
+        writeln!(self.out, ",{feed:?},{}", p.element)?;
+        self.check.push(&p.q[..axes], &self.limits);
+        self.deviation.push(&mut self.program, &p.tip[..tip]);
+        self.prev = Some(p.tip);
+        self.rows += 1;
+        Ok(())
+    }
+
+    /// [`Self::push`] for a planner's callback: a failed write ends the plan, and is kept as
+    /// the error to report ([`Self::write_error`]).
+    fn emit(&mut self, p: &nurbs_motion::planner::vpop::PathPoint) -> Result<(), String> {
+        self.push(p).map_err(|e| {
+            self.error = Some(format!("writing {}: {e}", self.path.display()));
+            "the setpoints could not be written".to_string()
+        })
+    }
+
+    fn write_error(&mut self) -> Result<(), String> {
+        self.error.take().map_or(Ok(()), Err)
+    }
+
+    /// The finite differences, the largest distance to the program, the plot samples and the
+    /// rows written.
+    fn finish(mut self) -> std::io::Result<(FiniteDifferences, Option<f64>, Vec<PlotSample>, usize)> {
+        self.check.finish(&self.limits);
+        self.out.flush()?;
+        let deviation = self.deviation.finish(&self.program);
+        Ok((self.check, deviation, self.plot.unwrap_or_default(), self.rows))
+    }
 }
