@@ -688,8 +688,13 @@ impl<'a> PointWriter<'a> {
             });
         }
         write!(self.out, "{:?},{:?}", self.rows as f64 * period, p.u)?;
-        let positions: &[f64] = if self.five { &p.q[..5] } else { &p.tip[..tip] };
-        for c in positions.iter().chain(if self.five { &p.tip[..] } else { &[][..] }) {
+        // A 5-axis machine's joints, then the tool tip.
+        let (joints, tip_columns): (&[f64], &[f64]) = if self.five {
+            (&p.q[..5], &p.tip)
+        } else {
+            (&[], &p.tip[..tip])
+        };
+        for c in joints.iter().chain(tip_columns) {
             write!(self.out, ",{c:?}")?;
         }
         writeln!(self.out, ",{feed:?},{}", p.element)?;

@@ -367,7 +367,7 @@ fn deviation(data: &RunData, curve: &Nurbs, budget: f64) -> f64 {
     let intervals = v.len() - 1;
     let sag = SAMPLE_SAG * budget;
     let at = |t: f64| p3(&curve.point(t.clamp(0.0, 1.0)));
-    // The samples in order along the spline; where each data interval's begin.
+    // The samples in order along the spline, and where each data interval's samples begin.
     let mut samples: Vec<P3> = Vec::with_capacity(CHECK_SAMPLES * intervals + 1);
     let mut first = Vec::with_capacity(intervals + 1);
     for i in 0..intervals {

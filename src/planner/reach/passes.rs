@@ -488,6 +488,16 @@ impl Projector {
         }
     }
 
+    /// Where lower bound `l` on c stays below upper bound `u`: (l.a + u.a)·A + (l.b + u.b)·B ≤
+    /// l.d + u.d.
+    fn pair(&self, l: usize, u: usize) -> HalfPlane {
+        HalfPlane {
+            na: self.lower.a[l] + self.upper.a[u],
+            nb: self.lower.b[l] + self.upper.b[u],
+            d: self.lower.d[l] + self.upper.d[u],
+        }
+    }
+
     /// The states of `init` (clipped by the rows without c) for which some c keeps every row.
     fn project(&mut self, rows: &[Row], mut poly: Polygon) -> Polygon {
         self.upper.clear();
@@ -517,11 +527,10 @@ impl Projector {
             self.cache.push(e);
         }
         self.used.clear();
-        // Whether a vertex was given up on beyond rounding (or the cuts ran out) before every
-        // one qualified.
+        // Whether every vertex qualified before the cuts ran out, and whether a vertex was
+        // given up on beyond rounding on the way.
         let outside = |e: &Eval| e.gap > PROJECTION_SLACK * e.scale.max(1.0);
-        let mut gave_up = true;
-        let mut given_up = false;
+        let (mut settled, mut escaped) = (false, false);
         for _ in 0..4 * (rows.len() + 8) {
             let Some((m, worst)) = self
                 .cache
@@ -533,29 +542,24 @@ impl Projector {
                 break;
             };
             if worst.gap <= 1e-12 * worst.scale {
-                gave_up = given_up;
+                settled = true;
                 break;
             }
             let v = poly.vertices[m];
             let pair = (self.lower.row_of(v, worst.lo), self.upper.row_of(v, -worst.hi));
             if self.used.contains(&pair) {
                 // Cut by this pair already: what is left over is rounding.
-                given_up |= outside(&worst);
+                escaped |= outside(&worst);
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
             }
             self.used.push(pair);
             let (l, u) = pair;
-            // lower_l(A, B) ≤ upper_u(A, B): (l.a + u.a)·A + (l.b + u.b)·B ≤ l.d + u.d.
-            let h = HalfPlane {
-                na: self.lower.a[l] + self.upper.a[u],
-                nb: self.lower.b[l] + self.upper.b[u],
-                d: self.lower.d[l] + self.upper.d[u],
-            };
+            let h = self.pair(l, u);
             self.before.clear();
             self.before.extend_from_slice(&poly.vertices);
             if !poly.clip(h) {
-                given_up |= outside(&worst);
+                escaped |= outside(&worst);
                 self.cache[m].gap = f64::NEG_INFINITY;
                 continue;
             }
@@ -577,14 +581,10 @@ impl Projector {
         // coefficient is tiny beside the others, whose bounds on c are huge): where one is
         // still outside, cut by every pair of a lower and an upper bound (the exact projection
         // the lazy one saves; on a few stations of long programs).
-        if gave_up && poly.vertices.iter().any(|v| outside(&self.eval(*v))) {
+        if (!settled || escaped) && poly.vertices.iter().any(|v| outside(&self.eval(*v))) {
             for l in 0..self.lower.a.len() {
                 for u in 0..self.upper.a.len() {
-                    poly.clip(HalfPlane {
-                        na: self.lower.a[l] + self.upper.a[u],
-                        nb: self.lower.b[l] + self.upper.b[u],
-                        d: self.lower.d[l] + self.upper.d[u],
-                    });
+                    poly.clip(self.pair(l, u));
                     if poly.is_empty() {
                         return poly;
                     }

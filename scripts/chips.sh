@@ -1,0 +1,30 @@
+#!/bin/bash
+# LinuxCNC's own 3D_Chips.ngc (a 3-D surfacing program), expanded to its moves by LinuxCNC's
+# interpreter (scripts/linuxcnc-expand.py), planned at F100 A5000 J5e4 with a 0.01 mm tolerance
+# by the default (Erwinski) and the reachability planners, corners rounded and smoothed; each
+# plan checked by `nurbs-plan verify`. Prints motion time, planning time, the largest distance of
+# a setpoint to the programmed polyline, and the verdict. With TP=1, LinuxCNC 2.9's own planner
+# on the same program too (scripts/linuxcnc-tp.sh: a full headless LinuxCNC, as root).
+# Usage: scripts/chips.sh  (after `cargo build --release --bin nurbs-plan`; needs linuxcnc-uspace)
+# shellcheck source=scripts/common.sh
+source "$(dirname "$0")/common.sh"
+"$(dirname "$0")/linuxcnc-expand.py" /usr/share/linuxcnc/ncfiles/3D_Chips.ngc >"$dir/chips.ngc"
+limits=(--feed 100 --accel 5000 --jerk 5e4 --chord-tol 0.01 --period 0.00025)
+echo "| planner | corners | motion (s) | plan (s) | from the program (mm) | verify |"
+echo "|---|---|---|---|---|---|"
+for planner in erwinski reach; do
+  for mode in auto smooth; do
+    flags=(--planner "$planner" --round-corners "$mode")
+    [ "$planner" = erwinski ] && flags+=(--stream)
+    $bin plan "$dir/chips.ngc" "${limits[@]}" "${flags[@]}" --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1
+    if $bin verify "$dir/o.csv" "$dir/chips.ngc" "${limits[@]}" --round-corners "$mode" >/dev/null 2>&1; then ok=pass; else ok=FAIL; fi
+    python3 - "$dir/s.json" "$planner" "$mode" "$ok" <<'PY'
+import json, sys
+s = json.load(open(sys.argv[1]))
+print(f"| {sys.argv[2]} | {sys.argv[3]} | {s['motion_time_s']:.3f} | {s['plan_time_s']:.2f} | {s['max_deviation_from_program_mm']:.6f} | {sys.argv[4]} |")
+PY
+  done
+done
+if [ "${TP:-0}" = 1 ]; then
+  scripts/linuxcnc-tp.sh "$dir/chips.ngc" 100 5000 50000 0.01
+fi
