@@ -2,7 +2,8 @@
 #
 #   make               realtime module nurbs_interp.so + userspace planner (needs linuxcnc-uspace-dev)
 #                      + the offline CLI nurbs-plan (the tests compare against it)
-#   make install       module into $(MODULE_DIR), planner, recorder and nurbs-plan into $(BINDIR)
+#   make install       module into $(MODULE_DIR), planner, recorder, nurbs-plan and the program
+#                      filter nurbs-filter into $(BINDIR), examples and configs/nurbs-sim into $(DATADIR)
 #   make test          cargo test (mock HAL) + the real-LinuxCNC tests in tests/hal/
 #   make bench         criterion: per-period cost of nurbs_interp.update (mock HAL)
 #   make man           docs/man/nurbs_interp.9 and the pin table of docs/integration.md from the
@@ -34,6 +35,10 @@ LINUXCNC_INCLUDE ?= /usr/include/linuxcnc
 MODULE_DIR  ?= /usr/lib/linuxcnc/modules
 PREFIX      ?= /usr/local
 BINDIR      ?= $(PREFIX)/bin
+# Examples (the toolpaths a configuration names are looked up here too) and the sample
+# configuration, to copy into a user's folder. M101 also looks in /usr/share/nurbs-motion and in
+# $$NURBS_MOTION_DATA: with another PREFIX set that variable.
+DATADIR     ?= $(PREFIX)/share/nurbs-motion
 MANDIR      ?= $(PREFIX)/share/man
 # Generator versions: their output is committed, so every machine must produce the same bytes.
 # bindgen from Debian bookworm (with its libclang); cbindgen from crates.io (Debian's 0.24 cannot
@@ -81,11 +86,18 @@ install: all
 	install -m 0644 docs/man/nurbs_interp.9 $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
 	install -m 0644 docs/man/nurbs-plan.1 docs/man/nurbs-planner.1 $(DESTDIR)$(MANDIR)/man1/
 	for b in $(BINS); do install -m 0755 $(OUT)/$$b $(DESTDIR)$(BINDIR)/$$b; done
+	install -m 0755 linuxcnc/nurbs-filter $(DESTDIR)$(BINDIR)/nurbs-filter
+	rm -rf $(DESTDIR)$(DATADIR)/examples $(DESTDIR)$(DATADIR)/configs
+	install -d $(DESTDIR)$(DATADIR)/examples $(DESTDIR)$(DATADIR)/configs
+	cp -r examples/. $(DESTDIR)$(DATADIR)/examples/
+	cp -r configs/nurbs-sim $(DESTDIR)$(DATADIR)/configs/
 
 uninstall:
 	rm -f $(DESTDIR)$(MODULE_DIR)/nurbs_interp.so $(DESTDIR)$(MANDIR)/man9/nurbs_interp.9
 	rm -f $(DESTDIR)$(MANDIR)/man1/nurbs-plan.1 $(DESTDIR)$(MANDIR)/man1/nurbs-planner.1
 	for b in $(BINS); do rm -f $(DESTDIR)$(BINDIR)/$$b; done
+	rm -f $(DESTDIR)$(BINDIR)/nurbs-filter
+	rm -rf $(DESTDIR)$(DATADIR)
 
 test: test-cargo test-hal
 

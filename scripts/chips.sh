@@ -1,6 +1,6 @@
 #!/bin/bash
-# LinuxCNC's own 3D_Chips.ngc (a 3-D surfacing program), expanded to its moves by LinuxCNC's
-# interpreter (scripts/linuxcnc-expand.py), planned at F100 A5000 J5e4 with a 0.01 mm tolerance
+# LinuxCNC's own 3D_Chips.ngc (a 3-D surfacing program), its moves as LinuxCNC's interpreter
+# reads them (the one run `nurbs-filter` cuts from it: all 4,681 feed moves), planned at F100 A5000 J5e4 with a 0.01 mm tolerance
 # by the default (Erwinski) and the reachability planners, corners rounded and smoothed; each
 # plan checked by `nurbs-plan verify`. Prints motion time, planning time, the largest distance of
 # a setpoint to the programmed polyline, and the verdict. With TP=1, LinuxCNC 2.9's own planner
@@ -8,7 +8,9 @@
 # Usage: scripts/chips.sh  (after `cargo build --release --bin nurbs-plan`; needs linuxcnc-uspace)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
-"$(dirname "$0")/linuxcnc-expand.py" /usr/share/linuxcnc/ncfiles/3D_Chips.ngc >"$dir/chips.ngc"
+XDG_CACHE_HOME="$dir/cache" "$(dirname "$0")/../linuxcnc/nurbs-filter" /usr/share/linuxcnc/ncfiles/3D_Chips.ngc \
+  >/dev/null 2>"$dir/filter.log" || { cat "$dir/filter.log"; exit 1; }
+cp "$dir"/cache/nurbs-filter/*/run-1.ngc "$dir/chips.ngc"
 limits=(--feed 100 --accel 5000 --jerk 5e4 --chord-tol 0.01 --period 0.00025)
 echo "| planner | corners | motion (s) | plan (s) | from the program (mm) | verify |"
 echo "|---|---|---|---|---|---|"

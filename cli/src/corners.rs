@@ -3,7 +3,7 @@
 //! as a stream ([`open`]) or whole ([`prepare`], the same stream collected).
 
 use crate::limits::{LimitArgs, Travel};
-use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::geometry::{Placement, Toolpath};
 use nurbs_motion::planner::corner::{CornerRounder, ProgramPolyline, RoundingStats};
 use nurbs_motion::planner::fit::RunFitter;
 use nurbs_motion::readers::{open_toolpath, ElementStream, ReadError};
@@ -48,6 +48,7 @@ pub struct Rounding {
 pub struct PreparedStream {
     pub elements: ElementStream,
     file: PathBuf,
+    placement: Placement,
     stats: Option<Arc<Mutex<RoundingStats>>>,
 }
 
@@ -67,7 +68,7 @@ impl PreparedStream {
     /// against it need ([`ProgramPolyline::streamed`]).
     pub fn program(&self) -> Result<ProgramPolyline, Box<dyn std::error::Error>> {
         Ok(ProgramPolyline::streamed(
-            open_toolpath(&self.file)?.map_while(Result::ok),
+            placed(open_toolpath(&self.file)?, self.placement).map_while(Result::ok),
         ))
     }
 }
@@ -95,7 +96,8 @@ pub fn open(
 ) -> Result<PreparedStream, Box<dyn std::error::Error>> {
     let mode = round_corners_mode(mode, limits)?;
     let tolerance = limits.chord_tolerance()?;
-    let elements = open_toolpath(file)?;
+    let placement = limits.placement.placement()?;
+    let elements = placed(open_toolpath(file)?, placement);
     let name = file.display().to_string();
     let (elements, stats): (ElementStream, _) = match mode {
         RoundCorners::Off => (elements, None),
@@ -118,8 +120,17 @@ pub fn open(
     Ok(PreparedStream {
         elements,
         file: file.to_owned(),
+        placement,
         stats,
     })
+}
+
+/// The elements of a file in program coordinates moved to the machine's ([`Placement`]).
+fn placed(elements: ElementStream, placement: Placement) -> ElementStream {
+    if placement.is_identity() {
+        return elements;
+    }
+    Box::new(elements.map(move |e| e.map(|e| placement.element(e))))
 }
 
 /// The elements of `elements` while they stay within `travel`: every control point of the tool

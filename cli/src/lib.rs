@@ -10,6 +10,7 @@ pub mod corners;
 mod inspect;
 pub mod limits;
 mod machine;
+pub mod placement;
 mod plan;
 mod planner_args;
 mod plot;

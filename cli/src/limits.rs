@@ -1,6 +1,7 @@
 //! The limit flags `nurbs-plan` and `nurbs-planner` share, and the LinuxCNC INI file they may come
 //! from: one set of names, one way to read them.
 
+use crate::placement::PlacementArgs;
 use nurbs_motion::planner::presets::{preset, Preset};
 use nurbs_motion::planner::Limits;
 use std::path::{Path, PathBuf};
@@ -42,6 +43,10 @@ pub struct LimitArgs {
     /// LinuxCNC INI file for the limits given neither as flags nor by --limits.
     #[arg(long)]
     pub ini: Option<PathBuf>,
+    /// Where the toolpath's coordinates sit on the machine (default: they are machine
+    /// coordinates).
+    #[command(flatten)]
+    pub placement: PlacementArgs,
 }
 
 impl LimitArgs {
@@ -121,6 +126,7 @@ impl LimitArgs {
             hold_reserve: self.hold_reserve,
             preset: None,
             ini: self.ini.clone(),
+            placement: self.placement.clone(),
         };
         flags.resolve(axes)
     }

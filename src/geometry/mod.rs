@@ -4,8 +4,10 @@
 
 mod arc_length;
 mod curve;
+mod placement;
 mod toolpath;
 
 pub use arc_length::{adaptive_simpson, simpson_length, ArcLengthTable};
 pub use curve::{analyze, golden_max, CurveStats, Nurbs};
+pub use placement::Placement;
 pub use toolpath::{ElementKind, PathElement, Toolpath};

@@ -1,7 +1,7 @@
 #!/bin/bash
 # LinuxCNC's own example 3D_Chips.ngc (a 3-D surfacing program: parameters, expressions, a
-# tool change), expanded by LinuxCNC's interpreter (scripts/linuxcnc-expand.py) into its 4,683
-# moves, planned with `--round-corners smooth` at F100 A5000 J5e4 and a 0.01 mm tolerance by
+# tool change), read by LinuxCNC's interpreter (`nurbs-filter`: one run of its 4,681 feed
+# moves), planned with `--round-corners smooth` at F100 A5000 J5e4 and a 0.01 mm tolerance by
 # the default and the reachability planners: every plan passes `nurbs-plan verify` (axis limits
 # by finite differences and every setpoint within 0.01 mm of the programmed polyline; a fit
 # across a sharp corner beside a 0.007 mm line once left it by 0.027 mm).
@@ -10,10 +10,13 @@ here=$(cd "$(dirname "$0")" && pwd)
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 program=/usr/share/linuxcnc/ncfiles/3D_Chips.ngc
-"$here/../../scripts/linuxcnc-expand.py" "$program" >"$work/chips.ngc"
-moves=$(grep -c '^G[01] ' "$work/chips.ngc")
-echo "3D_Chips.ngc expanded by LinuxCNC's interpreter: $moves moves"
-[ "$moves" -gt 4600 ] || { echo "FAIL: expected the program's 4,683 moves"; exit 1; }
+XDG_CACHE_HOME="$work/cache" nurbs-filter "$program" >/dev/null 2>"$work/filter.log" || { cat "$work/filter.log"; exit 1; }
+runs=("$work"/cache/nurbs-filter/*/run-*.ngc)
+[ "${#runs[@]}" = 1 ] || { cat "$work/filter.log"; echo "FAIL: one run expected, got ${#runs[@]}"; exit 1; }
+cp "${runs[0]}" "$work/chips.ngc"
+moves=$(grep -c '^G1 ' "$work/chips.ngc")
+echo "3D_Chips.ngc read by LinuxCNC's interpreter: one run of $moves feed moves"
+[ "$moves" = 4681 ] || { echo "FAIL: expected the program's 4,681 feed moves"; exit 1; }
 limits=(--feed 100 --accel 5000 --jerk 5e4 --chord-tol 0.01 --period 0.00025 --round-corners smooth)
 for planner in erwinski reach; do
     nurbs-plan plan "$work/chips.ngc" --planner "$planner" "${limits[@]}" --out "$work/$planner.csv" \

@@ -54,6 +54,60 @@ def p_word():
         fail(f"{os.path.basename(sys.argv[0])} needs a P word (the toolpath's number)")
 
 
+def q_word():
+    """The integer Q word of the M-code (0 when not given)."""
+    try:
+        return int(float(sys.argv[2]))
+    except (IndexError, ValueError):
+        return 0
+
+
+# Where installed data lives (`make install`): toolpaths named in the INI are looked for beside
+# the INI first, then among the installed examples.
+DATA_DIRS = [d for d in (os.environ.get("NURBS_MOTION_DATA"), "/usr/local/share/nurbs-motion", "/usr/share/nurbs-motion") if d]
+
+
+def find_toolpath(name, ini_name):
+    """The file [NURBS]TOOLPATH_<n> names: absolute, relative to the INI's folder, or an
+    installed example; None if there is none."""
+    if os.path.isabs(name):
+        return name if os.path.isfile(name) else None
+    for folder in [os.path.dirname(os.path.abspath(ini_name))] + [os.path.join(d, "examples") for d in DATA_DIRS]:
+        path = os.path.join(folder, name)
+        if os.path.isfile(path):
+            return os.path.normpath(path)
+    return None
+
+
+def filter_run(program_id, n):
+    """Run `n` of the program nurbs-filter cut with id `program_id` (nurbs-filter's cache)."""
+    cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(cache, "nurbs-filter", str(program_id), f"run-{n}.ngc")
+
+
+def filter_run_args(run_path):
+    """The planner flags nurbs-filter wrote beside a run (from G64 P and G61 in the program)."""
+    try:
+        with open(run_path[: -len(".ngc")] + ".args") as f:
+            return [line.strip() for line in f if line.strip()]
+    except OSError:
+        return []
+
+
+def offsets():
+    """nurbs-planner's placement flags for a toolpath in program coordinates: the offsets the
+    interpreter has active now (LinuxCNC's G5x, G92, XY rotation and tool length offset, as its
+    canonical layer adds them: docs/integration.md)."""
+    s = linuxcnc.stat()
+    s.poll()
+    work = [s.g5x_offset[i] + s.tool_offset[i] for i in range(3)]
+    return [
+        "--work-offset", ",".join(repr(v) for v in work),
+        "--g92-offset", ",".join(repr(v) for v in s.g92_offset[:3]),
+        "--rotation-xy", repr(s.rotation_xy),
+    ], s
+
+
 # nurbs-planner's messages (M101 starts it with its standard error here; the last line says
 # why it refused or stopped).
 PLANNER_LOG = os.path.join(os.environ.get("TMPDIR", "/tmp"), "nurbs-planner.log")

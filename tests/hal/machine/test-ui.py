@@ -7,9 +7,12 @@ motion catches up with where our path stopped and takes the drives back, then mo
 by MDI), `pause-abort` (the same after a pause), `estop` (E-stop there, then
 reset and on), `pause` (the operator's pause there, resumed 0.3 s after our path is held) or
 `override` (the operator's feed override to 10 % 0.1 s into the first toolpath, back to 100 %
-once it is over)."""
+once it is over). $NURBS_TEST_SETUP: MDI commands (separated by `;`) run before the program, as
+an operator's touch-off; $NURBS_TEST_FILTER: the program goes through that program filter
+first, as AXIS runs a [FILTER] (its report kept in the result's "filter")."""
 import json
 import os
+import subprocess
 import sys
 import time
 
@@ -72,8 +75,29 @@ if not wait(lambda: s.joints > 0 and all(s.homed[: s.joints]), 30, "homing"):
     finish()
 c.mode(linuxcnc.MODE_AUTO)
 c.wait_complete()
+program = os.environ["NURBS_TEST_PROGRAM"]
+setup = [m.strip() for m in os.environ.get("NURBS_TEST_SETUP", "").split(";") if m.strip()]
+if setup:
+    c.mode(linuxcnc.MODE_MDI)
+    c.wait_complete()
+    for command in setup:
+        c.mdi(command)
+        c.wait_complete()
+        wait(lambda: s.interp_state == linuxcnc.INTERP_IDLE, 10, f"MDI {command}")
+    c.mode(linuxcnc.MODE_AUTO)
+    c.wait_complete()
+if os.environ.get("NURBS_TEST_FILTER"):
+    # As AXIS does: the filter's standard output is the program LinuxCNC runs.
+    filtered = os.path.join(os.path.dirname(os.environ["NURBS_TEST_RESULT"]), "filtered.ngc")
+    with open(filtered, "w") as out:
+        run = subprocess.run([os.environ["NURBS_TEST_FILTER"], program], stdout=out, stderr=subprocess.PIPE, text=True)
+    result["filter"] = run.stderr
+    if run.returncode != 0:
+        result["errors"].append(f"filter: {run.stderr.strip()}")
+        finish()
+    program = filtered
 hal.set_p("sampler.0.enable", "1")
-c.program_open(os.environ["NURBS_TEST_PROGRAM"])
+c.program_open(program)
 c.wait_complete()
 c.auto(linuxcnc.AUTO_RUN, 0)
 wait(lambda: s.exec_state != linuxcnc.EXEC_DONE or s.interp_state != linuxcnc.INTERP_IDLE, 10, "the program to start")

@@ -1,0 +1,257 @@
+#!/usr/bin/python3
+"""nurbs-filter offline (LinuxCNC's interpreter module, no machine running):
+
+1. Our G-code reader against LinuxCNC's interpreter: every bundled G-code example through the
+   filter gives one run holding all its feed moves; the plan of that run file (LinuxCNC's
+   reading of the program) and the plan of the program itself (our reader) have the same
+   setpoints, to 1e-9 mm (the NURBS block of trident.ngc goes to the run file as written).
+2. What the filter makes of constructs a CAM program or a person writes: units, incremental
+   moves, arcs, helices, other planes, inverse time, parameters, subroutines, loops, NURBS
+   blocks with computed values, errors with the program's line, tool words without a machine
+   (left out of the reading, kept in the program).
+
+Usage: check_filter.py FILTER NURBS-PLAN EXAMPLES-DIR WORK-DIR
+"""
+import csv
+import glob
+import os
+import re
+import subprocess
+import sys
+
+FILTER, PLAN, EXAMPLES, WORK = sys.argv[1:5]
+failures = []
+
+
+def check(ok, what):
+    print(("ok:   " if ok else "FAIL: ") + what)
+    if not ok:
+        failures.append(what)
+
+
+def run_filter(name, text):
+    """Filters program `text`; returns (returncode, output, report, run files' texts)."""
+    folder = os.path.join(WORK, name)
+    os.makedirs(folder, exist_ok=True)
+    program = os.path.join(folder, f"{name}.ngc")
+    with open(program, "w") as f:
+        f.write(text)
+    env = dict(os.environ, XDG_CACHE_HOME=os.path.join(folder, "cache"))
+    env.pop("INI_FILE_NAME", None)
+    p = subprocess.run([FILTER, program], capture_output=True, text=True, env=env)
+    runs = sorted(glob.glob(os.path.join(folder, "cache", "nurbs-filter", "*", "run-*.ngc")),
+                  key=lambda f: int(re.search(r"run-(\d+)", f).group(1)))
+    return p.returncode, p.stdout, p.stderr, [open(r).read() for r in runs], runs
+
+
+class Preview:
+    """What a GUI's preview draws of a program: LinuxCNC's interpreter with #<_task> = 0."""
+
+    def __init__(self):
+        self.moves = []
+
+    def __getattr__(self, name):
+        return lambda *args: None
+
+    def get_external_length_units(self):
+        return 1.0
+
+    def get_external_angular_units(self):
+        return 1.0
+
+    def get_axis_mask(self):
+        return 7
+
+    def get_block_delete(self):
+        return 0
+
+    def check_abort(self):
+        return False
+
+    def get_tool(self, index):
+        return (index,) + (0.0,) * 12 + (0,)
+
+    def next_line(self, state):
+        pass
+
+    def straight_traverse(self, *p):
+        self.moves.append(("G0",) + tuple(round(v, 9) for v in p[:3]))
+
+    def straight_feed(self, *p):
+        self.moves.append(("G1",) + tuple(round(v, 9) for v in p[:3]))
+
+    def arc_feed(self, *p):
+        self.moves.append(("arc",) + tuple(round(v, 9) for v in p[:6]))
+
+
+def preview(path):
+    import gcode
+    canon = Preview()
+    canon.parameter_file = path + ".var"
+    open(canon.parameter_file, "w").close()
+    result, line = gcode.parse(path, canon, "G21", "")
+    assert result <= gcode.MIN_ERROR, f"{path}:{line}: {gcode.strerror(result)}"
+    return canon.moves
+
+
+def preview_alike(name, text, output):
+    """The filtered program previews as the program does (the GUI shows the programmed path)."""
+    folder = os.path.join(WORK, name)
+    original, filtered = os.path.join(folder, "original.ngc"), os.path.join(folder, "filtered.ngc")
+    with open(original, "w") as f:
+        f.write(text)
+    with open(filtered, "w") as f:
+        f.write(output)
+    a, b = preview(original), preview(filtered)
+    check(a == b and len(a) > 0, f"{name}: the filtered program previews as the program: {len(a)} / {len(b)} moves")
+
+
+def moves(run_text):
+    return [l for l in run_text.splitlines() if re.match(r"G[123] ", l)]
+
+
+def plan_rows(path, out):
+    subprocess.run([PLAN, "plan", path, "--limits", "lab1", "--out", out], check=True, capture_output=True)
+    with open(out) as f:
+        return list(csv.DictReader(f))
+
+
+# 1. Our reader and LinuxCNC's interpreter on the bundled programs.
+for example in sorted(glob.glob(os.path.join(EXAMPLES, "*.ngc"))):
+    name = os.path.basename(example)[:-4]
+    rc, out, report, runs, files = run_filter("example-" + name, open(example).read())
+    preview_alike("example-" + name, open(example).read(), out)
+    if rc != 0 or len(runs) != 1:
+        check(False, f"{name}: one run expected, got rc {rc}, {len(runs)} run(s): {report.strip()}")
+        continue
+    ours = plan_rows(example, os.path.join(WORK, f"ours-{name}.csv"))
+    theirs = plan_rows(files[0], os.path.join(WORK, f"theirs-{name}.csv"))
+    axes = [a for a in "xyz" if a in ours[0] and a in theirs[0]]
+    worst = max((abs(float(a[c]) - float(b[c])) for a, b in zip(ours, theirs) for c in axes), default=0.0)
+    check(len(ours) == len(theirs) and worst <= 1e-9 and "left to LinuxCNC" not in report,
+          f"{name}: our reader and LinuxCNC's interpreter plan alike: {len(ours)} / {len(theirs)} setpoints, "
+          f"largest difference {worst:.3e} mm")
+
+# 2. Constructs.
+sub_loop = open(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "machine", "programs", "sub_loop.ngc")).read()
+rc, out, report, runs, _ = run_filter("sub_loop", sub_loop)
+check(rc == 0 and len(runs) == 2 and "feed move left to LinuxCNC's planner (inside an o-word block" in report,
+      f"a subroutine's moves stay LinuxCNC's, the top-level runs around it are cut: {len(runs)} run(s)")
+preview_alike("sub_loop", sub_loop, out)
+rc, out, report, runs, _ = run_filter("inch_incremental", """G20 G90 G17
+G0 X0 Y0 Z0.1
+G91
+G1 X1 F10
+G1 Y1
+G90
+M2
+""")
+check(rc == 0 and len(runs) == 1 and moves(runs[0]) == ["G1 X25.4 Y0.0 Z2.54 F254.0", "G1 X25.4 Y25.4 Z2.54"],
+      f"G20 and G91: the run in absolute millimetres: {moves(runs[0]) if runs else runs}")
+check("  G1 F10.0" in out, "G20: the feed comes back in inches per minute after the run")
+
+rc, out, report, runs, _ = run_filter("arcs", """G21 G90 G17
+G0 X0 Y0 Z0
+G1 X10 F600
+G3 X10 Y10 I0 J5
+G2 X10 Y10 I0 J-5 P2
+G3 X0 Y0 Z-1 I-5 J-5 (a helix)
+G18
+G2 X5 Z-1 I2.5 K0
+G17
+G1 X1
+M2
+""")
+check(rc == 0 and len(runs) == 2, f"arcs: a helix and an XZ arc end runs: {len(runs)} run(s)")
+if len(runs) == 2:
+    check(moves(runs[0]) == ["G1 X10.0 Y0.0 Z0.0 F600.0", "G3 X10.0 Y10.0 I0.0 J5.0", "G2 X10.0 Y10.0 I0.0 J-5.0 P2"],
+          f"arcs: G2/G3 with centres relative to the start and turns: {moves(runs[0])}")
+check(":6: feed move left to LinuxCNC's planner (helix)" in report, "arcs: the helix is LinuxCNC's, said with its line")
+check(":8: feed move left to LinuxCNC's planner (arc outside the XY plane)" in report,
+      "arcs: the XZ arc is LinuxCNC's, said with its line")
+
+rc, out, report, runs, _ = run_filter("modes_and_words", """G21 G90
+G0 X0 Y0 Z0
+G1 X1 F100
+#1 = 2
+G1 X#1 Y[#1 * 2]
+G93 G1 X3 F2
+G1 X3.5 F2
+G94 G1 X4 F100
+M3 S1000 G1 X5
+G1 X6
+M2
+""")
+check(rc == 0 and [moves(r) for r in runs] == [["G1 X1.0 Y0.0 Z0.0 F100.0"], ["G1 X2.0 Y4.0 Z0.0 F100.0"],
+                                               ["G1 X6.0 Y4.0 Z0.0 F100.0"]],
+      f"a parameter set, G93, an M-code split runs; parameters and expressions are evaluated: {[moves(r) for r in runs]}")
+check("inverse-time" in report, "G93: said why the move is LinuxCNC's")
+
+rc, out, report, runs, _ = run_filter("unknown_start", "G21 G90\nG1 X1 Y1 Z0 F100\nG1 X2\nM2\n")
+check(rc == 0 and len(runs) == 1 and moves(runs[0]) == ["G1 X2.0 Y1.0 Z0.0 F100.0"],
+      f"a feed from an unknown position stays LinuxCNC's; the next one is a run: {[moves(r) for r in runs]}")
+
+rc, out, report, runs, _ = run_filter("computed_nurbs", """G21 G90
+G0 X0 Y0 Z0
+F600
+#1 = 5
+G5.2 X10 Y#1 P1 L3
+X20 Y0 P1
+G5.3
+M2
+""")
+check(rc == 0 and not any("G5.2" in r for r in runs) and "NURBS block LinuxCNC computes" in report,
+      f"a NURBS block with a parameter is LinuxCNC's (its line approximation): {report.strip()}")
+
+rc, out, report, runs, _ = run_filter("bad_word", "G21\nG0 X0 Y0 Z0\nG1 X1 F100\nG1 X2 Q3\nM2\n")
+check(rc != 0 and re.search(r"bad_word\.ngc:4: Q word", report), f"an interpreter error names the program's line: {report.strip()}")
+
+rc, out, report, runs, _ = run_filter("tool_change", """G21
+T#<_tool> M6 (tool words LinuxCNC's module cannot read without a machine)
+G43 H1
+G0 X0 Y0 Z5
+G1 Z0 F100
+G1 X1
+M2
+""")
+check(rc == 0 and "tool words of 2 line(s)" in report and [moves(r) for r in runs] == [["G1 X0.0 Y0.0 Z0.0 F100.0", "G1 X1.0 Y0.0 Z0.0"]],
+      f"tool words without a machine: read as for tools of length 0, said: {report.strip()}")
+check("T#<_tool> M6" in out and "G43 H1" in out, "tool words without a machine: kept in the program LinuxCNC runs")
+
+rc, out, report, runs, _ = run_filter("offsets_under_the_tool", """G21 G90
+G10 L2 P1 X1 R30
+G0 X0 Y0 Z0
+G1 X1 F100
+G10 L2 P1 X0 R0
+G1 X2
+G92 X0 Y0
+G1 X1
+M2
+""")
+# Each offset change keeps the tool where it stands on the machine: its program coordinates
+# move (machine (1 + cos 30, sin 30) after X1 rotated; then G54 0: program = machine; G92).
+check(rc == 0 and [moves(r) for r in runs] == [["G1 X1.0 Y0.0 Z0.0 F100.0"], ["G1 X2.0 Y0.5 Z0.0 F100.0"],
+                                               ["G1 X1.0 Y0.0 Z0.0 F100.0"]]
+      and "G0 X1.866025403784 Y0.5 Z0.0" in runs[1] and "G0 X0.0 Y0.0 Z0.0" in runs[2],
+      f"G10 L2 (with R) and G92 under the tool: runs start where the tool stands: {[r.splitlines()[3] for r in runs]}")
+
+rc, out, report, runs, files = run_filter("path_modes", """G20
+G64 P0.002
+G0 X0 Y0 Z0
+G1 X1 F10
+G61
+G1 X2
+G64
+G0 Z1
+G1 X3
+M2
+""")
+args = [open(f[:-4] + ".args").read().split() for f in files]
+check(rc == 0 and args == [["--chord-tol", "0.0508"], ["--round-corners", "off"], []],
+      f"G64 P (in inches) sets the run's chord tolerance, G61 plans its corners as programmed, G64 the INI's: {args}")
+
+p = subprocess.run([FILTER, os.path.join(WORK, "no-such.ngc")], capture_output=True, text=True)
+check(p.returncode != 0 and "no-such.ngc" in p.stderr, f"a missing program: {p.stderr.strip()}")
+
+print(f"{len(failures)} failure(s)")
+sys.exit(1 if failures else 0)
