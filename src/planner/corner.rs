@@ -515,6 +515,10 @@ pub fn round_toolpath(toolpath: &Toolpath, tolerance: f64) -> Result<Rounded, St
 
 /// Segments of the programmed polyline kept behind the one nearest to the last point measured.
 const PROGRAM_SEGMENTS_BEHIND: usize = 4096;
+/// How much of the program past the nearest segment found is read before a setpoint's distance
+/// is taken as new worst (mm, beyond that distance itself): more than a setpoint moves in a
+/// period at any feed.
+const PROGRAM_LOOK_AHEAD: f64 = 1.0;
 
 /// The programmed polyline of a toolpath of degree-1 elements, for measuring how far setpoints
 /// stray from it: read from its elements as far as the points measured need, and forgotten
@@ -617,6 +621,8 @@ pub struct Deviation {
     /// The largest distance so far.
     worst: f64,
     hint: usize,
+    /// The farthest segment found nearest so far.
+    furthest: usize,
 }
 
 impl Deviation {
@@ -643,12 +649,30 @@ impl Deviation {
             }
         }
         self.hint = i;
+        self.furthest = self.furthest.max(i);
         if near > self.worst {
+            // The walk stops at the first segment that is no nearer, so the nearest one may lie
+            // beyond a bend it has not read yet (a path that leaves and comes back, a retrace):
+            // read on from the farthest segment reached so far until the polyline ahead is
+            // longer than the distance in question.
+            let mut ahead = 0.0;
+            let mut k = i.max(self.furthest) + 1;
+            while ahead <= near + PROGRAM_LOOK_AHEAD && polyline.load(k + 1) {
+                ahead += norm(&sub(&polyline.vertices[k + 1], &polyline.vertices[k]));
+                k += 1;
+            }
             let (best, dmin) = (polyline.vertices.first_index()..=last_segment(polyline))
                 .map(|i| (i, polyline.segment(i, x)))
-                .fold((i, near), |a, b| if b.1 < a.1 { b } else { a });
+                // On a tie the later segment: setpoints move forward along the program, and a
+                // program that retraces itself (a CAM retract, move over and plunge to where it
+                // was) must not send the search back to the earlier pass.
+                .fold(
+                    (i, near),
+                    |a, b| if b.1 < a.1 || (b.1 == a.1 && b.0 > a.0) { b } else { a },
+                );
             self.hint = best;
             self.worst = self.worst.max(dmin);
+            self.furthest = self.furthest.max(best);
         }
         polyline
             .vertices
@@ -889,5 +913,62 @@ mod tests {
         let got = poly.max_distance(probes.iter().map(|x| x.as_slice())).unwrap();
         assert!(brute > 0.1);
         assert_eq!(got, brute);
+    }
+
+    /// A program that retraces itself (a CAM program's retract to Z1, move over, plunge to where
+    /// it cut before and cut on from there, one G1 element each), measured along it: exact,
+    /// not sent back to the earlier pass where the two touch.
+    #[test]
+    fn a_retracing_program_is_measured_exactly() {
+        let legs = [
+            [0.0, 0.0],
+            [5.0, 0.0],
+            [5.0, 2.0],
+            [8.0, 2.0],
+            [8.0, 0.0],
+            [5.0, 0.0],
+            [5.0, -3.0],
+            [0.0, -3.0],
+        ];
+        let elements: Vec<PathElement> = legs.windows(2).map(|w| g1(w, 10.0)).collect();
+        let mut poly = ProgramPolyline::streamed(elements.into_iter());
+        // Points along the legs, 0.01 mm apart, each off the path by up to 1e-4 mm.
+        let mut probes = Vec::new();
+        for w in legs.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            let n = (norm(&sub(&b, &a)) / 0.01).round() as usize;
+            for k in 0..n {
+                let t = k as f64 / n as f64;
+                let wiggle = 1e-4 * ((probes.len() as f64) * 0.37).sin();
+                probes.push(vec![
+                    a[0] + t * (b[0] - a[0]) + wiggle,
+                    a[1] + t * (b[1] - a[1]) + wiggle,
+                ]);
+            }
+        }
+        let brute = probes
+            .iter()
+            .map(|x| {
+                (0..legs.len() - 1)
+                    .map(|i| segment_distance(x, &legs[i], &legs[i + 1]))
+                    .fold(f64::INFINITY, f64::min)
+            })
+            .fold(0.0, f64::max);
+        let got = poly.max_distance(probes.iter().map(|x| x.as_slice())).unwrap();
+        assert!((got - brute).abs() < 1e-15 && brute < 2e-4, "{got} against {brute}");
+    }
+
+    /// A streamed program read as far as the points need: a point past a U-turn (a CAM
+    /// program's retract, move over and plunge, one G1 element each) is measured against the
+    /// segment beyond the turn, which the downhill walk alone does not reach (it stops at the
+    /// turn, farther than the segment before it) and had not read.
+    #[test]
+    fn a_point_past_a_turn_is_measured_against_the_program_beyond_it() {
+        let legs = [[0.0, 0.0], [10.0, 0.0], [10.0, 1.0], [0.0, 1.0], [0.0, 2.0]];
+        let elements: Vec<PathElement> = legs.windows(2).map(|w| g1(w, 10.0)).collect();
+        let mut poly = ProgramPolyline::streamed(elements.into_iter());
+        let probes = [vec![0.0, 0.0], vec![0.5, 1.0005]];
+        let got = poly.max_distance(probes.iter().map(|x| x.as_slice())).unwrap();
+        assert!((got - 0.0005).abs() < 1e-12, "{got}");
     }
 }

@@ -82,6 +82,9 @@ def main():
                     help="largest following error while engaged (mm): the drives' resolution")
     ap.add_argument("--ferror-max", type=float,
                     help="largest following error anywhere (mm); default: one period at the largest velocity")
+    ap.add_argument("--all-ours-after", action="store_true",
+                    help="every move from the first engagement on is ours (nurbs-filter took them all): "
+                         "the drive command within the axis limits in every period from there to the end")
     ap.add_argument("--action", choices=("abort", "estop", "travel", "pause", "pause-abort", "override"),
                     help="the run was aborted, E-stopped or paused and resumed mid-path, or its first toolpath leaves the travel")
     a = ap.parse_args()
@@ -161,6 +164,23 @@ def main():
     if not a.action and max(moved for _, _, moved in summary) < 1.0:
         fail("no toolpath with a catch-up move of 1 mm or more")
 
+    whole = ""
+    if a.all_ours_after:
+        # From two periods before the first engagement to the end, LinuxCNC's own planner moves
+        # nothing: every period's drive command within every limit.
+        ratio = [0.0, 0.0, 0.0]
+        for k in range(max(windows[0][0] - 2, 3), len(rows)):
+            for i in range(len(vmax)):
+                d = [rows[k - m]["drive"][i] for m in range(4)]
+                diffs = ((d[0] - d[1]) / T, (d[0] - 2 * d[1] + d[2]) / T**2, (d[0] - 3 * d[1] + 3 * d[2] - d[3]) / T**3)
+                for n, (x, lim) in enumerate(zip(diffs, (vmax[i], amax[i], jmax[i]))):
+                    ratio[n] = max(ratio[n], abs(x) / lim)
+                    if abs(x) > lim * (1 + 1e-6):
+                        fail(f"period {k}, joint {i}: drive {['velocity', 'acceleration', 'jerk'][n]} {x:.6g} exceeds {lim:g}")
+                        report(errors)
+        whole = (f"; every period from the first engagement to the end ({len(rows) - windows[0][0]}) within the limits "
+                 f"(v/a/jerk at most {ratio[0]:.3f} / {ratio[1]:.3f} / {ratio[2]:.3f})")
+
     # Following error as motion sees it.
     fe_engaged = max(abs(f) for k in engaged for f in rows[k]["ferror"])
     fe_all = max(abs(f) for r in rows for f in r["ferror"])
@@ -179,7 +199,7 @@ def main():
     print(f"ok: {len(rows)} periods; {paths}; drive v/a/jerk through the hand-overs at most "
           f"{worst_ratio[0]:.3f} / {worst_ratio[1]:.3f} / {worst_ratio[2]:.3f} of the limits; "
           f"following error at most {fe_engaged:.1e} mm while engaged, {fe_all:.1e} mm overall; "
-          f"motor offsets {offset}; homed, positions agree at the end")
+          f"motor offsets {offset}; homed, positions agree at the end{whole}")
 
 
 def ini_feed(path):
