@@ -1,6 +1,6 @@
 #!/bin/bash
 # LinuxCNC's own example 3D_Chips.ngc (a 3-D surfacing program: parameters, expressions, a
-# tool change), read by LinuxCNC's interpreter (`nurbs-filter`: one run of its 4,681 feed
+# tool change), read by LinuxCNC's interpreter (`nurbs-filter`: one run; its 4,681 feed
 # moves), planned with `--round-corners smooth` at F100 A5000 J5e4 and a 0.01 mm tolerance by
 # the default and the reachability planners: every plan passes `nurbs-plan verify` (axis limits
 # by finite differences and every setpoint within 0.01 mm of the programmed polyline; a fit
@@ -13,7 +13,9 @@ program=/usr/share/linuxcnc/ncfiles/3D_Chips.ngc
 XDG_CACHE_HOME="$work/cache" nurbs-filter "$program" >/dev/null 2>"$work/filter.log" || { cat "$work/filter.log"; exit 1; }
 runs=("$work"/cache/nurbs-filter/*/run-*.ngc)
 [ "${#runs[@]}" = 1 ] || { cat "$work/filter.log"; echo "FAIL: one run expected, got ${#runs[@]}"; exit 1; }
-cp "${runs[0]}" "$work/chips.ngc"
+# Its feed moves: the run ends with the program's retract (a rapid, at the filter's rapid feed).
+sed '/F60000000\.0$/,$d' "${runs[0]}" >"$work/chips.ngc"
+echo M2 >>"$work/chips.ngc"
 moves=$(grep -c '^G1 ' "$work/chips.ngc")
 echo "3D_Chips.ngc read by LinuxCNC's interpreter: one run of $moves feed moves"
 [ "$moves" = 4681 ] || { echo "FAIL: expected the program's 4,681 feed moves"; exit 1; }

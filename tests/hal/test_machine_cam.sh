@@ -10,7 +10,9 @@
 #   3d_chips  - LinuxCNC's own 3D_Chips.ngc, its first 300 lines (parameters, expressions,
 #               T M6, M8, S M3, G64 P) and M2;
 #   sub_loop  - named parameters, a subroutine called in a loop (LinuxCNC's moves) between
-#               top-level feed moves (ours), a G92 offset, G54 rotated by 15 degrees.
+#               top-level feed moves (ours), a G92 offset, G54 rotated by 15 degrees, and a
+#               toolpath file the program names, (NURBS_TOOLPATH, trident.json), found among
+#               the installed examples.
 # Checked: the program ran to its end with no error, homed, on, released; every run the
 # filter cut (feed moves, rapids, the G43 line) ran through nurbs_interp (one engagement each) with the offline plan of that run
 # file in the offsets the test set (G54 by MDI + the tool table's length, computed here, not
@@ -45,6 +47,11 @@ declare -A placement=(
     [cam_post]="--work-offset 20,15,7.5"
     [3d_chips]="--work-offset 60,60,-20"
     [sub_loop]="--work-offset 5,-5,0 --rotation-xy 15 --g92-offset 5,5,0")
+
+# The runs the filter cut and the toolpath files it copied, in order.
+runs() {
+    ls "$1"/cache/nurbs-filter/*/run-* | grep -v -e '\.args$' -e '\.from-file$' | sort -V
+}
 
 failed=0
 for case in ${CASES:-cam_post 3d_chips sub_loop}; do
@@ -85,9 +92,9 @@ PY
     fi
     read -r -a place <<<"${placement[$case]}"
     plans=() k=0
-    for file in $(ls "$run"/cache/nurbs-filter/*/run-*.ngc | sort -V); do
+    for file in $(runs "$run"); do
         # The program's G64 P / G61 where the run starts, as the filter passes them to M101.
-        mapfile -t mode <"${file%.ngc}.args"
+        mapfile -t mode <"${file%.*}.args"
         nurbs-plan plan "$file" --ini "$config/nurbs-sim.ini" "${place[@]}" "${mode[@]}" --stream --out "$run/offline-$k.csv" >/dev/null \
             || { echo "offline plan of $file failed"; failed=1; }
         plans+=(--offline "$run/offline-$k.csv" --recorded-csv "$run/recorded-$k.csv")
@@ -100,8 +107,8 @@ PY
         failed=1; continue
     fi
     k=0
-    for file in $(ls "$run"/cache/nurbs-filter/*/run-*.ngc | sort -V); do
-        mapfile -t mode <"${file%.ngc}.args"
+    for file in $(runs "$run"); do
+        mapfile -t mode <"${file%.*}.args"
         verify=(nurbs-plan verify "$run/recorded-$k.csv" "$file" --ini "$config/nurbs-sim.ini" "${place[@]}" "${mode[@]}")
         "${verify[@]}" | tail -n 1 | grep -q "^OK" || { echo "verify of run $k failed"; "${verify[@]}"; failed=1; }
         k=$((k + 1))

@@ -4,6 +4,7 @@ LinuxCNC runs a user M-code (M100-M199) as a program with P and Q as its argumen
 is idle, and waits for it to exit; a non-zero exit aborts the G-code program. On abort or
 E-stop the program gets SIGINT.
 """
+import glob
 import os
 import signal
 import subprocess
@@ -82,13 +83,22 @@ def find_toolpath(name, ini_name):
 def filter_run(program_id, n):
     """Run `n` of the program nurbs-filter cut with id `program_id` (nurbs-filter's cache)."""
     cache = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return os.path.join(cache, "nurbs-filter", str(program_id), f"run-{n}.ngc")
+    stem = os.path.join(cache, "nurbs-filter", str(program_id), f"run-{n}")
+    # A run cut from the program is G-code; a (NURBS_TOOLPATH, ...) file keeps its extension.
+    found = [p for p in glob.glob(stem + ".*") if not p.endswith((".args", ".from-file"))]
+    return found[0] if found else stem + ".ngc"
+
+
+def from_file(run_path):
+    """Whether the run is a toolpath file the program named (the machine moves to its start)
+    rather than moves cut from the program (which start where the tool stands)."""
+    return os.path.exists(os.path.splitext(run_path)[0] + ".from-file")
 
 
 def filter_run_args(run_path):
     """The planner flags nurbs-filter wrote beside a run (from G64 P and G61 in the program)."""
     try:
-        with open(run_path[: -len(".ngc")] + ".args") as f:
+        with open(os.path.splitext(run_path)[0] + ".args") as f:
             return [line.strip() for line in f if line.strip()]
     except OSError:
         return []

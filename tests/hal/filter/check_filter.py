@@ -233,6 +233,32 @@ check(rc == 0 and [moves(r) for r in runs] == [["G1 X10.0 Y10.0 Z-1.0 F100.0", "
       f"an axis is known once a line programs it: after G53 G0 Z0, X and Y are not; a program that never "
       f"names Z runs 2-D: {[moves(r) for r in runs]} {[moves(r) for r in runs2]}")
 
+os.makedirs(os.path.join(WORK, "toolpath_file"), exist_ok=True)
+trident = os.path.join(EXAMPLES, "trident.json")
+with open(trident) as f, open(os.path.join(WORK, "toolpath_file", "part.json"), "w") as g:
+    g.write(f.read())
+rc, out, report, runs, files = run_filter("toolpath_file", """G21 G90
+G0 X0 Y0 Z5
+G1 X1 F100
+(NURBS_TOOLPATH, part.json)
+G1 X2
+G0 X0 Y0 Z5
+G1 X3
+M2
+""")
+folder = os.path.dirname(files[0]) if files else ""
+copied = os.path.join(folder, "run-3.json")
+check(rc == 0 and [moves(r) for r in runs] == [["G1 X1.0 Y0.0 Z5.0 F100.0"], ["G1 X3.0 Y0.0 Z5.0 F100.0"]]
+      and os.path.isfile(copied) and open(copied).read() == open(trident).read()
+      and os.path.isfile(os.path.join(folder, "run-3.from-file"))
+      and "(NURBS_TOOLPATH, part.json)\no<nurbs_filter_3> if [#<_task>]\n  o<nurbs_run> call [3]" in out
+      and ":5: move left to LinuxCNC's planner (feed from an unknown position)" in report,
+      f"(NURBS_TOOLPATH, file) runs the file there; after it the position is unknown until programmed: "
+      f"{[moves(r) for r in runs]}, {report.strip()}")
+rc, out, report, runs, _ = run_filter("toolpath_missing", "G21\n(NURBS_TOOLPATH, nowhere.json)\nM2\n")
+check(rc != 0 and "toolpath_missing.ngc:2: toolpath nowhere.json is neither beside" in report,
+      f"a toolpath file that is not there: {report.strip()}")
+
 rc, out, report, runs, _ = run_filter("unknown_start", "G21 G90\nG1 X1 Y1 Z0 F100\nG1 X2\nM2\n")
 check(rc == 0 and len(runs) == 1 and moves(runs[0]) == ["G1 X2.0 Y1.0 Z0.0 F100.0"],
       f"a feed from an unknown position stays LinuxCNC's; the next one is a run: {[moves(r) for r in runs]}")
