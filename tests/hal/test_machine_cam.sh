@@ -9,6 +9,9 @@
 #               M8, G43 H1, rapids, plunges, G1/G2/G3 with I J, M9 M5 M30, % lines;
 #   3d_chips  - LinuxCNC's own 3D_Chips.ngc, its first 300 lines (parameters, expressions,
 #               T M6, M8, S M3, G64 P) and M2;
+#   cam_post_abort - the pocket, the operator's abort 0.3 s into its first run: the run stops
+#               on the path within the limits, motion catches up and takes the drives back,
+#               the machine stays on and homed (check_machine.py --action abort);
 #   sub_loop  - named parameters, a subroutine called in a loop (LinuxCNC's moves) between
 #               top-level feed moves (ours), a G92 offset, G54 rotated by 15 degrees, and a
 #               toolpath file the program names, (NURBS_TOOLPATH, trident.json), found among
@@ -42,9 +45,13 @@ tool_length=12.5
 declare -A g54=([cam_post]="X20 Y15 Z-5" [3d_chips]="X60 Y60 Z-20" [sub_loop]="X5 Y-5 Z0 R15")
 # Where every move after the first (from an unknown position) is ours, every period from the
 # first engagement on is checked against the limits (LinuxCNC's own moves are not jerk-limited).
-declare -A all_ours=([cam_post]=--all-ours-after [3d_chips]=--all-ours-after [sub_loop]=)
+declare -A all_ours=([cam_post]=--all-ours-after [3d_chips]=--all-ours-after)
+declare -A program_of=([cam_post]=cam_post [cam_post_abort]=cam_post [3d_chips]=3d_chips [sub_loop]=sub_loop)
+declare -A action=([cam_post_abort]=abort)
+g54[cam_post_abort]=${g54[cam_post]}
 declare -A placement=(
     [cam_post]="--work-offset 20,15,7.5"
+    [cam_post_abort]="--work-offset 20,15,7.5"
     [3d_chips]="--work-offset 60,60,-20"
     [sub_loop]="--work-offset 5,-5,0 --rotation-xy 15 --g92-offset 5,5,0")
 
@@ -54,7 +61,7 @@ runs() {
 }
 
 failed=0
-for case in ${CASES:-cam_post 3d_chips sub_loop}; do
+for case in ${CASES:-cam_post cam_post_abort 3d_chips sub_loop}; do
     echo "--- $case"
     run="$work/$case"
     mkdir -p "$run"
@@ -77,7 +84,7 @@ for axis, lo, hi in (("X", -100, 200), ("Y", -100, 200), ("Z", -60, 60)):
 open(sys.argv[1], "w").write(ini)
 PY
     hal_cleanup
-    (cd "$config" && TMPDIR="$run" XDG_CACHE_HOME="$run/cache" NURBS_TEST_PROGRAM="$work/$case.ngc" \
+    (cd "$config" && TMPDIR="$run" XDG_CACHE_HOME="$run/cache" NURBS_TEST_PROGRAM="$work/${program_of[$case]}.ngc" NURBS_TEST_ACTION="${action[$case]:-}" \
         NURBS_TEST_RESULT="$run/result.json" NURBS_TEST_SETUP="G10 L2 P1 ${g54[$case]}" \
         NURBS_TEST_FILTER="$(command -v nurbs-filter)" \
         env -u DISPLAY timeout 600 script -qec "linuxcnc $config/nurbs-sim.ini" /dev/null \
@@ -101,8 +108,20 @@ PY
         k=$((k + 1))
     done
     echo "$k run(s)"
+    if [ -n "${action[$case]:-}" ]; then
+        # Aborted in its first run: that one engagement, stopped on the path (every limit held,
+        # only the path's end not reached), then the program is over.
+        python3 "$here/machine/check_machine.py" --samples "$run/samples.txt" --result "$run/result.json" \
+            --ini "$config/nurbs-sim.ini" "${plans[@]:0:4}" --action "${action[$case]}" \
+            || { echo "--- LinuxCNC log:"; tail -n 30 "$run/linuxcnc.log"; failed=1; continue; }
+        file=$(runs "$run" | head -n 1)
+        mapfile -t mode <"${file%.*}.args"
+        v=$(nurbs-plan verify "$run/recorded-0.csv" "$file" --ini "$config/nurbs-sim.ini" "${place[@]}" "${mode[@]}" || true)
+        if grep "^VIOLATION" <<<"$v" | grep -v "not the end of the path"; then failed=1; fi
+        continue
+    fi
     if ! python3 "$here/machine/check_machine.py" --samples "$run/samples.txt" --result "$run/result.json" \
-        --ini "$config/nurbs-sim.ini" "${plans[@]}" ${all_ours[$case]}; then
+        --ini "$config/nurbs-sim.ini" "${plans[@]}" ${all_ours[$case]:-}; then
         echo "--- LinuxCNC log:"; tail -n 30 "$run/linuxcnc.log"; grep "^nurbs" "$run/nurbs-planner.log"* || true
         failed=1; continue
     fi
