@@ -111,7 +111,10 @@ def moves(run_text):
 
 
 def plan_rows(path, out):
+    """The plan of `path` at lab set 1, checked by `verify` (finite differences at the period)."""
     subprocess.run([PLAN, "plan", path, "--limits", "lab1", "--out", out], check=True, capture_output=True)
+    v = subprocess.run([PLAN, "verify", out, path, "--limits", "lab1"], capture_output=True, text=True)
+    check(v.returncode == 0, f"{os.path.basename(path)}: the plan verifies: {v.stdout.strip().splitlines()[-1:]}")
     with open(out) as f:
         return list(csv.DictReader(f))
 
