@@ -44,7 +44,7 @@ const MAX_RUN: usize = 500;
 const OVERLAP: usize = 100;
 /// The first run is cut this short, so that the planner gets its first element early (a run
 /// of `MAX_RUN` pieces takes some 0.1 s to read, round and fit).
-const FIRST_RUN: usize = 200;
+const FIRST_RUN: usize = 60;
 /// Programmed vertices per knot span of the first fit; fewer on each refinement (by half
 /// again as many spans) until the fit passes. The coarsest fit that passes is the smoothest:
 /// the quantisation of the coordinates (1e-4 mm, 5 % of a 0.02 mm step) would turn into
