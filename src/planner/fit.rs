@@ -33,7 +33,7 @@ use std::sync::{Arc, Mutex};
 
 /// Pieces longer than this (mm, control-polygon length) end a run: long lines and wide corners
 /// keep their rounding, which already lets the feed up.
-const SHORT_PIECE: f64 = 1.0;
+const SHORT_PIECE: f64 = 2.0;
 /// A run of fewer pieces is left as rounded.
 const MIN_RUN: usize = 8;
 /// Pieces in one fitted spline at most (about 5 mm of a 0.02 mm program). A longer run is
@@ -457,6 +457,8 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
     // The samples in order along the spline, and where each data interval's samples begin.
     let mut samples: Vec<P3> = Vec::with_capacity(CHECK_SAMPLES * intervals + 1);
     let mut first = Vec::with_capacity(intervals + 1);
+    // Per interval: what the check adds for the spline between its samples.
+    let mut margin = vec![sag; intervals];
     for i in 0..intervals {
         first.push(samples.len());
         let param = |k: usize| (chord[i] + (chord[i + 1] - chord[i]) * k as f64 / CHECK_SAMPLES as f64) / total;
@@ -464,7 +466,8 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
             let (t0, t1) = (param(k), param(k + 1));
             let p0 = at(t0);
             samples.push(p0);
-            halve(&at, (t0, p0), (t1, at(t1)), sag, MAX_HALVINGS, &mut samples);
+            let unresolved = halve(&at, (t0, p0), (t1, at(t1)), sag, MAX_HALVINGS, &mut samples);
+            margin[i] = margin[i].max(unresolved);
         }
     }
     first.push(samples.len());
@@ -479,7 +482,7 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
         if let Some(b) = data.before.filter(|_| i < WINDOW) {
             d = d.min(segment_distance(&x[..3], &b[..3], &v[0][..3]));
         }
-        worst[i] = worst[i].max(d + sag);
+        worst[i] = worst[i].max(d + margin[i]);
     }
     // (The first vertex of a spline that continues another is that one's to check.)
     let checked = usize::from(data.before.is_some());
@@ -490,23 +493,38 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
             .map(|s| segment_distance(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
             .fold(f64::INFINITY, f64::min);
         for j in [i.saturating_sub(1), i.min(intervals - 1)] {
-            worst[j] = worst[j].max(d + sag);
+            worst[j] = worst[j].max(d + margin[j]);
         }
     }
     worst
 }
 
 /// Pushes the samples strictly between `(a, pa)` and `(b, pb)` (parameter, point) in order:
-/// the middle, where it lies farther than `sag` from the chord, with the halves' own.
-fn halve(at: &dyn Fn(f64) -> P3, (a, pa): (f64, P3), (b, pb): (f64, P3), sag: f64, depth: u32, out: &mut Vec<P3>) {
+/// the middle, where it lies farther than `sag` from the chord, with the halves' own. Returns
+/// how far a middle lay from its chord where the halvings ran out before it came within `sag`
+/// (zero where none did): the check adds that instead of `sag` there.
+fn halve(
+    at: &dyn Fn(f64) -> P3,
+    (a, pa): (f64, P3),
+    (b, pb): (f64, P3),
+    sag: f64,
+    depth: u32,
+    out: &mut Vec<P3>,
+) -> f64 {
     let m = 0.5 * (a + b);
     let pm = at(m);
-    if depth == 0 || segment_distance(&pm[..3], &pa[..3], &pb[..3]) <= sag {
-        return;
+    let off = segment_distance(&pm[..3], &pa[..3], &pb[..3]);
+    if off <= sag {
+        return 0.0;
     }
-    halve(at, (a, pa), (m, pm), sag, depth - 1, out);
+    if depth == 0 {
+        // Within twice the middle's distance for a cubic this finely cut (its bulge between
+        // two samples is nearly a parabola's).
+        return 2.0 * off;
+    }
+    let left = halve(at, (a, pa), (m, pm), sag, depth - 1, out);
     out.push(pm);
-    halve(at, (m, pm), (b, pb), sag, depth - 1, out);
+    left.max(halve(at, (m, pm), (b, pb), sag, depth - 1, out))
 }
 
 /// The join at the end of `curve`: unit tangent and curvature vector.
