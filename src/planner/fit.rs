@@ -1178,6 +1178,32 @@ mod tests {
         assert_eq!(stats.fitted_runs, 0);
     }
 
+    /// The part of a spline cut by knot insertion is the same curve: its points at t / u equal
+    /// the whole one's at t, its end the whole one's at u.
+    #[test]
+    fn the_left_part_is_the_same_curve() {
+        let knots = vec![0.0, 0.0, 0.0, 0.0, 0.2, 0.35, 0.5, 0.8, 1.0, 1.0, 1.0, 1.0];
+        let cps: Vec<P3> = (0..8)
+            .map(|i| p3(&[i as f64, (i as f64 * 1.3).sin(), 0.1 * (i * i) as f64]))
+            .collect();
+        let curve = |k: &[f64], c: &[P3]| {
+            let rows: Vec<Vec<f64>> = c.iter().map(|p| p[..3].to_vec()).collect();
+            Nurbs::new(3, k.to_vec(), &rows, None).unwrap()
+        };
+        let whole = curve(&knots, &cps);
+        // Inside a span, and on a knot already there.
+        for u in [0.43, 0.5] {
+            let (k, c) = left_part(&knots, &cps, u);
+            let left = curve(&k, &c);
+            assert!(norm3(&sub(&c[c.len() - 1], &p3(&whole.point(u)))) < 1e-12);
+            for i in 0..=50 {
+                let t = u * i as f64 / 50.0;
+                let d = norm3(&sub(&p3(&left.point(t / u)), &p3(&whole.point(t))));
+                assert!(d < 1e-12, "at {t}: {d}");
+            }
+        }
+    }
+
     /// The band solver agrees with a dense solve.
     #[test]
     fn band_cholesky_solves() {
