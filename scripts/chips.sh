@@ -1,8 +1,9 @@
 #!/bin/bash
 # LinuxCNC's own 3D_Chips.ngc (a 3-D surfacing program), its moves as LinuxCNC's interpreter
-# reads them (the one run `nurbs-filter` cuts from it: all 4,681 feed moves), planned at F100 A5000 J5e4 with a 0.01 mm tolerance
-# by the default (Erwinski) and the reachability planners, corners rounded and smoothed; each
-# plan checked by `nurbs-plan verify`. Prints motion time, planning time, the largest distance of
+# reads them (the one run `nurbs-filter` cuts from it: all 4,681 feed moves), planned at F100
+# A5000 J5e4 with a 0.01 mm tolerance by the default (Erwinski) and the reachability planners,
+# corners only rounded (`--round-corners round`) and as by default (`auto`: runs of short lines
+# fitted); each plan checked by `nurbs-plan verify`. Prints motion time, planning time, the largest distance of
 # a setpoint to the programmed polyline, and the verdict. With TP=1, LinuxCNC 2.9's own planner
 # on the same program too (scripts/linuxcnc-tp.sh: a full headless LinuxCNC, as root).
 # Usage: scripts/chips.sh  (after `cargo build --release --bin nurbs-plan`; needs linuxcnc-uspace)
@@ -17,7 +18,7 @@ limits=(--feed 100 --accel 5000 --jerk 5e4 --chord-tol 0.01 --period 0.00025)
 echo "| planner | corners | motion (s) | plan (s) | from the program (mm) | verify |"
 echo "|---|---|---|---|---|---|"
 for planner in erwinski reach; do
-  for mode in auto smooth; do
+  for mode in round auto; do
     flags=(--planner "$planner" --round-corners "$mode")
     [ "$planner" = erwinski ] && flags+=(--stream)
     $bin plan "$dir/chips.ngc" "${limits[@]}" "${flags[@]}" --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1

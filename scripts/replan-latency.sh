@@ -1,6 +1,6 @@
 #!/bin/bash
 # Re-plans deep into a long program in real LinuxCNC: a generated dense G1 program of LINES
-# lines (default 100,000) smoothed (`--round-corners smooth`), streamed by nurbs-planner into
+# lines (default 100,000), its runs of short lines fitted (the default), streamed by nurbs-planner into
 # our module on a 250 us thread; a hold HOLD_AT seconds in (default 20), released 3 s later;
 # the feed override to 0.8 five seconds after the release, back to 1.0 three seconds after
 # that. Prints the planner's lines that give the figures: when the first records of the motion
@@ -20,7 +20,7 @@ python3 "$here/dense-g1.py" --lines "$lines" >"$work/dense.ngc"
 cat >"$work/replan.hal" <<EOF
 loadrt threads name1=servo period1=250000
 loadrt nurbs_interp
-loadusr -W nurbs-planner $work/dense.ngc --limits lab1 --feed 500 --period 0.00025 --round-corners smooth
+loadusr -W nurbs-planner $work/dense.ngc --limits lab1 --feed 500 --period 0.00025
 addf nurbs_interp.update servo
 setp nurbs_interp.enable 1
 start

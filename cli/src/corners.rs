@@ -15,17 +15,19 @@ use std::sync::{Arc, Mutex};
 pub enum RoundCorners {
     /// Round the corners of every run of joined straight lines (G1, DXF LINE / LWPOLYLINE
     /// without bulges, degree-1 JSON) of the tool tip, or of the tool tip and top point (5-axis
-    /// G1), within the chord tolerance; arcs and NURBS, and where a run meets them, as
-    /// programmed.
+    /// G1), within the chord tolerance, then replace each run of short tool-tip pieces (dense CAM
+    /// output: 8 or more lines of up to 4 mm at one feed) by cubic B-splines fitted to the
+    /// programmed points within the chord tolerance, continuous in tangent and curvature, so
+    /// that the feed follows the surface the points were sampled from instead of the corners
+    /// between them; arcs and NURBS, and where a run meets them, as programmed.
     #[default]
+    #[value(alias = "smooth")]
     Auto,
-    /// Round, and fail if the path is not one continuous polyline.
+    /// Round the corners as `auto` does, without fitting runs of short pieces (each corner its
+    /// own spline).
+    Round,
+    /// As `auto`, and fail if the path is not one continuous polyline.
     On,
-    /// Round as `auto` does, then replace each run of short pieces (dense CAM output: lines
-    /// under 1 mm) by a cubic B-spline fitted to the programmed points within the chord
-    /// tolerance, continuous in tangent and curvature: the feed follows the surface the points
-    /// were sampled from instead of the corners between them.
-    Smooth,
     /// Plan the programmed path as is (exact stop at every corner).
     Off,
 }
@@ -82,7 +84,7 @@ pub fn round_corners_mode(flag: Option<RoundCorners>, limits: &LimitArgs) -> Res
     match limits.ini_text("NURBS", "ROUND_CORNERS")? {
         None => Ok(RoundCorners::Auto),
         Some((value, file)) => <RoundCorners as clap::ValueEnum>::from_str(&value, true)
-            .map_err(|_| format!("{file}: [NURBS]ROUND_CORNERS = {value}: one of auto, on, off, smooth")),
+            .map_err(|_| format!("{file}: [NURBS]ROUND_CORNERS = {value}: one of auto, round, on, off")),
     }
 }
 
@@ -101,12 +103,17 @@ pub fn open(
     let name = file.display().to_string();
     let (elements, stats): (ElementStream, _) = match mode {
         RoundCorners::Off => (elements, None),
-        RoundCorners::Auto | RoundCorners::On | RoundCorners::Smooth => {
+        RoundCorners::Auto | RoundCorners::Round | RoundCorners::On => {
             let rounder = CornerRounder::new(&name, elements, tolerance, mode == RoundCorners::On)
                 .map_err(|e| format!("{name}: {e}"))?;
             let stats = rounder.stats();
-            let elements: ElementStream = if mode == RoundCorners::Smooth {
-                Box::new(RunFitter::new(rounder, tolerance, Arc::clone(&stats)))
+            let elements: ElementStream = if mode != RoundCorners::Round {
+                Box::new(RunFitter::new(
+                    rounder,
+                    tolerance,
+                    limits.corner_angle()?,
+                    Arc::clone(&stats),
+                ))
             } else {
                 Box::new(rounder)
             };

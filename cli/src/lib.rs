@@ -85,17 +85,9 @@ enum Command {
         /// (the finite differences `verify` checks) with their limits, over the curve parameter.
         #[arg(long, value_name = "PNG")]
         plot: Option<PathBuf>,
-        /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
-        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
-        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
-        /// control points that stays within --chord-tol of the programmed polyline (as much of it
-        /// as the segment lengths allow), and is planned as one motion without stopping at the
-        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
-        /// not such a polyline.
-        /// `off`: follow the programmed polyline exactly (exact stop at every corner). `smooth`:
-        /// as `auto`, then runs of short pieces become fitted splines. Default: `[NURBS]ROUND_CORNERS`
-        /// of --ini, else `auto`. `verify` must be given the same mode to check against the same path.
+        /// G1 corners (corner rounding of Beudaert et al. 2012, section 3.2, and the fit of runs
+        /// of short lines): one of the modes below. Default: `[NURBS]ROUND_CORNERS` of --ini,
+        /// else `auto`. `verify` must be given the same mode to check against the same path.
         #[arg(long, value_enum, value_name = "MODE")]
         round_corners: Option<RoundCorners>,
         #[command(flatten)]
@@ -107,17 +99,10 @@ enum Command {
         toolpath: PathBuf,
         #[command(flatten)]
         limits: LimitArgs,
-        /// G1 corner rounding (VPOp paper, section 3.2). `auto`: a path made only of straight
-        /// lines (G1 moves, DXF LINE / LWPOLYLINE without bulges, degree-1 JSON) of the tool tip,
-        /// or of the tool tip and top point (5-axis G1: the top curve is rounded on the same
-        /// parameter), one continuous run, has each corner replaced by a C2 cubic B-spline of five
-        /// control points that stays within --chord-tol of the programmed polyline (as much of it
-        /// as the segment lengths allow), and is planned as one motion without stopping at the
-        /// corners; other paths are planned as programmed. `on`: round, or fail if the path is
-        /// not such a polyline.
-        /// `off`: follow the programmed polyline exactly (exact stop at every corner).
-        /// The same mode as `plan` (default `auto`): the setpoints are checked against the same
-        /// rounded path, and their distance to the programmed polyline against --chord-tol.
+        /// G1 corners (corner rounding of Beudaert et al. 2012, section 3.2, and the fit of runs
+        /// of short lines): one of the modes below. Default: `[NURBS]ROUND_CORNERS` of --ini,
+        /// else `auto`. The same mode as `plan`: the setpoints are checked against the same
+        /// path, and their distance to the programmed polyline against --chord-tol.
         #[arg(long, value_enum, value_name = "MODE")]
         round_corners: Option<RoundCorners>,
         #[command(flatten)]

@@ -2,6 +2,7 @@
 //! from: one set of names, one way to read them.
 
 use crate::placement::PlacementArgs;
+use nurbs_motion::planner::fit::CORNER_ANGLE;
 use nurbs_motion::planner::presets::{preset, Preset};
 use nurbs_motion::planner::Limits;
 use std::path::{Path, PathBuf};
@@ -27,6 +28,11 @@ pub struct LimitArgs {
     /// Chord error tolerance (mm); default: `[NURBS]CHORD_TOLERANCE`.
     #[arg(long = "chord-tol")]
     pub chord_tol: Option<f64>,
+    /// Corner angle (degrees): a G1 corner that turns more, between lines long enough for the
+    /// turn to be programmed, ends a run of short lines fitted by `--round-corners auto` (it
+    /// stays rounded); default: `[NURBS]CORNER_ANGLE`, else 35.
+    #[arg(long = "corner-angle", value_name = "DEG")]
+    pub corner_angle: Option<f64>,
     /// Interpolation period (s): the servo thread's; default: `[EMCMOT]SERVO_PERIOD` (ns).
     #[arg(long)]
     pub period: Option<f64>,
@@ -90,6 +96,22 @@ impl LimitArgs {
             .ok_or_else(|| "no chord tolerance: give --chord-tol or [NURBS]CHORD_TOLERANCE in --ini".into())
     }
 
+    /// The corner angle (degrees): `--corner-angle`, else `[NURBS]CORNER_ANGLE` of the INI,
+    /// else [`CORNER_ANGLE`]; an error outside 0..180.
+    pub fn corner_angle(&self) -> Result<f64, String> {
+        let angle = match self.corner_angle {
+            Some(a) => a,
+            None => self
+                .ini()?
+                .map_or(Ok(None), |i| i.number("NURBS", "CORNER_ANGLE"))?
+                .unwrap_or(CORNER_ANGLE),
+        };
+        if !(angle > 0.0 && angle < 180.0) {
+            return Err(format!("corner angle {angle}: more than 0 and less than 180 degrees"));
+        }
+        Ok(angle)
+    }
+
     /// The machine's travel from `--ini` (`[AXIS_X|Y|Z]MIN_LIMIT`, `MAX_LIMIT`; an axis without
     /// them is not bounded); `None` without `--ini`.
     pub fn travel(&self) -> Result<Option<Travel>, String> {
@@ -122,6 +144,7 @@ impl LimitArgs {
             jerk: self.jerk.clone().or(named.and_then(|p| list(p.jerk))),
             vel: self.vel.clone().or(named.and_then(|p| list(p.velocity))),
             chord_tol: self.chord_tol.or(named.map(|p| p.chord_tolerance)),
+            corner_angle: self.corner_angle,
             period: self.period.or(named.map(|p| p.period)),
             hold_reserve: self.hold_reserve,
             preset: None,

@@ -37,10 +37,9 @@ pub struct PlannerArgs {
     /// sent as path blocks).
     #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
     pub planner: PlannerKind,
-    /// G1 corners: `auto` rounds the corners of every run of straight lines within the chord
-    /// tolerance (as `nurbs-plan plan` does), `on` requires the path to be one polyline, `off`
-    /// stops at every corner, `smooth` rounds and then fits runs of short pieces with splines.
-    /// Default: `[NURBS]ROUND_CORNERS` of --ini, else `auto`.
+    /// G1 corners, as `nurbs-plan plan --round-corners` (`auto`: rounded, runs of short lines
+    /// fitted; `round`: rounded only; `on`: as `auto` on one polyline only; `off`: as
+    /// programmed). Default: `[NURBS]ROUND_CORNERS` of --ini, else `auto`.
     #[arg(long, value_enum)]
     pub round_corners: Option<RoundCorners>,
     /// Exit (status 0) once the module has run the whole motion and no stop of it is left to

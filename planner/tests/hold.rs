@@ -104,12 +104,12 @@ fn a_hold_leaves_the_plan_within_a_few_milliseconds_within_the_limits() {
         ("butterfly", job("butterfly.json")),
         ("star_g1", job("star_g1.ngc")),
         ("G1 zigzag", job_of(g1_zigzag(150))),
-        ("dense G1 (600 lines)", job_at(&dense_g1(600, &std::env::temp_dir()))),
-        ("2000 mm line", job_of(line(2000.0))),
         (
-            "dense G1 smoothed (2000 lines)",
-            job_smoothed(&dense_g1(2000, &std::env::temp_dir())),
+            "dense G1 rounded (600 lines)",
+            job_rounded(&dense_g1(600, &std::env::temp_dir())),
         ),
+        ("2000 mm line", job_of(line(2000.0))),
+        ("dense G1 (2000 lines)", job_at(&dense_g1(2000, &std::env::temp_dir()))),
     ];
     let mut instants = Instants::new(0x2545_f491_4f6c_dd1d);
     let mut all = Vec::new();
@@ -220,7 +220,7 @@ fn a_hold_takes_the_stored_deceleration_where_no_s_curve_stop_passes() {
 #[test]
 fn on_dense_g1_the_stops_run_across_short_elements() {
     let _guard = lock_module();
-    let job = job_at(&dense_g1(300, &std::env::temp_dir()));
+    let job = job_rounded(&dense_g1(300, &std::env::temp_dir()));
     let stops = offered_stops(&job);
     let candidates = job.samples.len() as u64 / HOLD_STOP_SPACING;
     let offered = stops.iter().filter(|&&n| n % HOLD_STOP_SPACING == 0).count() as u64;

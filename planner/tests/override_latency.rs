@@ -57,12 +57,12 @@ fn a_feed_override_change_takes_effect_within_milliseconds_within_the_limits() {
         ("trident", job("trident.json")),
         ("butterfly", job("butterfly.json")),
         ("G1 zigzag", job_of(g1_zigzag(40))),
-        ("dense G1 (600 lines)", job_at(&dense_g1(600, &std::env::temp_dir()))),
-        ("2000 mm line", job_of(line(2000.0))),
         (
-            "dense G1 smoothed (2000 lines)",
-            job_smoothed(&dense_g1(2000, &std::env::temp_dir())),
+            "dense G1 rounded (600 lines)",
+            job_rounded(&dense_g1(600, &std::env::temp_dir())),
         ),
+        ("2000 mm line", job_of(line(2000.0))),
+        ("dense G1 (2000 lines)", job_at(&dense_g1(2000, &std::env::temp_dir()))),
     ];
     let mut instants = Instants::new(0x9e37_79b9_7f4a_7c15);
     // `OVERRIDE_AT`: every change at this sample (to reproduce one).

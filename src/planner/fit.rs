@@ -14,6 +14,12 @@
 //! tolerance from the polyline, no programmed vertex farther than it from the spline), and
 //! where it cannot be made to pass the run is split, down to the rounded pieces themselves.
 //!
+//! A run ends at a real corner: a turn sharper than the corner angle (`--corner-angle`) between
+//! lines long enough that a curve through their vertices would leave them by more than
+//! [`CORNER_DEPTH`] tolerances (a zigzag of 2 mm lines, a pocket's corners; not the tight turns
+//! of a densely sampled curve, where lines of 0.02 mm turn by up to 42 degrees). Such a corner
+//! keeps its rounding, a stop for the feed as a corner should be, instead of being fitted over.
+//!
 //! The spline starts and ends where the run does. Where it meets a rounded piece (or anything
 //! else) it runs along the piece's tangent with zero curvature there (three collinear control
 //! points), as the pieces it replaces do. A long run is fitted in overlapping windows: a window
@@ -74,6 +80,12 @@ const WINDOW: usize = 3;
 const FAIR_INTERVALS: f64 = 32.0;
 /// Factor on the weight of the data in an interval that is off, each refinement.
 const REWEIGHT: f64 = 2.0;
+/// A turn sharper than the corner angle ends a run where `L θ / 8` (how far an arc through
+/// the vertices would leave the shorter line, of length `L`, turning by `θ` radians) is more
+/// than this many tolerances: the lines are long for their turn, the corner was programmed.
+const CORNER_DEPTH: f64 = 4.0;
+/// The corner angle by default (degrees; `--corner-angle`, `[NURBS]CORNER_ANGLE`).
+pub const CORNER_ANGLE: f64 = 35.0;
 
 /// A tool-tip point or vector (the first three coordinates; the rest zero).
 type P3 = Vector;
@@ -798,6 +810,9 @@ struct Pending {
 pub struct RunFitter<I> {
     source: I,
     budget: f64,
+    tolerance: f64,
+    /// Cosine of the corner angle: a corner spline turning more may end the run.
+    corner_cos: f64,
     run: Vec<PathElement>,
     /// The part kept of the last window (a run longer than [`MAX_RUN`]).
     pending: Option<Pending>,
@@ -810,11 +825,14 @@ pub struct RunFitter<I> {
 }
 
 impl<I: Iterator<Item = Result<PathElement, ReadError>>> RunFitter<I> {
-    /// Fits the runs of `source` within `tolerance` (mm, > 0), counting into `stats`.
-    pub fn new(source: I, tolerance: f64, stats: Arc<Mutex<RoundingStats>>) -> Self {
+    /// Fits the runs of `source` within `tolerance` (mm, > 0), ended at corners sharper than
+    /// `corner_angle` (degrees) between long lines, counting into `stats`.
+    pub fn new(source: I, tolerance: f64, corner_angle: f64, stats: Arc<Mutex<RoundingStats>>) -> Self {
         RunFitter {
             source,
             budget: FIT_SHARE * tolerance,
+            tolerance,
+            corner_cos: corner_angle.to_radians().cos(),
             run: Vec::new(),
             pending: None,
             cap: FIRST_RUN,
@@ -892,6 +910,21 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> RunFitter<I> {
         self.run.drain(..keep);
     }
 
+    /// Whether the run's last piece is a corner sharper than the corner angle between lines
+    /// long enough for it to be a programmed corner ([`CORNER_DEPTH`]), `e` coming next. The
+    /// lines' lengths are taken as far as the pieces beside the corner show them.
+    fn ends_at_a_corner(&self, e: &PathElement) -> bool {
+        let Some((leg, turn)) = self.run.last().and_then(corner_of) else {
+            return false;
+        };
+        if turn.cos() >= self.corner_cos {
+            return false;
+        }
+        let before = leg + line_part(self.run.iter().rev().skip(1));
+        let after = leg + line_part(std::iter::once(e));
+        before.min(after) * turn / 8.0 > CORNER_DEPTH * self.tolerance
+    }
+
     /// The run ends: fits what is left of it.
     fn finish(&mut self) {
         let carry = self.pending.as_ref().map(|p| p.next);
@@ -902,6 +935,36 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> RunFitter<I> {
         self.run.clear();
         self.cap = MAX_RUN;
         self.settle(parts, carry.is_some());
+    }
+}
+
+/// How far a corner spline's legs reach along its lines, and its turn (radians); `None` for
+/// anything else.
+fn corner_of(e: &PathElement) -> Option<(f64, f64)> {
+    let c = &e.curve;
+    if !is_corner_spline(c) {
+        return None;
+    }
+    let (p0, p2, p4) = (p3(c.control_point(0)), p3(c.control_point(2)), p3(c.control_point(4)));
+    let (u1, u2) = (sub(&p2, &p0), sub(&p4, &p2));
+    let leg = norm3(&u1);
+    let cos = dot3(&u1, &u2) / (leg * norm3(&u2));
+    Some((leg, cos.clamp(-1.0, 1.0).acos()))
+}
+
+/// How much of a line the pieces `near` show, going away from a corner (nearest first): a
+/// straight piece all of it and the leg of a corner spline beyond it, a corner spline its leg.
+fn line_part<'a>(mut near: impl Iterator<Item = &'a PathElement>) -> f64 {
+    let Some(e) = near.next() else {
+        return 0.0;
+    };
+    match corner_of(e) {
+        Some((leg, _)) => leg,
+        None => {
+            let c = &e.curve;
+            let straight = norm3(&sub(&p3(c.control_point(1)), &p3(c.control_point(0))));
+            straight + near.next().and_then(corner_of).map_or(0.0, |(leg, _)| leg)
+        }
     }
 }
 
@@ -940,6 +1003,18 @@ impl<I: Iterator<Item = Result<PathElement, ReadError>>> Iterator for RunFitter<
                         let end = p3(c.control_point(c.control_point_count() - 1));
                         norm3(&sub(&p3(e.curve.control_point(0)), &end)) <= 1e-9
                     });
+                    if continues && self.ends_at_a_corner(&e) {
+                        // The corner goes out rounded, between the runs it ends and begins.
+                        let corner = self.run.pop();
+                        self.finish();
+                        self.out.extend(corner);
+                        if joins_run(&e, None) {
+                            self.run.push(e);
+                        } else {
+                            self.out.push_back(e);
+                        }
+                        continue;
+                    }
                     if joins_run(&e, feed) && continues {
                         self.run.push(e);
                         if self.run.len() >= self.cap + OVERLAP {
@@ -1002,7 +1077,7 @@ mod tests {
     fn smooth_within(program: &[PathElement], tol: f64) -> (Vec<PathElement>, RoundingStats) {
         let rounder = CornerRounder::new("t", program.iter().cloned().map(Ok), tol, false).unwrap();
         let stats = rounder.stats();
-        let out: Vec<PathElement> = RunFitter::new(rounder, tol, Arc::clone(&stats))
+        let out: Vec<PathElement> = RunFitter::new(rounder, tol, CORNER_ANGLE, Arc::clone(&stats))
             .collect::<Result<_, _>>()
             .unwrap();
         let stats = *stats.lock().unwrap();
@@ -1194,6 +1269,41 @@ mod tests {
         let (out, stats) = smooth_within(&program, 0.01);
         assert!(stats.fitted_runs >= 1, "{stats:?}");
         check_within(&program, &out, 0.01);
+    }
+
+    /// A programmed corner ends a run: dense lines of 0.05 mm turn by 90 degrees (an arc
+    /// through the vertices would leave the lines by 10 µm, more than 4 tolerances) into more
+    /// of them. Two fitted runs with the corner rounded between them; with the corner angle
+    /// above the turn, fitted across it. A zigzag of 2 mm lines turning by 53 degrees is
+    /// left rounded (not fitted at all).
+    #[test]
+    fn a_programmed_corner_ends_a_run() {
+        let mut program = g1(120, 0.05, |s| [s, 0.0005 * (s * 2.0).sin()]);
+        let end = p3(program.last().unwrap().curve.control_point(1));
+        program.extend(g1(120, 0.05, |s| [end[0] + 0.0005 * (s * 2.0).sin(), end[1] + s]));
+        let fit = |angle: f64| {
+            let rounder = CornerRounder::new("t", program.iter().cloned().map(Ok), TOL, false).unwrap();
+            let stats = rounder.stats();
+            let out: Vec<PathElement> = RunFitter::new(rounder, TOL, angle, Arc::clone(&stats))
+                .collect::<Result<_, _>>()
+                .unwrap();
+            let stats = *stats.lock().unwrap();
+            (out, stats)
+        };
+        let (out, stats) = fit(CORNER_ANGLE);
+        assert_eq!(stats.fitted_runs, 2, "{stats:?}");
+        assert_eq!(out.len(), 3);
+        assert!(is_corner_spline(&out[1].curve));
+        check(&program, &out);
+        let (out, stats) = fit(100.0);
+        assert!(out.iter().all(|e| e.curve.control_point_count() > 5), "{stats:?}");
+        check(&program, &out);
+
+        let zigzag = g1(40, 2.0, |s| [s, (s / 2.0).round() % 2.0]);
+        let (out, stats) = smooth(&zigzag);
+        assert_eq!(stats.fitted_runs, 0, "{stats:?}");
+        assert_eq!(out.len(), 2 * zigzag.len() - 1);
+        check(&zigzag, &out);
     }
 
     /// Dense lines with a sharp corner (107 degrees), then a long line: the path stays within

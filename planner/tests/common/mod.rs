@@ -194,16 +194,17 @@ pub fn job_at(path: &Path) -> Job {
     job_of(prepared(path))
 }
 
-/// The toolpath of a file as `nurbs-plan` prepares it (corners rounded).
+/// The toolpath of a file as `nurbs-plan` prepares it by default (`--round-corners auto`:
+/// corners rounded, runs of short lines fitted).
 pub fn prepared(path: &Path) -> Toolpath {
     prepare(path, Some(RoundCorners::Auto), &chord_tolerance(0.001))
         .unwrap()
         .toolpath
 }
 
-/// [`job_at`] with the runs of short G1 pieces fitted (`--round-corners smooth`).
-pub fn job_smoothed(path: &Path) -> Job {
-    let prepared = prepare(path, Some(RoundCorners::Smooth), &chord_tolerance(0.001)).unwrap();
+/// [`job_at`] with the corners only rounded, each on its own (`--round-corners round`).
+pub fn job_rounded(path: &Path) -> Job {
+    let prepared = prepare(path, Some(RoundCorners::Round), &chord_tolerance(0.001)).unwrap();
     job_of(prepared.toolpath)
 }
 
