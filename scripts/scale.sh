@@ -7,8 +7,9 @@
 # way (where back-tracking found no feed but rest; 0 is the aim), peak RSS of the whole command
 # (planning and writing the CSV), then `verify` of the written setpoints. PLANNER=vpop runs
 # VPOp instead (its first points instead of the first record; no groups: a stop of its own at
-# every state it hands out).
-# Usage: [PLANNER=vpop] scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
+# every state it hands out). ROUND_CORNERS=round plans the program with its corners only rounded
+# (default: auto, runs of short lines fitted).
+# Usage: [PLANNER=vpop] [ROUND_CORNERS=round] scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
 limits="--limits lab1 --feed 500"
@@ -23,9 +24,9 @@ for lines in ${LINES:-1000 10000 100000}; do
   python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
   # shellcheck disable=SC2086
   /usr/bin/time -f "%M" -o "$dir/rss" $bin plan "$dir/dense.ngc" $limits --stream --planner "${PLANNER:-erwinski}" \
-    --out "$dir/dense.csv" --summary "$dir/dense.json" 2>/dev/null
+    --round-corners "${ROUND_CORNERS:-auto}" --out "$dir/dense.csv" --summary "$dir/dense.json" 2>/dev/null
   # shellcheck disable=SC2086
-  if $bin verify "$dir/dense.csv" "$dir/dense.ngc" $limits >/dev/null; then ok=pass; else ok=FAIL; fi
+  if $bin verify "$dir/dense.csv" "$dir/dense.ngc" $limits --round-corners "${ROUND_CORNERS:-auto}" >/dev/null; then ok=pass; else ok=FAIL; fi
   python3 - "$lines" "$(cat "$dir/rss")" "$ok" "$dir/dense.json" <<'PY'
 import json, sys
 lines, rss, ok, path = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4]
