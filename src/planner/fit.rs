@@ -1062,6 +1062,11 @@ mod tests {
                 vec![q(p[0]), q(p[1])]
             })
             .collect();
+        lines_through(&v)
+    }
+
+    /// G1 lines through the vertices `v`, one element each.
+    fn lines_through(v: &[Vec<f64>]) -> Vec<PathElement> {
         v.windows(2)
             .map(|w| PathElement {
                 kind: ElementKind::Polyline,
@@ -1231,15 +1236,7 @@ mod tests {
             (52.999, -30.5),
         ];
         let v: Vec<Vec<f64>> = yz.iter().map(|&(y, z)| vec![1.3, 0.1 * y, 0.1 * z]).collect();
-        let program: Vec<PathElement> = v
-            .windows(2)
-            .map(|w| PathElement {
-                kind: ElementKind::Polyline,
-                curve: Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], w, None).unwrap(),
-                feed: Some(100.0),
-                source_line: None,
-            })
-            .collect();
+        let program = lines_through(&v);
         let (out, _) = smooth(&program);
         check(&program, &out);
     }
@@ -1259,15 +1256,7 @@ mod tests {
                 vec![35.5, yz[0], yz[1]]
             })
             .collect();
-        let program: Vec<PathElement> = v
-            .windows(2)
-            .map(|w| PathElement {
-                kind: ElementKind::Polyline,
-                curve: Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], w, None).unwrap(),
-                feed: Some(100.0),
-                source_line: None,
-            })
-            .collect();
+        let program = lines_through(&v);
         let (out, stats) = smooth_within(&program, 0.01);
         assert!(stats.fitted_runs >= 1, "{stats:?}");
         check_within(&program, &out, 0.01);
