@@ -153,7 +153,8 @@ impl FlfScan {
     }
 
     /// The scan of step 1 with no samples taken yet: `per_point` samples per control point,
-    /// but on a short curve no closer than [`MIN_SAMPLE_SPACING`] on its control polygon (at
+    /// but on a short curve no closer than [`MIN_SAMPLE_SPACING`] (or
+    /// [`MIN_SAMPLE_SPACING_LONG`]) on its control polygon (at
     /// least [`MIN_SAMPLES_PER_POINT`] per control point): the paper's density was chosen for
     /// curves of tens of millimetres, and a 0.02 mm G1 line would otherwise get 1,000 samples.
     pub fn lazy(curve: &CurveView, per_point: usize) -> Self {
@@ -169,7 +170,12 @@ impl FlfScan {
                     .sqrt()
             })
             .sum();
-        let by_length = (polygon / MIN_SAMPLE_SPACING).ceil();
+        let spacing = if n > CORNER_CONTROL_POINTS {
+            MIN_SAMPLE_SPACING_LONG
+        } else {
+            MIN_SAMPLE_SPACING
+        };
+        let by_length = (polygon / spacing).ceil();
         let floor = n * MIN_SAMPLES_PER_POINT;
         let steps = if by_length.is_finite() && by_length < (n * per_point) as f64 {
             (by_length as usize).max(floor).min(n * per_point)

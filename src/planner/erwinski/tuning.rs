@@ -186,13 +186,21 @@ pub(super) const SUCCESSOR_FEEDS: usize = 16;
 /// sagitta at the middle parameter only, `verify` searches the whole step for the largest one.
 pub(super) const CHORD_MARGIN: f64 = 0.9;
 
-/// Closest spacing of FLF samples on a curve's control polygon (mm): no coarser than the
-/// finest chord tolerance in use or a servo step at any useful feed, and far above what a
-/// 0.02 mm G1 line at 500 samples per control point would get. (At 1e-4 a 7 mm spline fitted
-/// to a dense G1 run got 50,000 samples, whose arc grids were most of the planner's memory
-/// and time on such programs; at 1e-3 every bundled curve plans the same, and the dense
-/// programs in half the time and memory.)
-pub(super) const MIN_SAMPLE_SPACING: f64 = 1e-3;
+/// Closest spacing of FLF samples on a curve's control polygon (mm): far below any chord
+/// tolerance or servo step that matters, and far above what a 0.02 mm G1 line at 500 samples
+/// per control point would get.
+pub(super) const MIN_SAMPLE_SPACING: f64 = 1e-4;
+
+/// The same for a curve of more than [`CORNER_CONTROL_POINTS`] control points (a spline fitted
+/// to a run of short lines, a NURBS block): no coarser than the finest chord tolerance in use or
+/// a servo step at any useful feed. At [`MIN_SAMPLE_SPACING`] a 7 mm spline fitted to a dense
+/// G1 run got 50,000 samples, whose arc grids were most of the planner's memory and time on
+/// such programs. (Lines and corner splines keep the finer spacing: with it for them too, one
+/// of 200 holds on a G1 zigzag waited 27.5 ms for a stop.)
+pub(super) const MIN_SAMPLE_SPACING_LONG: f64 = 1e-3;
+
+/// Control points of a corner spline (and of anything rounding makes of a G1 program).
+pub(super) const CORNER_CONTROL_POINTS: usize = 5;
 
 /// FLF samples per control point at least, however short the curve.
 pub(super) const MIN_SAMPLES_PER_POINT: usize = 16;
