@@ -41,7 +41,7 @@ pub struct Rounding {
     pub max_deviation: f64,
     /// 5-axis: the same for the top curve (tool axis).
     pub max_top_deviation: Option<f64>,
-    /// `--round-corners smooth`: runs replaced by a fitted spline, and the pieces they held.
+    /// `--round-corners auto`: runs replaced by a fitted spline, and the pieces they held.
     pub fitted_runs: usize,
     pub fitted_pieces: usize,
 }

@@ -1062,6 +1062,24 @@ fn smoothing_a_dense_program_keeps_the_tolerance_and_shortens_the_motion() {
         &summary_ini,
     );
     assert_eq!(std::fs::read(&csv_ini).unwrap(), std::fs::read(&csv_round).unwrap());
+    // A corner angle outside 0..180 degrees is refused, from the flag or the INI.
+    for (args, said_what) in [
+        (vec!["--corner-angle", "180"], "corner angle 180"),
+        (vec!["--ini", ini.to_str().unwrap()], "corner angle -5"),
+    ] {
+        std::fs::write(&ini, "[NURBS]\nCORNER_ANGLE = -5\n").unwrap();
+        let refused = bin()
+            .arg("plan")
+            .arg(&program)
+            .args(["--limits", "lab1"])
+            .args(&args)
+            .arg("--out")
+            .arg(dir.join("refused.csv"))
+            .output()
+            .unwrap();
+        let said = String::from_utf8_lossy(&refused.stderr);
+        assert!(!refused.status.success() && said.contains(said_what), "{said}");
+    }
     std::fs::write(&ini, "[NURBS]\nROUND_CORNERS = smoothest\n").unwrap();
     let refused = bin()
         .arg("plan")
