@@ -266,6 +266,31 @@ rc, out, report, runs, _ = run_filter("unknown_start", "G21 G90\nG1 X1 Y1 Z0 F10
 check(rc == 0 and len(runs) == 1 and moves(runs[0]) == ["G1 X2.0 Y1.0 Z0.0 F100.0"],
       f"a feed from an unknown position stays LinuxCNC's; the next one is a run: {[moves(r) for r in runs]}")
 
+# A laser post's second pass: the beam off, a rapid to where the first pass ended (it moves
+# nothing), the beam on, the pass back. The zero-length rapid is no run of its own (our planner
+# refuses a run that moves nothing), and every run plans.
+laser = """G21 G90
+G0 X0 Y0 Z0
+M3 S100
+G1 X5 Y1 F600
+G1 X10 Y0
+M5
+G0 X10 Y0
+G4 P0
+M3 S100
+G1 X5 Y1
+G1 X0 Y0
+M5
+M2
+"""
+rc, out, report, runs, files = run_filter("zero_length_rapid", laser)
+preview_alike("zero_length_rapid", laser, out)
+check(rc == 0 and [moves(r) for r in runs] == [["G1 X5.0 Y1.0 Z0.0 F600.0", "G1 X10.0 Y0.0 Z0.0"],
+                                               ["G1 X5.0 Y1.0 Z0.0 F600.0", "G1 X0.0 Y0.0 Z0.0"]],
+      f"a rapid to where the tool stands is no run: {[moves(r) for r in runs]}")
+for k, f in enumerate(files):
+    plan_rows(f, os.path.join(WORK, f"zero_length_rapid-{k}.csv"))
+
 rc, out, report, runs, _ = run_filter("computed_nurbs", """G21 G90
 G0 X0 Y0 Z0
 F600
