@@ -161,7 +161,10 @@ for k in range(a, b + 4):
         j = (q[k][i] - 3 * q[k - 1][i] + 3 * q[k - 2][i] - q[k - 3][i]) / T**3
         for d, x in enumerate((v, acc, j)):
             peak[d][i] = max(peak[d][i], abs(x))
-print(f"LinuxCNC 2.9 TP: motion {(b - a) * T:.4f} s ({b - a} periods); max |v| {[round(x, 1) for x in peak[0]]}, "
+# Periods that move: a program whose M-codes stop the machine (a laser's beam on and off)
+# also spends time standing while the task runs them, which is not the planner's.
+moves = sum(1 for k in range(a + 1, b + 1) if q[k] != q[k - 1])
+print(f"LinuxCNC 2.9 TP: motion {(b - a) * T:.4f} s ({b - a} periods, {moves * T:.4f} s of them moving); max |v| {[round(x, 1) for x in peak[0]]}, "
       f"|a| {[round(x, 1) for x in peak[1]]}, |jerk| {[round(x) for x in peak[2]]} "
       f"({max(peak[2]) / float(sys.argv[2]):.1f} x a jerk limit of {float(sys.argv[2]):g})")
 PY

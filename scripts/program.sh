@@ -7,7 +7,10 @@
 # the verdict (a planner that refuses a run says so). With TP=1, LinuxCNC 2.9's own planner on
 # the same runs too (scripts/linuxcnc-tp.sh, one headless LinuxCNC per run, as root: its time
 # runs in real time, and it blends within G64 P = 0.001 mm: give G64=0.001 to plan the runs that
-# way too, whatever path mode the program sets).
+# way too, whatever path mode the program sets). With TP=program, one LinuxCNC on the whole
+# program instead (for programs of many runs; compare its moving time with our summed motion:
+# both leave out the time the machine stands while M-codes run). PLANNERS="erwinski reach"
+# plans with those only.
 # Usage: scripts/program.sh PROGRAM.ngc  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
@@ -19,7 +22,7 @@ mapfile -t runs < <(ls "$dir"/cache/nurbs-filter/*/run-*.ngc | sort -V)
 limits=(--feed 1000 --vel 1000 --accel 10000 --jerk 100000 --period 0.00025)
 echo "| planner | runs planned | motion (s) | plan (s) | from the program (mm) | verify |"
 echo "|---|---|---|---|---|---|"
-for planner in erwinski vpop reach; do
+for planner in ${PLANNERS:-erwinski vpop reach}; do
   motion=0 plan=0 worst=0 planned=0 ok=pass
   for run in "${runs[@]}"; do
     mapfile -t mode <"${run%.ngc}.args"  # the program's G64 P / G61 there
@@ -42,4 +45,6 @@ if [ "${TP:-0}" = 1 ]; then
   for run in "${runs[@]}"; do
     scripts/linuxcnc-tp.sh "$run" 1000 10000 100000 0.001
   done
+elif [ "${TP:-0}" = program ]; then
+  scripts/linuxcnc-tp.sh "$program" 1000 10000 100000 "${G64:-0.001}"
 fi

@@ -42,6 +42,12 @@ fn norm(a: &[f64]) -> f64 {
 /// allocation: the smoothing's two-way check calls it for every sample against every nearby
 /// vertex.
 pub(super) fn segment_distance(x: &[f64], a: &[f64], b: &[f64]) -> f64 {
+    segment_distance_squared(x, a, b).sqrt()
+}
+
+/// The square of [`segment_distance`]: the nearest of many segments is found without a square
+/// root for each.
+pub(super) fn segment_distance_squared(x: &[f64], a: &[f64], b: &[f64]) -> f64 {
     let n = x.len().min(a.len()).min(b.len());
     let (mut l2, mut along) = (0.0, 0.0);
     for i in 0..n {
@@ -55,7 +61,7 @@ pub(super) fn segment_distance(x: &[f64], a: &[f64], b: &[f64]) -> f64 {
         let r = (x[i] - a[i]) - t * (b[i] - a[i]);
         d2 += r * r;
     }
-    d2.sqrt()
+    d2
 }
 
 /// A polyline vertex: the tool tip, followed on 5-axis paths by the top point (a second point

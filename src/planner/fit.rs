@@ -29,7 +29,7 @@
 //! on both sides (a spline fitted up to a free end bends there, up to twice the curvature of the
 //! data on a circle), and the path stays continuous in tangent and curvature at every join.
 
-use super::corner::{is_corner_spline, segment_distance, RoundingStats};
+use super::corner::{is_corner_spline, segment_distance, segment_distance_squared, RoundingStats};
 use crate::geometry::{ElementKind, Nurbs, PathElement};
 use crate::readers::ReadError;
 use nurbs_rtcore::math::{dot, norm, sub};
@@ -489,13 +489,14 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
         breaks.dedup();
         breaks.push(u1);
         for w in breaks.windows(2) {
+            let (mut t0, mut p0) = (w[0], at(w[0]));
             for k in 0..CHECK_SAMPLES {
-                let t0 = w[0] + (w[1] - w[0]) * k as f64 / CHECK_SAMPLES as f64;
                 let t1 = w[0] + (w[1] - w[0]) * (k + 1) as f64 / CHECK_SAMPLES as f64;
-                let p0 = at(t0);
+                let p1 = at(t1);
                 samples.push(p0);
-                let unresolved = halve(&at, (t0, p0), (t1, at(t1)), sag, MAX_HALVINGS, &mut samples);
+                let unresolved = halve(&at, (t0, p0), (t1, p1), sag, MAX_HALVINGS, &mut samples);
                 margin[i] = margin[i].max(unresolved);
+                (t0, p0) = (t1, p1);
             }
         }
     }
@@ -505,13 +506,14 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
     let mut worst = vec![0.0f64; intervals];
     for (s, x) in samples.iter().enumerate() {
         let i = interval_of(s);
-        let mut d = (i.saturating_sub(WINDOW)..=(i + WINDOW).min(intervals - 1))
-            .map(|j| segment_distance(&x[..3], &v[j][..3], &v[j + 1][..3]))
+        // (Squared distances: the square root of the nearest is the nearest square root.)
+        let mut d2 = (i.saturating_sub(WINDOW)..=(i + WINDOW).min(intervals - 1))
+            .map(|j| segment_distance_squared(&x[..3], &v[j][..3], &v[j + 1][..3]))
             .fold(f64::INFINITY, f64::min);
         if let Some(b) = data.before.filter(|_| i < WINDOW) {
-            d = d.min(segment_distance(&x[..3], &b[..3], &v[0][..3]));
+            d2 = d2.min(segment_distance_squared(&x[..3], &b[..3], &v[0][..3]));
         }
-        worst[i] = worst[i].max(d + margin[i]);
+        worst[i] = worst[i].max(d2.sqrt() + margin[i]);
     }
     // (The first vertex of a spline that continues another is that one's to check.)
     let checked = usize::from(data.before.is_some());
@@ -519,8 +521,9 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
         let lo = first[i.saturating_sub(WINDOW)];
         let hi = first[(i + WINDOW).min(intervals)].min(samples.len() - 1);
         let d = (lo..hi)
-            .map(|s| segment_distance(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
-            .fold(f64::INFINITY, f64::min);
+            .map(|s| segment_distance_squared(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
+            .fold(f64::INFINITY, f64::min)
+            .sqrt();
         for j in [i.saturating_sub(1), i.min(intervals - 1)] {
             worst[j] = worst[j].max(d + margin[j]);
         }
