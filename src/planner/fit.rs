@@ -502,10 +502,13 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
     }
     first.push(samples.len());
     samples.push(at(1.0));
-    let interval_of = |s: usize| first.partition_point(|&f| f <= s).saturating_sub(1).min(intervals - 1);
     let mut worst = vec![0.0f64; intervals];
+    // The interval each sample belongs to: the last whose first sample is not after it.
+    let mut i = 0;
     for (s, x) in samples.iter().enumerate() {
-        let i = interval_of(s);
+        while i + 1 < intervals && first[i + 1] <= s {
+            i += 1;
+        }
         // (Squared distances: the square root of the nearest is the nearest square root.)
         let mut d2 = (i.saturating_sub(WINDOW)..=(i + WINDOW).min(intervals - 1))
             .map(|j| segment_distance_squared(&x[..3], &v[j][..3], &v[j + 1][..3]))
