@@ -3,7 +3,7 @@
 # [FILTER] of the configuration: the configuration as `make install` installs it, copied to a
 # fresh folder (as LinuxCNC's configuration picker copies a sample), only its display replaced
 # by the test UI and a recorder added. The test UI sets G54 by MDI (the operator's touch-off),
-# runs the program through the filter as AXIS would, and runs the filtered program. Three
+# runs the program through the filter as AXIS would, and runs the filtered program. Four
 # programs, one machine run each:
 #   cam_post  - a CAM post-processor's pocket: G53, T1 M6 (tool 1 is 12.5 mm long), S M3, G54,
 #               M8, G43 H1, rapids, plunges, G1/G2/G3 with I J, M9 M5 M30, % lines;
@@ -15,14 +15,17 @@
 #   sub_loop  - named parameters, a subroutine called in a loop (LinuxCNC's moves) between
 #               top-level feed moves (ours), a G92 offset, G54 rotated by 15 degrees, and a
 #               toolpath file the program names, (NURBS_TOOLPATH, trident.json), found among
-#               the installed examples.
+#               the installed examples;
+#   laser_nest - a laser post's contours of short lines (a circle of 36, a star), each cut
+#               twice with M3/M5 and G4 P0 around every pass, `;` comments, G64 P0.01, and
+#               before each second pass a rapid to where the first ended (zero length: no run).
 # Checked: the program ran to its end with no error, homed, on, released; every run the
 # filter cut (feed moves, rapids, the G43 line) ran through nurbs_interp (one engagement each) with the offline plan of that run
 # file in the offsets the test set (G54 by MDI + the tool table's length, computed here, not
 # read from LinuxCNC) bit for bit (1e-9 mm), no step at any hand-over edge, every engaged period
 # within the axis limits (check_machine.py), and `nurbs-plan verify` of every recorded run
 # against the run file placed the same way; where LinuxCNC's planner moves nothing after the
-# first move (cam_post, 3d_chips), every period from the first engagement to the end.
+# first move (cam_post, 3d_chips, laser_nest), every period from the first engagement to the end.
 here=$(cd "$(dirname "$0")" && pwd)
 source "$here/lib.sh"
 installed=${NURBS_MOTION_DATA:-/usr/local/share/nurbs-motion}
@@ -35,25 +38,27 @@ trap 'hal_cleanup; [ -n "${KEEP_WORK:-}" ] || rm -rf "$work"' EXIT
 [ -f "$chips" ] || { echo "$chips is missing (linuxcnc-uspace installs it)"; exit 1; }
 head -n 300 "$chips" >"$work/3d_chips.ngc"
 echo "M2" >>"$work/3d_chips.ngc"
-cp "$here/machine/programs/cam_post.ngc" "$here/machine/programs/sub_loop.ngc" "$work/"
+cp "$here/machine/programs/cam_post.ngc" "$here/machine/programs/sub_loop.ngc" "$here/machine/programs/laser_nest.ngc" "$work/"
 
 # G54 per program (the operator's G10 L2 by MDI), inside the travel below, and where the
 # program's coordinates are on the machine: machine = Rz(R) (p + G92) + G54 + tool length
 # offset, worked out here from the programs (G43 H1: tool 1 is 12.5 mm long; sub_loop's
 # G92 X5 Y5 where the tool stands at X10 Y10), not read from LinuxCNC.
 tool_length=12.5
-declare -A g54=([cam_post]="X20 Y15 Z-5" [3d_chips]="X60 Y60 Z-20" [sub_loop]="X5 Y-5 Z0 R15")
+declare -A g54=([cam_post]="X20 Y15 Z-5" [3d_chips]="X60 Y60 Z-20" [sub_loop]="X5 Y-5 Z0 R15" [laser_nest]="X20 Y15 Z-5")
 # Where every move after the first (from an unknown position) is ours, every period from the
 # first engagement on is checked against the limits (LinuxCNC's own moves are not jerk-limited).
-declare -A all_ours=([cam_post]=--all-ours-after [3d_chips]=--all-ours-after)
-declare -A program_of=([cam_post]=cam_post [cam_post_abort]=cam_post [3d_chips]=3d_chips [sub_loop]=sub_loop)
+declare -A all_ours=([cam_post]=--all-ours-after [3d_chips]=--all-ours-after [laser_nest]=--all-ours-after)
+declare -A program_of=([cam_post]=cam_post [cam_post_abort]=cam_post [3d_chips]=3d_chips [sub_loop]=sub_loop
+    [laser_nest]=laser_nest)
 declare -A action=([cam_post_abort]=abort)
 g54[cam_post_abort]=${g54[cam_post]}
 declare -A placement=(
     [cam_post]="--work-offset 20,15,7.5"
     [cam_post_abort]="--work-offset 20,15,7.5"
     [3d_chips]="--work-offset 60,60,-20"
-    [sub_loop]="--work-offset 5,-5,0 --rotation-xy 15 --g92-offset 5,5,0")
+    [sub_loop]="--work-offset 5,-5,0 --rotation-xy 15 --g92-offset 5,5,0"
+    [laser_nest]="--work-offset 20,15,-5")
 
 # The runs the filter cut and the toolpath files it copied, in order.
 runs() {
@@ -61,7 +66,7 @@ runs() {
 }
 
 failed=0
-for case in ${CASES:-cam_post cam_post_abort 3d_chips sub_loop}; do
+for case in ${CASES:-cam_post cam_post_abort 3d_chips sub_loop laser_nest}; do
     echo "--- $case"
     run="$work/$case"
     mkdir -p "$run"
