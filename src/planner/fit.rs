@@ -523,15 +523,52 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
         }
         worst[i] = worst[i].max(d2.sqrt() + margin[i]);
     }
+    // Each vertex's nearest chord between the spline's samples within the window: its own
+    // intervals first, then another only where the box around that interval's samples (its
+    // chords lie inside) is nearer than the nearest chord so far: the same minimum, with a
+    // fraction of the distances.
+    let boxes: Vec<[[f64; 3]; 2]> = (0..intervals)
+        .map(|j| {
+            let mut b = [[f64::INFINITY; 3], [f64::NEG_INFINITY; 3]];
+            for x in &samples[first[j]..=first[j + 1]] {
+                for k in 0..3 {
+                    b[0][k] = b[0][k].min(x[k]);
+                    b[1][k] = b[1][k].max(x[k]);
+                }
+            }
+            b
+        })
+        .collect();
     // (The first vertex of a spline that continues another is that one's to check.)
     let checked = usize::from(data.before.is_some());
     for (i, p) in v.iter().enumerate().skip(checked) {
-        let lo = first[i.saturating_sub(WINDOW)];
-        let hi = first[(i + WINDOW).min(intervals)].min(samples.len() - 1);
-        let d = (lo..hi)
-            .map(|s| segment_distance_squared(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
-            .fold(f64::INFINITY, f64::min)
-            .sqrt();
+        let window = i.saturating_sub(WINDOW)..(i + WINDOW).min(intervals);
+        let own = [i.saturating_sub(1), i.min(intervals - 1)];
+        let nearest_in = |j: usize, d2: f64| {
+            (first[j]..first[j + 1])
+                .map(|s| segment_distance_squared(&p[..3], &samples[s][..3], &samples[s + 1][..3]))
+                .fold(d2, f64::min)
+        };
+        let mut d2 = f64::INFINITY;
+        for j in window.clone() {
+            if own.contains(&j) {
+                d2 = nearest_in(j, d2);
+            }
+        }
+        for j in window.filter(|j| !own.contains(j)) {
+            let [lo, hi] = &boxes[j];
+            let box_d2: f64 = (0..3)
+                .map(|k| {
+                    let d = (lo[k] - p[k]).max(p[k] - hi[k]).max(0.0);
+                    d * d
+                })
+                .sum();
+            // (With a margin far above the rounding of either distance.)
+            if box_d2 <= d2 * (1.0 + 1e-9) {
+                d2 = nearest_in(j, d2);
+            }
+        }
+        let d = d2.sqrt();
         for j in [i.saturating_sub(1), i.min(intervals - 1)] {
             worst[j] = worst[j].max(d + margin[j]);
         }
