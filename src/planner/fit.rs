@@ -33,6 +33,7 @@ use super::corner::{is_corner_spline, segment_distance, segment_distance_squared
 use crate::geometry::{ElementKind, Nurbs, PathElement};
 use crate::readers::ReadError;
 use nurbs_rtcore::math::{dot, norm, sub};
+use nurbs_rtcore::span_cache::{CachedCurve, SpanCache};
 use nurbs_rtcore::{basis_functions, Vector, MAX_DIM};
 use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
@@ -467,12 +468,12 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
     let total = chord[chord.len() - 1];
     let intervals = v.len() - 1;
     let sag = SAMPLE_SAG * budget;
-    let pieces = CubicPieces::of(curve);
-    let hint = std::cell::Cell::new(0);
-    let at = |t: f64| match &pieces {
-        Some(pieces) => pieces.point(t.clamp(0.0, 1.0), &hint),
-        None => p3(&curve.point(t.clamp(0.0, 1.0))),
-    };
+    // The samples through the span cache (a cubic span's Taylor polynomials): a few
+    // multiplications each instead of a span search and the basis functions, which were a
+    // third of the work before the first record on dense programs.
+    let mut cache = SpanCache::new();
+    let mut cached = CachedCurve::new(curve.view(), &mut cache);
+    let mut at = |t: f64| p3(&cached.point(t.clamp(0.0, 1.0)));
     // The samples in order along the spline, and where each data interval's samples begin.
     let mut samples: Vec<P3> = Vec::with_capacity(CHECK_SAMPLES * intervals + 1);
     let mut first = Vec::with_capacity(intervals + 1);
@@ -499,7 +500,7 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
                 let t1 = w[0] + (w[1] - w[0]) * (k + 1) as f64 / CHECK_SAMPLES as f64;
                 let p1 = at(t1);
                 samples.push(p0);
-                let unresolved = halve(&at, (t0, p0), (t1, p1), sag, MAX_HALVINGS, &mut samples);
+                let unresolved = halve(&mut at, (t0, p0), (t1, p1), sag, MAX_HALVINGS, &mut samples);
                 margin[i] = margin[i].max(unresolved);
                 (t0, p0) = (t1, p1);
             }
@@ -576,70 +577,12 @@ fn deviations(data: &RunData, curve: &Nurbs, budget: f64) -> Vec<f64> {
     worst
 }
 
-/// A cubic spline's polynomial pieces in power form, for the check's many samples: a Horner
-/// evaluation each instead of a B-spline one (the fit check's samples were a third of the
-/// planner's work before the first record on dense programs). Each piece interpolates the
-/// spline at four points of its span, which a cubic piece is exactly, up to rounding (some
-/// 1e-15 of the coordinates, far below any tolerance and the check's margins).
-struct CubicPieces {
-    /// The spans' parameter bounds, in order (span k is `breaks[k]..breaks[k + 1]`).
-    breaks: Vec<f64>,
-    /// Per span, per tip coordinate: the coefficients of t⁰..t³, t from 0 to 1 across the span.
-    coefficients: Vec<[[f64; 4]; 3]>,
-}
-
-impl CubicPieces {
-    /// The pieces of a non-rational cubic curve on 0..1 (what the fit makes); `None` for any other.
-    fn of(curve: &Nurbs) -> Option<Self> {
-        let view = curve.view();
-        if curve.degree() != 3 || view.u_min() != 0.0 || view.u_max() != 1.0 || view.weights().iter().any(|&w| w != 1.0)
-        {
-            return None;
-        }
-        let mut breaks: Vec<f64> = curve.knots().to_vec();
-        breaks.dedup();
-        let mut coefficients = Vec::with_capacity(breaks.len().saturating_sub(1));
-        for w in breaks.windows(2) {
-            let y = [0.0, 1.0, 2.0, 3.0].map(|k| curve.point(w[0] + (w[1] - w[0]) * k / 3.0));
-            let mut piece = [[0.0; 4]; 3];
-            for (c, coefficient) in piece.iter_mut().enumerate() {
-                // Newton's divided differences on t = 0, 1/3, 2/3, 1, then the power form.
-                let h = 1.0 / 3.0;
-                let (y0, y1, y2, y3) = (y[0][c], y[1][c], y[2][c], y[3][c]);
-                let (d1, d2, d3) = ((y1 - y0) / h, (y2 - y1) / h, (y3 - y2) / h);
-                let (e1, e2) = ((d2 - d1) / (2.0 * h), (d3 - d2) / (2.0 * h));
-                let f = (e2 - e1) / (3.0 * h);
-                // y0 + d1 t + e1 t (t - h) + f t (t - h)(t - 2h)
-                *coefficient = [y0, d1 - e1 * h + f * 2.0 * h * h, e1 - f * 3.0 * h, f];
-            }
-            coefficients.push(piece);
-        }
-        (!coefficients.is_empty()).then_some(Self { breaks, coefficients })
-    }
-
-    /// The point at `u` (0..1); `hint`, the span of the last call, speeds up samples in order.
-    fn point(&self, u: f64, hint: &std::cell::Cell<usize>) -> P3 {
-        let last = self.coefficients.len() - 1;
-        let mut k = hint.get().min(last);
-        if !(self.breaks[k] <= u && (u < self.breaks[k + 1] || k == last)) {
-            k = (self.breaks.partition_point(|&b| b <= u).saturating_sub(1)).min(last);
-            hint.set(k);
-        }
-        let t = (u - self.breaks[k]) / (self.breaks[k + 1] - self.breaks[k]);
-        let mut p = [0.0; MAX_DIM];
-        for (x, c) in p.iter_mut().zip(&self.coefficients[k]) {
-            *x = ((c[3] * t + c[2]) * t + c[1]) * t + c[0];
-        }
-        p
-    }
-}
-
 /// Pushes the samples strictly between `(a, pa)` and `(b, pb)` (parameter, point) in order:
 /// the middle, where it lies farther than `sag` from the chord, with the halves' own. Returns
 /// how far a middle lay from its chord where the halvings ran out before it came within `sag`
 /// (zero where none did): the check adds that instead of `sag` there.
 fn halve(
-    at: &dyn Fn(f64) -> P3,
+    at: &mut dyn FnMut(f64) -> P3,
     (a, pa): (f64, P3),
     (b, pb): (f64, P3),
     sag: f64,
@@ -1442,39 +1385,6 @@ mod tests {
         let (out, stats) = smooth(&program);
         assert_eq!(out, rounded);
         assert_eq!(stats.fitted_runs, 0);
-    }
-
-    /// The check's cubic pieces are the spline: at parameters in order and out of order, across
-    /// spans of very different lengths and at the ends, within 1e-12 mm of the B-spline's
-    /// points (coordinates up to some 100 mm); a curve that is not a non-rational cubic on
-    /// 0..1 gets none.
-    #[test]
-    fn cubic_pieces_are_the_spline() {
-        let knots = vec![0.0, 0.0, 0.0, 0.0, 1e-4, 0.2, 0.35, 0.5, 0.8, 1.0, 1.0, 1.0, 1.0];
-        let rows: Vec<Vec<f64>> = (0..9)
-            .map(|i| {
-                vec![
-                    40.0 + i as f64 * 7.3,
-                    100.0 * (i as f64 * 1.3).sin(),
-                    0.9 * (i * i) as f64,
-                ]
-            })
-            .collect();
-        let curve = Nurbs::new(3, knots.clone(), &rows, None).unwrap();
-        let pieces = CubicPieces::of(&curve).expect("a non-rational cubic on 0..1");
-        let hint = std::cell::Cell::new(0);
-        let mut us: Vec<f64> = (0..=4000).map(|k| k as f64 / 4000.0).collect();
-        us.extend(knots.iter().copied());
-        us.extend([0.61, 0.05, 0.99, 1e-5, 0.3]);
-        for u in us {
-            let (a, b) = (pieces.point(u, &hint), curve.point(u));
-            let d = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max);
-            assert!(d <= 1e-12, "at u = {u}: {d:e} mm apart");
-        }
-        let rational = Nurbs::new(3, knots, &rows, Some(vec![1.0, 2.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])).unwrap();
-        assert!(CubicPieces::of(&rational).is_none());
-        let line = Nurbs::new(1, vec![0.0, 0.0, 1.0, 1.0], &rows[..2], None).unwrap();
-        assert!(CubicPieces::of(&line).is_none());
     }
 
     /// The part of a spline cut by knot insertion is the same curve: its points at t / u equal
