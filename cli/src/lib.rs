@@ -66,11 +66,14 @@ enum Command {
         /// breaks).
         #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
         planner: PlannerKind,
-        /// Erwinski planner: plan as a stream, each segment final as soon as back-tracking can
+        /// Plan as a stream. Erwinski planner: each segment final as soon as back-tracking can
         /// no longer reach it (what `nurbs-planner --stream` runs on the machine; the plan time
-        /// then also reports when the first segment was final). Rarely a back-tracking cascade
+        /// then also reports when the first segment was final); rarely a back-tracking cascade
         /// that would reach a final segment makes a stop instead, or fails where the whole-path
-        /// plan succeeds.
+        /// plan succeeds. Reachability planner: long stretches in look-ahead windows, each
+        /// window's points written once it is planned and the path read only as far as the
+        /// windows reach (docs/planners.md); it refuses some paths the whole-stretch plan
+        /// plans.
         #[arg(long)]
         stream: bool,
         /// Erwinski planner: how the setpoints map each period's arc length to the curve

@@ -563,7 +563,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// is planned; every setpoint is written once its stretch (rest to rest) passed the
 /// finite-difference check.
 fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use nurbs_motion::planner::reach::{run, ReachOptions};
+    use nurbs_motion::planner::reach::{run, window::WindowOptions, ReachOptions};
     let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
     let program = stream.program()?;
     let mut curves = PathCurves::streamed(stream.take_elements())?;
@@ -571,20 +571,28 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
     let limits = args.limits.limits(tip)?.for_axes(tip)?;
     let columns = ["x", "y", "z"][..tip].join(",");
     let mut writer = PointWriter::create(args.out, &columns, program, &limits, (tip, false), args.plot.is_some())?;
-    let options = ReachOptions::default();
+    let options = ReachOptions {
+        window: args.stream.then(WindowOptions::default),
+        ..ReachOptions::default()
+    };
     let planned = run(&mut curves, &limits, &options, None, &mut |p| writer.emit(p));
     writer.write_error()?;
     let (limits, stats, plan_time) = planned?;
     let (check, deviation, points, rows) = writer.finish()?;
     let motion_time = rows.saturating_sub(1) as f64 * limits.period;
     eprintln!(
-        "reach: motion {motion_time:.6} s ({rows} setpoints), planning {:.3} ms (first setpoints after {:.3} ms), {} stretches, {} stations, {} passes, {} re-plans",
+        "reach: motion {motion_time:.6} s ({rows} setpoints), planning {:.3} ms (first setpoints after {:.3} ms), {} stretches, {} stations, {} passes, {} re-plans{}",
         plan_time * 1e3,
         stats.first_points_time * 1e3,
         stats.stretches,
         stats.stations,
         stats.passes,
-        stats.repairs
+        stats.repairs,
+        if stats.windows > 0 {
+            format!(", {} windows ({} restarts from rest)", stats.windows, stats.restarts)
+        } else {
+            String::new()
+        }
     );
     let rounding = stream.rounding();
     if let Some(line) = describe(rounding, deviation, limits.chord_tolerance) {
@@ -602,6 +610,8 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "stations": stats.stations,
                 "passes": stats.passes,
                 "replans": stats.repairs,
+                "windows": stats.windows,
+                "window_restarts": stats.restarts,
                 "axes": "tool tip",
             }),
         );

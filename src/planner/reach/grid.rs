@@ -170,6 +170,8 @@ pub struct Stretch {
     pub rest_at_end: bool,
     /// Approximate length (mm): where the grid grows denser towards a rest at the end.
     pub length: f64,
+    /// Whether `to` is only as far as the path was read yet (the stretch goes on).
+    pub open: bool,
 }
 
 /// The stations and intervals of one stretch.
@@ -202,17 +204,37 @@ impl Grid {
         options: &GridOptions,
         speed: &dyn Fn(f64, &Local) -> f64,
     ) -> Grid {
+        Self::build_part(
+            curves,
+            stretch,
+            (stretch.from, 0.0),
+            f64::INFINITY,
+            caps,
+            options,
+            speed,
+        )
+        .0
+    }
+
+    /// Lays stations along `stretch` from `(element, u)` at arc length `s` from the stretch
+    /// start (`from`), until the first station at or past arc length `until` that is no
+    /// element's end (its far side is known), or the stretch's end; whether it reached that.
+    pub fn build_part(
+        curves: &PathCurves,
+        stretch: &Stretch,
+        (from, s0): ((usize, f64), f64),
+        until: f64,
+        caps: &Caps,
+        options: &GridOptions,
+        speed: &dyn Fn(f64, &Local) -> f64,
+    ) -> (Grid, bool) {
         let n = caps.axes;
         let mut grid = Grid::default();
-        let mut s = 0.0;
-        for e in stretch.from.0..=stretch.to.0 {
+        let mut s = s0;
+        for e in from.0..=stretch.to.0 {
             let view = curves.view(e);
             let feed = curves.programmed_feed(e);
-            let u_from = if e == stretch.from.0 {
-                stretch.from.1
-            } else {
-                view.u_min()
-            };
+            let u_from = if e == from.0 { from.1 } else { view.u_min() };
             let u_to = if e == stretch.to.0 { stretch.to.1 } else { view.u_max() };
             if u_to <= u_from {
                 continue;
@@ -241,7 +263,7 @@ impl Grid {
                 None => grid.stations.push(Station {
                     element: e,
                     u: u_from,
-                    s: 0.0,
+                    s: s0,
                     left: right,
                     right,
                 }),
@@ -316,8 +338,35 @@ impl Grid {
                     right: local(next, false),
                 });
                 u = next;
+                if s >= until && u < u_to {
+                    return (grid, false);
+                }
             }
         }
-        grid
+        (grid, true)
+    }
+
+    /// Appends `part`, whose first station is this grid's last (laid again: its far side and
+    /// its place at a join come from `part`).
+    pub fn append(&mut self, part: Grid) {
+        let mut stations = part.stations.into_iter();
+        if let Some(first) = stations.next() {
+            match self.stations.last_mut() {
+                Some(last) => {
+                    last.right = first.right;
+                    last.element = first.element;
+                    last.u = first.u;
+                }
+                None => self.stations.push(first),
+            }
+        }
+        self.stations.extend(stations);
+        self.intervals.extend(part.intervals);
+    }
+
+    /// Keeps stations `..=k` and the intervals between them.
+    pub fn truncate(&mut self, k: usize) {
+        self.stations.truncate(k + 1);
+        self.intervals.truncate(k);
     }
 }

@@ -25,6 +25,7 @@ pub mod pieces;
 pub mod polygon;
 pub mod rows;
 pub mod sampler;
+pub mod window;
 
 use std::time::Instant;
 
@@ -32,7 +33,7 @@ use crate::geometry::Toolpath;
 use crate::planner::vpop::PathPoint;
 use crate::planner::{Limits, LimitsError, PathCurves};
 use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
-use passes::{Motion, PassError, Passes};
+use passes::{Motion, PassError, Passes, Start};
 use rows::AxisLimits;
 use sampler::Check;
 
@@ -64,6 +65,9 @@ pub struct ReachOptions {
     pub margin: f64,
     /// Most re-plans of a stretch whose samples ran over.
     pub repairs: usize,
+    /// Long stretches planned window by window (their points handed out as each window is
+    /// done), or whole.
+    pub window: Option<window::WindowOptions>,
 }
 
 impl Default for ReachOptions {
@@ -80,6 +84,7 @@ impl Default for ReachOptions {
             max_vertices: 12,
             margin: 1e-4,
             repairs: 8,
+            window: None,
         }
     }
 }
@@ -105,6 +110,9 @@ pub struct ReachStats {
     pub worst_ratio: f64,
     /// Wall-clock time to the first points handed out (s).
     pub first_points_time: f64,
+    /// Windows planned, and windows that ran the last one's stop and started again from rest.
+    pub windows: usize,
+    pub restarts: usize,
 }
 
 /// Why no plan.
@@ -193,27 +201,50 @@ pub fn run(
     };
     check.push(&first.tip);
     emit(&first).map_err(ReachError::Plan)?;
+    // The time the first planned points leave.
+    let mut first_points: Option<f64> = None;
+    let mut out = |p: &PathPoint| {
+        first_points.get_or_insert_with(|| started.elapsed().as_secs_f64());
+        emit(p)
+    };
     let mut from = from_start;
     let mut last = Some(first);
-    while let Some(stretch) = next_stretch(curves, from) {
-        let (grid, _motion, passes, repairs, points) = planner.plan_stretch(curves, &stretch, last, &mut check)?;
+    while let Some(stretch) = begin_stretch(curves, from) {
         stats.stretches += 1;
-        stats.stations += grid.stations.len();
-        stats.passes += passes;
-        stats.repairs += repairs;
-        for p in &points {
-            emit(p).map_err(ReachError::Plan)?;
+        let whole = match &options.window {
+            Some(w) => match planner.plan_stretch_windowed(curves, stretch, last, &mut check, w, &mut out)? {
+                Ok(run) => {
+                    stats.stations += run.stations;
+                    stats.passes += run.passes;
+                    stats.repairs += run.repairs;
+                    stats.windows += run.windows;
+                    stats.restarts += run.restarts;
+                    last = run.last;
+                    from = run.to;
+                    None
+                }
+                Err(stretch) => Some(stretch),
+            },
+            None => Some(stretch),
+        };
+        if let Some(mut stretch) = whole {
+            read_on(curves, &mut stretch, f64::INFINITY);
+            let (grid, _motion, passes, repairs, points) = planner.plan_stretch(curves, &stretch, last, &mut check)?;
+            stats.stations += grid.stations.len();
+            stats.passes += passes;
+            stats.repairs += repairs;
+            for p in &points {
+                out(p).map_err(ReachError::Plan)?;
+            }
+            last = points.last().copied().or(last);
+            from = stretch.to;
         }
-        last = points.last().copied().or(last);
-        if stats.stretches == 1 {
-            stats.first_points_time = started.elapsed().as_secs_f64();
-        }
-        from = stretch.to;
         if from.0 >= curves.len() - 1 && from.1 >= curves.view(from.0).u_max() {
             break;
         }
         curves.release_before(from.0);
     }
+    stats.first_points_time = first_points.unwrap_or(0.0);
     if let Some(e) = curves.error() {
         return Err(ReachError::Path(e.to_string()));
     }
@@ -221,9 +252,9 @@ pub fn run(
     Ok((limits, stats, started.elapsed().as_secs_f64()))
 }
 
-/// Where the path turns (a tangent break: the motion must stop there) after `from`, reading
-/// elements as far as it. `None` at the path end.
-fn next_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> {
+/// A stretch from `from` (a rest: the path start or the last stretch's end) with nothing read
+/// yet. `None` at the path end.
+fn begin_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> {
     let (mut e, mut u) = from;
     if !curves.load(e) {
         return None;
@@ -235,9 +266,44 @@ fn next_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> 
         e += 1;
         u = curves.view(e).u_min();
     }
-    let start = (e, u);
+    Some(Stretch {
+        from: (e, u),
+        to: (e, u),
+        rest_at_start: true,
+        rest_at_end: false,
+        length: 0.0,
+        open: true,
+    })
+}
+
+/// Reads `stretch` on by at least `more` mm (whole elements), or to its end: a tangent break
+/// inside an element or at a join, or the path's end.
+fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
+    if !stretch.open {
+        return;
+    }
     let axes = curves.tip_dim();
-    let mut length = 0.0;
+    let (mut e, mut u) = stretch.to;
+    let target = stretch.length + more;
+    let close = |stretch: &mut Stretch, to: (usize, f64)| {
+        stretch.to = to;
+        stretch.open = false;
+        stretch.rest_at_end = true;
+    };
+    if u >= curves.view(e).u_max() && stretch.to != stretch.from {
+        // At the end of the elements read: the join to the next one.
+        let end_tangent = curves.view(e).derivatives(u, 1)[1];
+        if !curves.load(e + 1) {
+            return close(stretch, (e, u));
+        }
+        let next = curves.view(e + 1);
+        let start_tangent = next.derivatives(next.u_min(), 1)[1];
+        if crate::planner::vpop::path::turns(&end_tangent, &start_tangent, axes) {
+            return close(stretch, (e, u));
+        }
+        e += 1;
+        u = curves.view(e).u_min();
+    }
     loop {
         let view = curves.view(e);
         // A C0 knot inside the element whose tangents differ.
@@ -249,43 +315,31 @@ fn next_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> 
                 inside = true;
             }
         });
-        length += approximate_length(&view, u, end, axes);
+        stretch.length += approximate_length(&view, u, end, axes);
         if inside {
-            return Some(Stretch {
-                from: start,
-                to: (e, end),
-                rest_at_start: true,
-                rest_at_end: true,
-                length,
-            });
+            return close(stretch, (e, end));
         }
         let end_tangent = view.derivatives(end, 1)[1];
         if !curves.load(e + 1) {
-            return Some(Stretch {
-                from: start,
-                to: (e, end),
-                rest_at_start: true,
-                rest_at_end: true,
-                length,
-            });
+            return close(stretch, (e, end));
         }
         let next = curves.view(e + 1);
         let start_tangent = next.derivatives(next.u_min(), 1)[1];
         if crate::planner::vpop::path::turns(&end_tangent, &start_tangent, axes) {
-            return Some(Stretch {
-                from: start,
-                to: (e, end),
-                rest_at_start: true,
-                rest_at_end: true,
-                length,
-            });
+            return close(stretch, (e, end));
+        }
+        if stretch.length >= target {
+            stretch.to = (e, end);
+            return;
         }
         e += 1;
         u = curves.view(e).u_min();
     }
 }
 
-/// Arc length of `view` from `a` to `b`, knot span by knot span (eight pieces each).
+/// Arc length of `view` from `a` to `b`, knot span by knot span, each in pieces (Gauss-Legendre)
+/// halved until the length settles: where the grid's stations grow denser towards the end, a
+/// length short of the grid's own measure would lay them ever denser past it.
 fn approximate_length(view: &nurbs_rtcore::CurveView, a: f64, b: f64, axes: usize) -> f64 {
     let mut cuts = vec![a];
     for &k in view.knots() {
@@ -294,14 +348,25 @@ fn approximate_length(view: &nurbs_rtcore::CurveView, a: f64, b: f64, axes: usiz
         }
     }
     cuts.push(b);
+    let in_pieces = |lo: f64, hi: f64, n: usize| {
+        let h = (hi - lo) / n as f64;
+        (0..n)
+            .map(|i| grid::piece_length(view, lo + h * i as f64, lo + h * (i + 1) as f64, axes))
+            .sum::<f64>()
+    };
     cuts.windows(2)
         .map(|w| {
-            (0..8)
-                .map(|i| {
-                    let h = (w[1] - w[0]) / 8.0;
-                    grid::piece_length(view, w[0] + h * i as f64, w[0] + h * (i + 1) as f64, axes)
-                })
-                .sum::<f64>()
+            let (mut n, mut length) = (8, in_pieces(w[0], w[1], 8));
+            while n < 1024 {
+                n *= 2;
+                let finer = in_pieces(w[0], w[1], n);
+                let settled = (finer - length).abs() <= 1e-9 * finer;
+                length = finer;
+                if settled {
+                    break;
+                }
+            }
+            length
         })
         .sum()
 }
@@ -404,7 +469,7 @@ impl<'o> Planner<'o> {
         let (least, most) = (o.iterations.max(1), o.most_iterations.max(o.iterations).max(1));
         let mut last_pass = least == 1;
         for it in 0.. {
-            let motion = self.passes(&grid, &lin, floors.as_ref(), &tight, &mut passes)?;
+            let motion = self.passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)?;
             let best_time = best.as_ref().map_or(f64::INFINITY, |(_, m, _)| m.time());
             let better = motion.time() < best_time;
             if last_pass {
@@ -472,36 +537,18 @@ impl<'o> Planner<'o> {
                 before,
                 &mut trial,
                 1e-9,
+                sampler::Span {
+                    first: self.period,
+                    at_rest: true,
+                },
             );
             if sampled.over.is_empty() {
                 *check = trial;
                 return Ok((grid, motion, passes, repairs, sampled.points));
             }
-            if repairs >= o.repairs {
-                let (t, r) = sampled.over[0];
-                return Err(ReachError::Plan(format!(
-                    "the samples still run over a limit (ratio {r:.9} at {t:.4} s into a stretch) after {repairs} re-plans"
-                )));
-            }
-            repairs += 1;
-            // The intervals whose motion the finite differences over saw.
-            let mut starts = Vec::with_capacity(motion.durations.len() + 1);
-            let mut t = 0.0;
-            for d in &motion.durations {
-                starts.push(t);
-                t += d;
-            }
-            starts.push(t);
-            for &(t_over, ratio) in &sampled.over {
-                let (from, to) = (t_over - 3.5 * self.period, t_over + 0.5 * self.period);
-                for k in 0..grid.len() {
-                    if starts[k + 1] >= from && starts[k] <= to {
-                        tight[k] = tight[k].min(tight[k] / ratio * (1.0 - 1e-4));
-                    }
-                }
-            }
+            self.tighten(&mut tight, &motion, &sampled.over, &mut repairs)?;
             let floors = (o.floor > 0.0).then(|| lin.scaled(o.floor));
-            motion = self.passes(&grid, &lin, floors.as_ref(), &tight, &mut passes)?;
+            motion = self.passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)?;
         }
     }
 
@@ -512,45 +559,108 @@ impl<'o> Planner<'o> {
         lin: &Linearisation,
         floors: Option<&Linearisation>,
         tight: &[f64],
+        start: Start,
         count: &mut usize,
     ) -> Result<Motion, ReachError> {
-        let run = |floors: Option<&Linearisation>| -> Result<Motion, PassError> {
-            let p = Passes {
-                grid,
-                limits: self.axis,
-                period: self.period,
-                lin_stations: &lin.stations,
-                lin_points: &lin.points,
-                floors: floors.map(|f| (&f.stations[..], &f.points[..])),
-                tight,
-                max_vertices: self.options.max_vertices,
-                jerk: true,
-            };
-            let sets = p.backward()?;
-            p.forward(&sets)
-        };
-        let describe = |e: PassError| {
-            let (k, what) = match e {
-                PassError::Empty { station } => (station, "no state there can keep the limits and still stop"),
-                PassError::Stalls { interval } => (interval, "the motion would stand still there"),
-            };
-            let st = &grid.stations[k.min(grid.stations.len() - 1)];
-            ReachError::Plan(format!(
-                "{what} (element {}, u = {:.9}, curvature {:.3e} 1/mm): the path's geometry leaves no speed to plan with",
-                st.element,
-                st.u,
-                st.right.curvature()
-            ))
-        };
+        self.try_passes(grid, lin, floors, tight, start, count)
+            .map_err(|e| self.describe(grid, 0, e))
+    }
+
+    /// [`Planner::passes`], saying only where it failed.
+    fn try_passes(
+        &self,
+        grid: &Grid,
+        lin: &Linearisation,
+        floors: Option<&Linearisation>,
+        tight: &[f64],
+        start: Start,
+        count: &mut usize,
+    ) -> Result<Motion, PassError> {
         *count += 1;
-        match run(floors) {
+        match self.pass(grid, lin, floors, tight, start) {
             Ok(m) => Ok(m),
             Err(_) if floors.is_some() => {
                 *count += 1;
-                run(None).map_err(describe)
+                self.pass(grid, lin, None, tight, start)
             }
-            Err(e) => Err(describe(e)),
+            Err(e) => Err(e),
         }
+    }
+
+    /// One backward and one forward pass.
+    fn pass(
+        &self,
+        grid: &Grid,
+        lin: &Linearisation,
+        floors: Option<&Linearisation>,
+        tight: &[f64],
+        start: Start,
+    ) -> Result<Motion, PassError> {
+        let p = Passes {
+            grid,
+            limits: self.axis,
+            period: self.period,
+            lin_stations: &lin.stations,
+            lin_points: &lin.points,
+            floors: floors.map(|f| (&f.stations[..], &f.points[..])),
+            tight,
+            max_vertices: self.options.max_vertices,
+            jerk: true,
+            start,
+        };
+        let sets = p.backward()?;
+        p.forward(&sets)
+    }
+
+    /// What a failed pass means, at the station of `grid` `offset` stations before the one
+    /// it names.
+    fn describe(&self, grid: &Grid, offset: usize, e: PassError) -> ReachError {
+        let (k, what) = match e {
+            PassError::Empty { station } => (station, "no state there can keep the limits and still stop"),
+            PassError::Stalls { interval } => (interval, "the motion would stand still there"),
+        };
+        let st = &grid.stations[(offset + k).min(grid.stations.len() - 1)];
+        ReachError::Plan(format!(
+            "{what} (element {}, u = {:.9}, curvature {:.3e} 1/mm): the path's geometry leaves no speed to plan with",
+            st.element,
+            st.u,
+            st.right.curvature()
+        ))
+    }
+
+    /// Tightens the limits of the intervals (of `tight`, which `motion` runs over) whose
+    /// motion the finite differences that ran `over` saw; counts the try, refuses beyond
+    /// [`ReachOptions::repairs`].
+    fn tighten(
+        &self,
+        tight: &mut [f64],
+        motion: &Motion,
+        over: &[(f64, f64)],
+        tries: &mut usize,
+    ) -> Result<(), ReachError> {
+        if *tries >= self.options.repairs {
+            let (t, r) = over[0];
+            return Err(ReachError::Plan(format!(
+                "the samples still run over a limit (ratio {r:.9} at {t:.4} s into a stretch) after {tries} re-plans"
+            )));
+        }
+        *tries += 1;
+        let mut starts = Vec::with_capacity(motion.durations.len() + 1);
+        let mut t = 0.0;
+        for d in &motion.durations {
+            starts.push(t);
+            t += d;
+        }
+        starts.push(t);
+        for &(t_over, ratio) in over {
+            let (from, to) = (t_over - 3.5 * self.period, t_over + 0.5 * self.period);
+            for k in 0..tight.len().min(motion.durations.len()) {
+                if starts[k + 1] >= from && starts[k] <= to {
+                    tight[k] = tight[k].min(tight[k] / ratio * (1.0 - 1e-4));
+                }
+            }
+        }
+        Ok(())
     }
 }
 

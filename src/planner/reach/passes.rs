@@ -38,6 +38,23 @@ pub struct Passes<'a> {
     /// Whether the axis jerk is a constraint (without it: the second-order problem, a quick
     /// upper estimate of the feed).
     pub jerk: bool,
+    /// Where the motion starts.
+    pub start: Start<'a>,
+}
+
+/// Where a motion starts: at rest, or already under way (a window of a stretch).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Start<'a> {
+    /// The state (a, b) at station 0; `None`: at rest.
+    pub state: Option<(f64, f64)>,
+    /// Whether the rest at the grid's end is a window's artificial one (whose stop is never
+    /// run as planned unless checked): a state off the stop line there (rounding near rest)
+    /// ends with the stop from its speed instead of failing.
+    pub artificial_end: bool,
+    /// States (a, b) from station 0 on that the sets keep where they hold them: the
+    /// continuation an earlier window accepted the start state with (the sets' simplification
+    /// must not cut it off).
+    pub through: &'a [(f64, f64)],
 }
 
 /// The linearisation points of the jerk rows of one interval: at its start, its collocation
@@ -76,6 +93,9 @@ pub struct Motion {
     pub durations: Vec<f64>,
     /// Stages where the chosen control left the rows' range by more than rounding.
     pub off_range: usize,
+    /// Whether the motion stops short of a window's artificial rest with a stop the limits
+    /// do not hold (never to be run).
+    pub cut_short: bool,
 }
 
 impl Motion {
@@ -291,23 +311,44 @@ impl Passes<'_> {
             if poly.is_empty() {
                 return Err(PassError::Empty { station: k });
             }
+            // The continuation an earlier window accepted stays in the set where the exact
+            // projection holds it (the simplification alone could cut it off).
+            let keep = self.start.through.get(k).filter(|&&(a, b)| poly.contains(a, b, 1e-12));
             poly.simplify(self.max_vertices);
+            if let Some(&(a, b)) = keep {
+                if !poly.contains(a, b, 1e-12) {
+                    poly.include([a, b]);
+                }
+            }
             sets[k] = poly;
             lins[k] = lin;
         }
         Ok(Sets { sets, lins })
     }
 
-    /// The greedy forward pass from rest at station 0 through the sets to rest at the end of
-    /// the grid (the first interval a constant-jerk start, the last a constant-jerk stop).
+    /// The greedy forward pass from rest at station 0 (the first interval a constant-jerk
+    /// start), or from the state [`Passes::start`] there, through the sets to rest at the end
+    /// of the grid (the last interval a constant-jerk stop).
     pub fn forward(&self, sets: &Sets) -> Result<Motion, PassError> {
         let g = self.grid;
         let n = g.len();
         let mut m = Motion::default();
         let mut rows = Vec::new();
         let mut hp = Vec::new();
+        let under_way = self.start.state.filter(|&(a, _)| a > 0.0);
+        if let Some((a, b)) = under_way {
+            // A state the first set does not hold has no continuation that keeps the rows.
+            if !sets.sets[0].contains(a, b, 1e-9) {
+                return Err(PassError::Empty { station: 0 });
+            }
+            m.a.push(a);
+            m.b.push(b);
+        }
+        let first = if under_way.is_some() { 0 } else { 1 };
         // The largest b1 on the start line (1.5·D·b1, b1) inside the set of station 1.
-        let (mut a, mut b) = {
+        let (mut a, mut b) = if let Some(state) = under_way {
+            state
+        } else {
             let d = g.intervals[0].length;
             let jt = self.piece_jerk(0);
             let bmax = (2.0 * jt * (1.5 * d).sqrt()).powf(2.0 / 3.0);
@@ -331,7 +372,7 @@ impl Passes<'_> {
             m.durations.push(duration);
             (a1, b1)
         };
-        for k in 1..n - 1 {
+        for k in first..n - 1 {
             self.stage_rows(k, &sets.lins[k], &mut rows);
             sets.sets[k + 1].half_planes(&mut hp);
             let d = g.intervals[k].length;
@@ -364,6 +405,11 @@ impl Passes<'_> {
             let c = c.max(no_dip(a, b, d));
             let piece = Piece::quadratic(a, b, c);
             let Some(duration) = piece.duration(d) else {
+                if self.start.artificial_end && a > 0.0 {
+                    // Short of a window's artificial rest: stop here and stay (what follows is
+                    // never run as planned).
+                    return Ok(Self::stop_here(m, a, d, n - k));
+                }
                 return Err(PassError::Stalls { interval: k });
             };
             a = (a + 2.0 * b * d + c * d * d).max(0.0);
@@ -384,11 +430,36 @@ impl Passes<'_> {
                 m.pieces.push(Piece::Start { jerk: 0.0 });
                 m.durations.push(0.0);
             }
+            None if self.start.artificial_end && a > 0.0 => {
+                return Ok(Self::stop_here(m, a, g.intervals[n - 1].length, 1))
+            }
             None => return Err(PassError::Stalls { interval: n - 1 }),
         }
         m.a.push(0.0);
         m.b.push(0.0);
         Ok(m)
+    }
+
+    /// Ends `m` (at state a) with a constant-jerk stop over the next interval (length `d`)
+    /// whatever its tangential acceleration, at rest for the `left - 1` intervals after it.
+    fn stop_here(mut m: Motion, a: f64, d: f64, left: usize) -> Motion {
+        let (piece, duration) = match Piece::stop(a, -a / (1.5 * d)) {
+            Some((piece, duration, _)) => (piece, duration),
+            None => (Piece::Start { jerk: 0.0 }, 0.0),
+        };
+        m.off_range += 1;
+        m.cut_short = true;
+        m.pieces.push(piece);
+        m.durations.push(duration);
+        for _ in 1..left {
+            m.pieces.push(Piece::Start { jerk: 0.0 });
+            m.durations.push(0.0);
+            m.a.push(0.0);
+            m.b.push(0.0);
+        }
+        m.a.push(0.0);
+        m.b.push(0.0);
+        m
     }
 }
 

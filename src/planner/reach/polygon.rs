@@ -162,6 +162,40 @@ impl Polygon {
         }
     }
 
+    /// Grows the polygon to the convex hull of itself and `x` (a point of a convex set that
+    /// holds the polygon too, so that the hull stays inside that set).
+    pub fn include(&mut self, x: [f64; 2]) {
+        let v = &self.vertices;
+        let n = v.len();
+        if n < 3 {
+            return;
+        }
+        // Edge i (v[i] to v[i + 1], counter-clockwise) sees x when x lies to its right.
+        let sees = |i: usize| {
+            let (p, q) = (v[i], v[(i + 1) % n]);
+            (q[0] - p[0]) * (x[1] - p[1]) - (q[1] - p[1]) * (x[0] - p[0]) < 0.0
+        };
+        let visible: Vec<bool> = (0..n).map(sees).collect();
+        let Some(first) = (0..n).find(|&i| visible[i] && !visible[(i + n - 1) % n]) else {
+            return;
+        };
+        // The chain of edges that see x, from `first` to `last`: the vertices between them go,
+        // x comes in their place.
+        let mut last = first;
+        while visible[(last + 1) % n] && (last + 1) % n != first {
+            last = (last + 1) % n;
+        }
+        let mut out = Vec::with_capacity(n + 1);
+        out.push(v[first]);
+        out.push(x);
+        let mut i = (last + 1) % n;
+        while i != first {
+            out.push(v[i]);
+            i = (i + 1) % n;
+        }
+        self.vertices = out;
+    }
+
     /// The vertex furthest along the direction `(na, nb)`.
     pub fn max_along(&self, na: f64, nb: f64) -> Option<[f64; 2]> {
         self.vertices
@@ -207,6 +241,26 @@ mod tests {
             d: -1.0
         }));
         assert!(p.is_empty());
+    }
+
+    #[test]
+    fn including_a_point_gives_the_hull() {
+        let mut p = Polygon::rectangle(0.0, 1.0, 0.0, 1.0);
+        p.include([2.0, 0.5]);
+        assert_eq!(p.vertices.len(), 5);
+        assert!(p.contains(2.0, 0.5, 1e-12));
+        assert!(p.contains(1.5, 0.5, 1e-12));
+        assert!(!p.contains(1.5, 0.9, 1e-12));
+        // Beyond a corner: the corner goes, the point takes its place.
+        let mut q = Polygon::rectangle(0.0, 1.0, 0.0, 1.0);
+        q.include([3.0, 3.0]);
+        assert_eq!(q.vertices.len(), 4);
+        assert!(q.vertices.contains(&[3.0, 3.0]));
+        assert!(!q.vertices.contains(&[1.0, 1.0]));
+        // A point inside changes nothing.
+        let mut r = Polygon::rectangle(0.0, 1.0, 0.0, 1.0);
+        r.include([0.5, 0.5]);
+        assert_eq!(r.vertices.len(), 4);
     }
 
     #[test]

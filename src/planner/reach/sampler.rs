@@ -76,10 +76,22 @@ pub struct Sampled {
     pub points: Vec<PathPoint>,
     /// (time into the stretch, ratio) of every sample over its limits.
     pub over: Vec<(f64, f64)>,
+    /// Time from the end of the motion to the next sample (a motion that goes on).
+    pub next: f64,
 }
 
-/// Samples `motion` over `grid` from time `period` on (the stretch's start point is the
-/// previous sample, `before`), the last sample at the stretch's end, and checks each with
+/// Where the samples of a motion begin and end.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Span {
+    /// Time of the first sample into the motion (0 < first ≤ period; the one before is
+    /// `before`).
+    pub first: f64,
+    /// Whether the motion ends at rest, the last sample at its end (a stretch's end); if not,
+    /// it goes on and the samples stop at the last period within it.
+    pub at_rest: bool,
+}
+
+/// Samples `motion` over `grid` at the servo period from `span.first` on, and checks each with
 /// `check`, and its feed and chord error against `limits`. A ratio counts as over above
 /// `1 + slack`.
 #[allow(clippy::too_many_arguments)]
@@ -92,20 +104,26 @@ pub fn sample(
     before: Option<PathPoint>,
     check: &mut Check,
     slack: f64,
+    span: Span,
 ) -> Sampled {
     let period = limits.period;
     let mut out = Sampled {
         points: Vec::new(),
         over: Vec::new(),
+        next: 0.0,
     };
     let total = motion.time();
     let mut k = 0;
     let mut t_k = 0.0;
     // The last position found: interval, distance into it, curve parameter.
     let mut last: Option<(usize, f64, f64)> = None;
-    let mut n = 1u64;
+    let mut n = 0u64;
     loop {
-        let t = n as f64 * period;
+        let t = span.first + n as f64 * period;
+        if !span.at_rest && t > total {
+            out.next = t - total;
+            break;
+        }
         let (interval, sigma) = if t >= total {
             (grid.len() - 1, grid.intervals[grid.len() - 1].length)
         } else {
@@ -174,6 +192,7 @@ pub fn sample(
             tip,
         });
         if t >= total {
+            out.next = t - total + period;
             break;
         }
         n += 1;
