@@ -25,12 +25,13 @@ bench_cases=(
   "trident|VPOp limits|$vpop_limits"
 )
 
-# plan_verified PLANNER CURVE "LIMIT FLAGS": `nurbs-plan plan` of examples/CURVE.json, checked by
-# `nurbs-plan verify`; prints "motion s|plan ms|pass or FAIL" ("refused|-|-" where no plan).
+# plan_verified PLANNER CURVE "LIMIT FLAGS" ["PLAN FLAGS"]: `nurbs-plan plan` of examples/CURVE.json,
+# checked by `nurbs-plan verify`; prints "motion s|plan ms|pass or FAIL" ("refused|-|-" where no
+# plan).
 plan_verified() {
-  local planner=$1 curve=$2 lim=$3 ok
+  local planner=$1 curve=$2 lim=$3 extra=${4:-} ok
   # shellcheck disable=SC2086
-  if ! $bin plan "examples/$curve.json" --planner "$planner" $lim --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
+  if ! $bin plan "examples/$curve.json" --planner "$planner" $lim $extra --out "$dir/o.csv" --summary "$dir/s.json" >/dev/null 2>&1; then
     echo "refused|-|-"
     return
   fi

@@ -1,7 +1,8 @@
 #!/bin/bash
 # Side by side in one run: every benchmark case of figures.sh (every bundled curve at both lab
 # sets of Erwinski et al. 2022, the three Table III sets on the butterfly, the trident at the
-# VPOp limits) planned by `--planner erwinski`, `vpop` and `reach`, each output checked by
+# VPOp limits) planned by `--planner erwinski`, `vpop`, `reach` and `reach --stream` (look-ahead
+# windows; a stretch shorter than a window is planned whole, as without), each output checked by
 # `nurbs-plan verify`. Prints the comparison table of docs/planners.md: motion time, its ratio to
 # the best known plan where there is one (../shared/curves), planning time of one run and its
 # share of the motion. The 5-axis curves are planned by their tool tip, but by VPOp, which plans
@@ -21,14 +22,15 @@ t, p, b = float('$t'), float('$p'), '$b'
 r = f' = {t / float(b):.3f} x' if b else ''
 print(f'{t:.4f}{r}, {p:.0f} ms ({100 * p / 1e3 / t:.1f} %), $v')"
 }
-echo "| curve | limits | Erwinski | VPOp | reach |"
-echo "|---|---|---|---|---|"
+echo "| curve | limits | Erwinski | VPOp | reach | reach --stream |"
+echo "|---|---|---|---|---|---|"
 for c in "${bench_cases[@]}"; do
   IFS='|' read -r curve name lim <<<"$c"
   b=${best[$curve|$name]:-}
   row="| $curve | $name"
-  for planner in erwinski vpop reach; do
-    IFS='|' read -r t p v <<<"$(plan_verified "$planner" "$curve" "$lim")"
+  for run in erwinski vpop reach "reach --stream"; do
+    read -r planner extra <<<"$run"
+    IFS='|' read -r t p v <<<"$(plan_verified "$planner" "$curve" "$lim" "$extra")"
     row="$row | $(cell "$t" "$p" "$v" "$b")"
   done
   echo "$row |"

@@ -8,12 +8,17 @@
 # (planning and writing the CSV), then `verify` of the written setpoints. PLANNER=vpop runs
 # VPOp instead (its first points instead of the first record; no groups: a stop of its own at
 # every state it hands out). ROUND_CORNERS=round plans the program with its corners only rounded
-# (default: auto, runs of short lines fitted).
+# (default: auto, runs of short lines fitted). PLANNER=reach runs the reachability planner in
+# look-ahead windows (its first points instead of the first record; its windows and the
+# restarts from rest among them instead of groups).
 # Usage: [PLANNER=vpop] [ROUND_CORNERS=round] scripts/scale.sh  (after `cargo build --release --bin nurbs-plan`)
 # shellcheck source=scripts/common.sh
 source "$(dirname "$0")/common.sh"
 limits="--limits lab1 --feed 500"
-if [ "${PLANNER:-erwinski}" = vpop ]; then
+if [ "${PLANNER:-erwinski}" = reach ]; then
+  echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first setpoints (ms) | windows | restarts from rest | peak RSS (MB) | verify |"
+  echo "|---|---|---|---|---|---|---|---|---|---|---|"
+elif [ "${PLANNER:-erwinski}" = vpop ]; then
   echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first setpoints (ms) | points held at most | elements held at most | peak RSS (MB) | verify |"
   echo "|---|---|---|---|---|---|---|---|---|---|---|"
 else
@@ -32,10 +37,12 @@ import json, sys
 lines, rss, ok, path = int(sys.argv[1]), int(sys.argv[2]), sys.argv[3], sys.argv[4]
 s = json.load(open(path))
 t, plan = s["motion_time_s"], s["plan_time_s"]
-elements = s["elements"]
+elements = s.get("elements", 0)
 first = s.get("first_segment_time_s", s.get("first_points_time_s"))
 if "groups" in s:
     groups = f"{s['groups']:,} | {s['longest_group_s']:.3f} | {s['stops_made']}"
+elif "windows" in s:
+    groups = f"{s['windows']:,} | {s['window_restarts']}"
 else:
     groups = f"{s['most_points_held']:,} | {s['most_elements_held']:,}"
 print(f"| {lines:,} | {elements:,} | {t:.1f} | {plan:.2f} | {100 * plan / t:.1f} % | {1000 * plan / lines:.3f} "

@@ -610,6 +610,7 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
                 "stations": stats.stations,
                 "passes": stats.passes,
                 "replans": stats.repairs,
+                "elements": curves.len(),
                 "windows": stats.windows,
                 "window_restarts": stats.restarts,
                 "axes": "tool tip",

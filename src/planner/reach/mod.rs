@@ -292,13 +292,7 @@ fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
     };
     if u >= curves.view(e).u_max() && stretch.to != stretch.from {
         // At the end of the elements read: the join to the next one.
-        let end_tangent = curves.view(e).derivatives(u, 1)[1];
-        if !curves.load(e + 1) {
-            return close(stretch, (e, u));
-        }
-        let next = curves.view(e + 1);
-        let start_tangent = next.derivatives(next.u_min(), 1)[1];
-        if crate::planner::vpop::path::turns(&end_tangent, &start_tangent, axes) {
+        if stops_after(curves, e, u) {
             return close(stretch, (e, u));
         }
         e += 1;
@@ -316,16 +310,7 @@ fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
             }
         });
         stretch.length += approximate_length(&view, u, end, axes);
-        if inside {
-            return close(stretch, (e, end));
-        }
-        let end_tangent = view.derivatives(end, 1)[1];
-        if !curves.load(e + 1) {
-            return close(stretch, (e, end));
-        }
-        let next = curves.view(e + 1);
-        let start_tangent = next.derivatives(next.u_min(), 1)[1];
-        if crate::planner::vpop::path::turns(&end_tangent, &start_tangent, axes) {
+        if inside || stops_after(curves, e, end) {
             return close(stretch, (e, end));
         }
         if stretch.length >= target {
@@ -335,6 +320,18 @@ fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
         e += 1;
         u = curves.view(e).u_min();
     }
+}
+
+/// Whether the motion must stop at the end `end` of element `e`: the path ends there, or the
+/// next element starts in another direction.
+fn stops_after(curves: &mut PathCurves, e: usize, end: f64) -> bool {
+    let end_tangent = curves.view(e).derivatives(end, 1)[1];
+    if !curves.load(e + 1) {
+        return true;
+    }
+    let next = curves.view(e + 1);
+    let start_tangent = next.derivatives(next.u_min(), 1)[1];
+    crate::planner::vpop::path::turns(&end_tangent, &start_tangent, curves.tip_dim())
 }
 
 /// Arc length of `view` from `a` to `b`, knot span by knot span, each in pieces (Gauss-Legendre)
@@ -469,7 +466,9 @@ impl<'o> Planner<'o> {
         let (least, most) = (o.iterations.max(1), o.most_iterations.max(o.iterations).max(1));
         let mut last_pass = least == 1;
         for it in 0.. {
-            let motion = self.passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)?;
+            let motion = self
+                .passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)
+                .map_err(|e| self.describe(&grid, 0, e))?;
             let best_time = best.as_ref().map_or(f64::INFINITY, |(_, m, _)| m.time());
             let better = motion.time() < best_time;
             if last_pass {
@@ -548,26 +547,14 @@ impl<'o> Planner<'o> {
             }
             self.tighten(&mut tight, &motion, &sampled.over, &mut repairs)?;
             let floors = (o.floor > 0.0).then(|| lin.scaled(o.floor));
-            motion = self.passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)?;
+            motion = self
+                .passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)
+                .map_err(|e| self.describe(&grid, 0, e))?;
         }
     }
 
     /// One backward and one forward pass (again without floors where they leave no plan).
     fn passes(
-        &self,
-        grid: &Grid,
-        lin: &Linearisation,
-        floors: Option<&Linearisation>,
-        tight: &[f64],
-        start: Start,
-        count: &mut usize,
-    ) -> Result<Motion, ReachError> {
-        self.try_passes(grid, lin, floors, tight, start, count)
-            .map_err(|e| self.describe(grid, 0, e))
-    }
-
-    /// [`Planner::passes`], saying only where it failed.
-    fn try_passes(
         &self,
         grid: &Grid,
         lin: &Linearisation,

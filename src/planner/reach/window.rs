@@ -404,110 +404,102 @@ impl Planner<'_> {
                 through: &through,
                 artificial_end: !(laid.complete && e == laid.grid.len()),
             };
-            let planned = self.window_passes(curves, laid, (m, &mut e), frozen, start, &mut run.passes, gap);
-            let motion = match planned {
-                Ok(motion) => motion,
-                Err(PassError::Empty { station: 0 }) if state.is_some() => {
-                    m = self.restart(
-                        curves,
-                        &laid.grid,
-                        &mut last_stop,
-                        m,
-                        first_sample,
-                        check,
-                        &mut run,
-                        emit,
-                    )?;
-                    (frozen, state, first_sample) = (m, None, self.period);
-                    continue;
-                }
-                Err(err) => return Err(self.describe(&laid.grid, m, err)),
-            };
-            if laid.complete && e == laid.grid.len() {
-                // The last window: all of it, to rest at the stretch's end.
-                let start = Start {
-                    artificial_end: false,
-                    ..start
-                };
-                let sub = laid.grid.slice(m, e);
-                let lin_sub = laid.lin.slice(m, e);
-                let floors = (self.options.floor > 0.0).then(|| lin_sub.scaled(self.options.floor));
-                let mut motion = motion;
-                let mut tries = 0;
-                loop {
-                    let span = sampler::Span {
-                        first: first_sample,
-                        at_rest: true,
-                    };
-                    match self.commit(curves, &sub, &motion, run.last, check, span, emit)? {
-                        Ok((last, _)) => {
-                            run.last = last.or(run.last);
-                            run.repairs += tries;
-                            run.stations += laid.grid.stations.len();
-                            run.to = laid.stretch.to;
-                            return Ok(Some(run));
-                        }
-                        Err(over) => {
-                            self.tighten(&mut laid.tight[m..e], &motion, &over, &mut tries)?;
-                            motion = self
-                                .try_passes(
-                                    &sub,
-                                    &lin_sub,
-                                    floors.as_ref(),
-                                    &laid.tight[m..e],
-                                    start,
-                                    &mut run.passes,
-                                )
-                                .map_err(|err| self.describe(&laid.grid, m, err))?;
-                        }
-                    }
-                }
-            }
-            // Freeze the rows to `f`, commit to `m2`: the motion from the state at `m` to rest
-            // at `f`. The rows past the window plan's last speed maximum are linearised at its
-            // artificial stop: `f` lies before it.
-            let mut decel = motion.a.len() - 1;
-            while decel > 0 && motion.a[decel - 1] >= motion.a[decel] {
-                decel -= 1;
-            }
-            let grid = &laid.grid;
-            let f = station_before(grid, grid.stations[e].s - gap, m + 2).min((m + decel).max(m + 2));
-            let mut m2 = station_before(grid, grid.stations[f].s - gap, m + 1).min(f - 1) - m;
-            let sub = grid.slice(m, f);
-            let lin_sub = laid.lin.slice(m, f);
-            let mut tries = 0;
-            let committed = loop {
-                // The stop is planned with a reserve on the limits past the committed end: the
-                // next window may tighten those rows by as much (samples that ran over) and
-                // still hold the committed state. The last intervals before it keep the
-                // reserve too: the finite differences across the junction see both windows'
-                // motions, and only the next one's can still be tightened.
-                let mut reserved = laid.tight[m..f].to_vec();
-                for t in &mut reserved[m2.saturating_sub(JUNCTION)..] {
-                    *t *= 1.0 - STOP_RESERVE;
-                }
-                let stop = match self.proof(&sub, &lin_sub, &reserved, start, &mut m2, &mut run.passes) {
-                    Ok(stop) => stop,
-                    Err(PassError::Empty { station: 0 }) if state.is_some() => break None,
+            // The committed motion (to rest at `f`) and its ends, or none where the start state
+            // lies outside the window's first set.
+            let committed = 'window: {
+                let planned = self.window_passes(curves, laid, (m, &mut e), frozen, start, &mut run.passes, gap);
+                let motion = match planned {
+                    Ok(motion) => motion,
+                    Err(PassError::Empty { station: 0 }) if state.is_some() => break 'window None,
                     Err(err) => return Err(self.describe(&laid.grid, m, err)),
                 };
-                let part = stop.truncated(m2);
-                let span = sampler::Span {
-                    first: first_sample,
-                    at_rest: false,
-                };
-                match self.commit(curves, &laid.grid.slice(m, m + m2), &part, run.last, check, span, emit)? {
-                    Ok((last, next)) => {
-                        run.last = last.or(run.last);
-                        first_sample = next;
-                        break Some(stop);
+                if laid.complete && e == laid.grid.len() {
+                    // The last window: all of it, to rest at the stretch's end.
+                    let start = Start {
+                        artificial_end: false,
+                        ..start
+                    };
+                    let sub = laid.grid.slice(m, e);
+                    let lin_sub = laid.lin.slice(m, e);
+                    let floors = (self.options.floor > 0.0).then(|| lin_sub.scaled(self.options.floor));
+                    let mut motion = motion;
+                    let mut tries = 0;
+                    loop {
+                        let span = sampler::Span {
+                            first: first_sample,
+                            at_rest: true,
+                        };
+                        match self.commit(curves, &sub, &motion, run.last, check, span, emit)? {
+                            Ok((last, _)) => {
+                                run.last = last.or(run.last);
+                                run.repairs += tries;
+                                run.stations += laid.grid.stations.len();
+                                run.to = laid.stretch.to;
+                                return Ok(Some(run));
+                            }
+                            Err(over) => {
+                                self.tighten(&mut laid.tight[m..e], &motion, &over, &mut tries)?;
+                                motion = self
+                                    .passes(
+                                        &sub,
+                                        &lin_sub,
+                                        floors.as_ref(),
+                                        &laid.tight[m..e],
+                                        start,
+                                        &mut run.passes,
+                                    )
+                                    .map_err(|err| self.describe(&laid.grid, m, err))?;
+                            }
+                        }
                     }
-                    Err(over) => self.tighten(&mut laid.tight[m..m + m2], &part, &over, &mut tries)?,
                 }
+                // Freeze the rows to `f`, commit to `m2`: the motion from the state at `m` to rest
+                // at `f`. The rows past the window plan's last speed maximum are linearised at its
+                // artificial stop: `f` lies before it.
+                let mut decel = motion.a.len() - 1;
+                while decel > 0 && motion.a[decel - 1] >= motion.a[decel] {
+                    decel -= 1;
+                }
+                let grid = &laid.grid;
+                let f = station_before(grid, grid.stations[e].s - gap, m + 2).min((m + decel).max(m + 2));
+                let mut m2 = station_before(grid, grid.stations[f].s - gap, m + 1).min(f - 1) - m;
+                let sub = grid.slice(m, f);
+                let lin_sub = laid.lin.slice(m, f);
+                let mut tries = 0;
+                let committed = loop {
+                    // The stop is planned with a reserve on the limits past the committed end: the
+                    // next window may tighten those rows by as much (samples that ran over) and
+                    // still hold the committed state. The last intervals before it keep the
+                    // reserve too: the finite differences across the junction see both windows'
+                    // motions, and only the next one's can still be tightened.
+                    let mut reserved = laid.tight[m..f].to_vec();
+                    for t in &mut reserved[m2.saturating_sub(JUNCTION)..] {
+                        *t *= 1.0 - STOP_RESERVE;
+                    }
+                    let stop = match self.proof(&sub, &lin_sub, &reserved, start, &mut m2, &mut run.passes) {
+                        Ok(stop) => stop,
+                        Err(PassError::Empty { station: 0 }) if state.is_some() => break None,
+                        Err(err) => return Err(self.describe(&laid.grid, m, err)),
+                    };
+                    let part = stop.truncated(m2);
+                    let span = sampler::Span {
+                        first: first_sample,
+                        at_rest: false,
+                    };
+                    match self.commit(curves, &laid.grid.slice(m, m + m2), &part, run.last, check, span, emit)? {
+                        Ok((last, next)) => {
+                            run.last = last.or(run.last);
+                            first_sample = next;
+                            break Some(stop);
+                        }
+                        Err(over) => self.tighten(&mut laid.tight[m..m + m2], &part, &over, &mut tries)?,
+                    }
+                };
+                run.repairs += tries;
+                committed.map(|stop| (stop, m2, f))
             };
-            run.repairs += tries;
             match committed {
-                Some(stop) => {
+                Some((stop, m2, f)) => {
                     // Past the frozen rows the window's linearisation is its artificial stop's:
                     // the next window starts from the first guess there.
                     let stretch = &laid.stretch;
@@ -583,7 +575,7 @@ impl Planner<'_> {
             } else {
                 start
             };
-            let motion = self.try_passes(&sub, &current, floors.as_ref(), &laid.tight[m..*e], pass_start, count);
+            let motion = self.passes(&sub, &current, floors.as_ref(), &laid.tight[m..*e], pass_start, count);
             let motion = motion?;
             let best_time = best.as_ref().map_or(f64::INFINITY, |(m, _)| m.time());
             let better = motion.time() < best_time;
@@ -686,7 +678,7 @@ impl Planner<'_> {
                 }
             }
         }
-        self.try_passes(sub, lin_sub, None, tight, start, count)
+        self.passes(sub, lin_sub, None, tight, start, count)
     }
 
     /// Samples `motion` over `grid` and checks the samples; if none runs over, hands them out
