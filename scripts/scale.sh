@@ -2,7 +2,7 @@
 # Programs of growing length through `nurbs-plan plan --stream` (the plan the machine runs):
 # the dense CAM-like G1 program of scripts/dense-g1.py (the butterfly every 0.02 mm, passes
 # back and forth in Z) at F500 A1e4 J6e4, chord tolerance 0.001 mm, 0.25 ms, for each length in
-# LINES (default "1000 10000 100000"): motion time, planning time (the planner alone) and its
+# LINES (default "10000 100000 1000000"): motion time, planning time (the planner alone) and its
 # ratio to the motion, time per 1,000 lines, first record, groups and the longest, stops on the
 # way (where back-tracking found no feed but rest; 0 is the aim), peak RSS of the whole command
 # (planning and writing the CSV), then `verify` of the written setpoints. PLANNER=vpop runs
@@ -25,7 +25,7 @@ else
   echo "| lines | elements | motion (s) | plan (s) | plan / motion | plan per 1,000 lines (s) | first record (ms) | groups | longest group (s) | stops on the way | peak RSS (MB) | verify |"
   echo "|---|---|---|---|---|---|---|---|---|---|---|---|"
 fi
-for lines in ${LINES:-1000 10000 100000}; do
+for lines in ${LINES:-10000 100000 1000000}; do
   python3 scripts/dense-g1.py --lines "$lines" >"$dir/dense.ngc"
   # shellcheck disable=SC2086
   /usr/bin/time -f "%M" -o "$dir/rss" $bin plan "$dir/dense.ngc" $limits --stream --planner "${PLANNER:-erwinski}" \
