@@ -421,14 +421,37 @@ impl<'o> Planner<'o> {
         v
     }
 
+    /// The smallest axis acceleration and jerk.
+    fn least_limits(&self) -> (f64, f64) {
+        let axes = self.axis.axes;
+        let least = |x: &[f64]| x[..axes].iter().copied().fold(f64::INFINITY, f64::min);
+        (least(&self.axis.acceleration), least(&self.axis.jerk))
+    }
+
     /// Speed reachable from rest within `d` with the smallest axis jerk.
     fn ramp(&self, d: f64) -> f64 {
-        let j = self.axis.jerk[..self.axis.axes]
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
+        let j = self.least_limits().1;
         let t = (6.0 * d.max(0.0) / j).cbrt();
         0.5 * j * t * t
+    }
+
+    /// Distance such a ramp takes to speed `v` (the inverse of [`Planner::ramp`]).
+    fn ramp_length(&self, v: f64) -> f64 {
+        let j = self.least_limits().1;
+        let t = (2.0 * v.max(0.0) / j).sqrt();
+        j * t * t * t / 6.0
+    }
+
+    /// The first guess of the speed at arc length `s` of `stretch` where the path is `here`:
+    /// what the caps and the curvature allow, and a ramp from the start (and to the end, once
+    /// read).
+    fn first_guess(&self, stretch: &Stretch, s: f64, here: &Local) -> f64 {
+        let v = self.speed_bound(here).min(self.ramp(s));
+        if stretch.open {
+            v
+        } else {
+            v.min(self.ramp(stretch.length - s))
+        }
     }
 
     /// Plans one rest-to-rest stretch: passes, a second grid, more passes, then sampled and
@@ -442,8 +465,7 @@ impl<'o> Planner<'o> {
         check: &mut Check,
     ) -> Result<(Grid, Motion, usize, usize, Vec<PathPoint>), ReachError> {
         let o = self.options;
-        let len = stretch.length;
-        let first_guess = |s: f64, here: &Local| self.speed_bound(here).min(self.ramp(s)).min(self.ramp(len - s));
+        let first_guess = |s: f64, here: &Local| self.first_guess(stretch, s, here);
         let mut grid = Grid::build(curves, stretch, &self.caps, &o.grid, &first_guess);
         if grid.len() < 3 {
             // Too short for a start, a piece and a stop: lay it again finer.

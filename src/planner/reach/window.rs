@@ -177,28 +177,11 @@ impl Planner<'_> {
     /// Length of a stop from speed `v` along a straight line with the smallest axis
     /// acceleration and jerk (constant jerk to the deceleration, held, and back).
     fn stop_distance(&self, v: f64) -> f64 {
-        let axes = self.axis.axes;
-        let a = self.axis.acceleration[..axes]
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        let j = self.axis.jerk[..axes].iter().copied().fold(f64::INFINITY, f64::min);
+        let (a, j) = self.least_limits();
         if v * j <= a * a {
             v * (v / j).sqrt()
         } else {
             0.5 * v * (v / a + a / j)
-        }
-    }
-
-    /// The first guess of the speed at arc length `s` of `stretch` where the path is `here`:
-    /// what the caps and the curvature allow, and a ramp from the start (and to the end, once
-    /// read).
-    fn first_guess(&self, stretch: &Stretch, s: f64, here: &Local) -> f64 {
-        let v = self.speed_bound(here).min(self.ramp(s));
-        if stretch.open {
-            v
-        } else {
-            v.min(self.ramp(stretch.length - s))
         }
     }
 
@@ -213,14 +196,6 @@ impl Planner<'_> {
         speed: Option<&AlongPath<'_>>,
         lin_a: Option<&AlongPath<'_>>,
     ) {
-        let j = self.axis.jerk[..self.axis.axes]
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        let from_rest = |v: f64| {
-            let t = (2.0 * v / j).sqrt();
-            j * t * t * t / 6.0
-        };
         loop {
             // The path read a chunk past `until`, so that a rest within it is known before the
             // stations near it are laid.
@@ -264,9 +239,9 @@ impl Planner<'_> {
             laid.expected.truncate(old.saturating_sub(1));
             for k in laid.expected.len()..laid.grid.stations.len() {
                 let st = &laid.grid.stations[k];
-                let mut d = from_rest(guess(st.s, &st.right));
+                let mut d = self.ramp_length(guess(st.s, &st.right));
                 if k > 0 {
-                    let before = from_rest(laid.expected[k - 1]) + st.s - laid.grid.stations[k - 1].s;
+                    let before = self.ramp_length(laid.expected[k - 1]) + st.s - laid.grid.stations[k - 1].s;
                     d = d.min(before);
                 }
                 laid.expected.push(self.ramp(d));
