@@ -32,9 +32,10 @@ pub struct PlannerArgs {
     /// the stop from every block end and lowers it where the axis limits need it.
     #[arg(long, default_value_t = 1.0)]
     pub stop_fraction: f64,
-    /// Planner: `erwinski` (S-curve segments, streamed as records), `vpop` or `reach`
-    /// (per-period positions of 2-/3-axis tool-tip paths, planned whole before the motion and
-    /// sent as path blocks).
+    /// Planner: `erwinski` (S-curve segments, streamed as records), `reach` (per-period
+    /// positions of 2-/3-axis tool-tip paths, planned in look-ahead windows as the motion runs
+    /// and streamed as path blocks) or `vpop` (the same positions' kind, planned whole before
+    /// the motion).
     #[arg(long, value_enum, default_value_t = PlannerKind::Erwinski)]
     pub planner: PlannerKind,
     /// G1 corners, as `nurbs-plan plan --round-corners` (`auto`: rounded, runs of short lines

@@ -66,8 +66,8 @@ fn bench_start(c: &mut Criterion) {
             b.iter(|| {
                 block_plan(&toolpath, (&plan.points, &plan.limits), None, 1.0)
                     .unwrap()
-                    .blocks
-                    .len()
+                    .blocks()
+                    .count()
             })
         });
     }

@@ -1,5 +1,5 @@
-//! VPOp plans as path blocks through the realtime module on the mock HAL: exact positions,
-//! the stop at block group ends (the module's tangential stop or a stored sequence) within the
+//! VPOp plans (whole) and reachability plans (streamed in windows) as path blocks through the
+//! realtime module on the mock HAL: exact positions, the stop at block group ends (the module's tangential stop or a stored sequence) within the
 //! axis limits, resume, and malformed blocks.
 
 mod common;
@@ -11,9 +11,11 @@ use common::*;
 use nurbs_hal::channel::{PathBlock, Slot, StopPoint};
 use nurbs_hal::module::FaultCode;
 use nurbs_motion::geometry::Toolpath;
+use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions};
 use nurbs_motion::planner::vpop::VpopPlan;
 use nurbs_motion::planner::PathCurves;
 use nurbs_planner::feed::{block_plan, plan_start, vpop_plan, BlockPlan, Source, Streamer};
+use nurbs_planner::shared_path::SharedPath;
 
 struct BlockJob {
     job: Job,
@@ -26,10 +28,10 @@ fn block_job(toolpath: Toolpath) -> BlockJob {
     let limits = lab1(toolpath.tip_dim()).for_axes(toolpath.tip_dim()).unwrap();
     let plan = vpop_plan(&toolpath, &limits, None).unwrap();
     let blocks = blocks_of(&toolpath, &plan, None);
-    let (ends, stored, worst) = blocks.stops();
+    let (ends, stored, worst) = blocks.stops;
     println!(
         "{} blocks, {ends} group ends with a stop ({stored} stored), worst {worst:.9}",
-        blocks.blocks.len()
+        blocks.blocks().count()
     );
     assert!(worst <= 1.0 + 1e-6);
     BlockJob {
@@ -86,20 +88,65 @@ fn vpop_blocks_run_exactly_the_planned_positions() {
     }
 }
 
+/// The reachability planner streamed as `nurbs-planner --planner reach` runs it (in look-ahead
+/// windows, in its own thread, the blocks decided as the points come): the module plays the
+/// positions `nurbs-plan plan --planner reach --stream` plans, one per period, within the
+/// limits, with a checked stop at every group end, and stops within the limits where it holds.
+#[test]
+fn reach_blocks_stream_the_windowed_plan() {
+    let _guard = lock_module();
+    let mut windows = 0;
+    for name in ["trident.json", "butterfly.json"] {
+        let toolpath = job(name).toolpath;
+        let tip = toolpath.tip_dim();
+        let limits = lab1(tip).for_axes(tip).unwrap();
+        let options = ReachOptions {
+            window: Some(WindowOptions::default()),
+            ..ReachOptions::default()
+        };
+        let plan = reach::plan_tip(&toolpath, &limits, &options, None).unwrap();
+        windows += plan.stats.windows;
+        let l = load();
+        let source = Source::streamed_blocks(SharedPath::whole(&toolpath), limits.clone(), None, 1.0);
+        let (got, s) = paced_source_run(&l, tip, source, 1.0, plan.points.len() + 40_000, &mut |_, _| {});
+        assert!(
+            bit("nurbs_interp.done") && !bit("nurbs_interp.fault"),
+            "{name}: ran to its end"
+        );
+        assert!(!bit("nurbs_interp.underrun"), "{name}: the plan kept ahead");
+        assert_eq!(got.len(), plan.points.len(), "{name}: one sample per planned period");
+        for (k, (g, p)) in got.iter().zip(&plan.points).enumerate() {
+            assert_eq!((g.u, g.curve), (p.u, p.element), "{name} sample {k}: parameter");
+        }
+        let job = Job {
+            toolpath,
+            limits,
+            groups: Vec::new(),
+            samples: Vec::new(),
+        };
+        assert_eq!(violations(&job, &got, true), Vec::<String>::new(), "{name}");
+        println!("{name}: {} samples, longest group {:.4} s", got.len(), s.longest_group);
+    }
+    assert!(windows >= 2, "some stretch planned in windows");
+}
+
 /// Only the groups up to block `cut` arrive: the module stops after the group end at or
 /// before it, within the limits, at rest; VPOp re-plans from the stop point and the resume
 /// command runs it to C(1), the whole run within the limits.
 fn underrun_and_resume(bj: &BlockJob, cut: usize) {
     let l = load();
     let mut blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
-    // The groups that end at or before `cut`.
+    // The groups that end at or before block `cut`.
     let mut end = 0;
-    while end < blocks.blocks.len() && end + blocks.blocks[end].group_left as usize <= cut + 1 {
-        end += blocks.blocks[end].group_left as usize;
-    }
-    blocks.blocks.truncate(end);
-    blocks.stored.truncate(end);
-    blocks.choices.truncate(end);
+    let kept = blocks
+        .groups
+        .iter()
+        .take_while(|g| {
+            end += g.blocks.len();
+            end <= cut + 1
+        })
+        .count();
+    blocks.groups.truncate(kept);
     let mut s = block_streamer(&l, bj, blocks, 0);
     let mut got = run_to_rest(&mut s, bj.plan.points.len() + 20_000);
     let stop = stop_point(l.channel).expect("no stop point");
@@ -136,12 +183,25 @@ fn an_underrun_at_a_block_end_stops_within_the_limits_and_resumes() {
     for toolpath in [job("trident.json").toolpath, rounded_polyline()] {
         let bj = block_job(toolpath);
         let blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
-        let feed = |k: usize| nurbs_rtcore::block_stop::block_end_state(&blocks.blocks[k], PERIOD).1;
-        let mut ends: Vec<usize> = (2..blocks.blocks.len() - 2)
-            .filter(|&k| blocks.blocks[k].group_left == 1)
+        let all: Vec<_> = blocks.blocks().copied().collect();
+        let feed = |k: usize| nurbs_rtcore::block_stop::block_end_state(&all[k], PERIOD).1;
+        // Each group's last block, and whether its stop is a stored sequence.
+        let mut k = 0;
+        let group_ends: Vec<(usize, bool)> = blocks
+            .groups
+            .iter()
+            .map(|g| {
+                k += g.blocks.len();
+                (k - 1, g.stored.is_some())
+            })
+            .filter(|&(k, _)| k >= 2 && k + 2 < all.len())
             .collect();
+        let mut ends: Vec<usize> = group_ends.iter().map(|&(k, _)| k).collect();
         ends.sort_by(|&a, &b| feed(b).total_cmp(&feed(a)));
-        let stored = ends.iter().copied().find(|&k| blocks.stored[k].is_some());
+        let stored = ends
+            .iter()
+            .copied()
+            .find(|k| group_ends.iter().any(|&(e, stored)| e == *k && stored));
         for cut in ends.iter().copied().take(2).chain(stored) {
             underrun_and_resume(&bj, cut);
         }
@@ -211,10 +271,9 @@ fn bad_blocks_are_refused_with_the_position_held() {
     for (name, tamper, code) in cases {
         let l = load();
         let mut blocks = blocks_of(&bj.job.toolpath, &bj.plan, None);
-        let k = (blocks.blocks.len() / 2..)
-            .find(|&k| blocks.blocks[k].group_left == 1)
-            .unwrap();
-        tamper(&mut blocks.blocks[k]);
+        // The last block of a group half-way along the path.
+        let g = blocks.groups.len() / 2;
+        tamper(blocks.groups[g].blocks.last_mut().unwrap());
         let mut s = block_streamer(&l, &bj, blocks, 0);
         run(&mut s, bj.plan.points.len() + 100, &mut |_| {}, &mut |_| {
             bit("nurbs_interp.fault")

@@ -135,6 +135,12 @@ impl PathCurves {
     pub fn len(&self) -> usize {
         self.elements.len()
     }
+
+    /// The first element not forgotten (where a streamed path began, or was released to).
+    pub fn first(&self) -> usize {
+        self.elements.first_index()
+    }
+
     pub fn is_empty(&self) -> bool {
         self.elements.len() == 0
     }

@@ -1,7 +1,8 @@
 #!/bin/bash
 # path_test.sh TOOLPATH [PLANNER [FLAGS]]: the product end to end in real LinuxCNC. nurbs-planner
-# plans TOOLPATH (with PLANNER, erwinski, vpop or reach; default erwinski, compared with the offline
-# `nurbs-plan plan --stream`; FLAGS go to nurbs-planner, the offline nurbs-plan plan and verify)
+# plans TOOLPATH (with PLANNER, erwinski, vpop or reach; default erwinski; the streaming planners,
+# erwinski and reach, compared with the offline `nurbs-plan plan --stream`; FLAGS go to
+# nurbs-planner, the offline nurbs-plan plan and verify)
 # and streams it through the channel, nurbs_interp.update interpolates it on a 250 us servo
 # thread, LinuxCNC's sampler records every setpoint, nurbs-hal-record writes them at full
 # precision. Checks (check_path.py, nurbs-plan verify): the samples are the offline
@@ -19,7 +20,8 @@ LIMITS="--limits lab1"
 work=$(mktemp -d /tmp/nurbs-hal-test.XXXXXX)
 chmod 755 "$work"
 offline_flags=$flags
-[ "$planner" = erwinski ] && offline_flags="$flags --stream"
+# The streaming planners: the offline plan of the same stream (the reachability planner in windows).
+[ "$planner" != vpop ] && offline_flags="$flags --stream"
 nurbs-plan plan "$toolpath" $LIMITS --period $PERIOD --planner "$planner" $offline_flags --out "$work/offline.csv"
 SAMPLES=$(($(wc -l <"$work/offline.csv") - 1))
 sed -e "s|@TOOLPATH@|$toolpath|g" -e "s|@LIMITS@|$LIMITS --period $PERIOD --planner $planner $flags|g" \

@@ -15,9 +15,12 @@
 //! (`nurbs-plan plan --stream` plans the same records): each record goes out once it is final,
 //! with the stop after the last record of each group (the next segment re-planned to rest,
 //! checked by the planner like every segment). The motion starts as soon as the plan can stay
-//! ahead of it. `--planner vpop` plans with VPOp (one tool-tip position per servo period,
-//! 2-/3-axis paths) before the motion, checks the module's stop from every block end, and sends
-//! the positions as path blocks, which the module outputs exactly.
+//! ahead of it. `--planner reach` plans with the reachability planner in look-ahead windows
+//! (`nurbs-plan plan --planner reach --stream` plans the same positions), also in a thread of
+//! its own reading the file as it plans: one tool-tip position per servo period (2-/3-axis
+//! paths), sent as path blocks, which the module outputs exactly, in groups that end where the
+//! module's stop from the block end was checked within the limits. `--planner vpop` plans with
+//! VPOp the same way but whole, before the motion.
 //! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_cli::LimitArgs`): with
 //! `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given
@@ -56,7 +59,6 @@ use nurbs_cli::{PlannerArgs as Args, PlannerKind};
 use nurbs_hal::channel::{Channel, StopPoint};
 use nurbs_hal::sys::{HAL_IN, HAL_OUT};
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::vpop::PathPoint;
 use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{self, Source, Streamer};
 use nurbs_planner::hal_user::{install_signal_handlers, stopped, Component};
@@ -70,46 +72,15 @@ fn open_path(args: &Args) -> Result<SharedPath, String> {
     Ok(SharedPath::new(stream.take_elements()))
 }
 
-/// What a motion runs on: the file read as a stream, once, by the plans (the Erwinski
-/// planner), or the whole path, read before (VPOp plans it whole).
+/// What a motion runs on: the file read as a stream, once, by the plans (the Erwinski and the
+/// reachability planner), or the whole path, read before (VPOp plans it whole).
 enum PathSource {
     Stream(SharedPath),
     Whole(Arc<Toolpath>),
 }
 
-/// A whole plan of one point per period, as VPOp or the reachability planner makes it.
-struct WholePlan {
-    points: Vec<PathPoint>,
-    limits: Limits,
-    motion_time: f64,
-    plan_time: f64,
-}
-
-/// Plans the whole tool-tip path (or its rest from `from`) period by period.
-fn whole_plan(
-    kind: PlannerKind,
-    path: &Toolpath,
-    limits: &Limits,
-    from: Option<&StopPoint>,
-) -> Result<WholePlan, String> {
-    match kind {
-        PlannerKind::Reach => feed::reach_plan(path, limits, from).map(|p| WholePlan {
-            points: p.points,
-            limits: p.limits,
-            motion_time: p.motion_time,
-            plan_time: p.plan_time,
-        }),
-        _ => feed::vpop_plan(path, limits, from).map(|p| WholePlan {
-            points: p.points,
-            limits: p.limits,
-            motion_time: p.motion_time,
-            plan_time: p.plan_time,
-        }),
-    }
-}
-
 /// Plans the path, or the rest of it from the module's stop point `from` (the Erwinski
-/// planner as a stream over `curves`, VPOp over the whole path, read here), begins its
+/// and the reachability planner as streams over `curves`, VPOp over the whole path, read here), begins its
 /// geometry stream once the module runs no motion, and queues the first records.
 fn start_motion<'a>(
     args: &Args,
@@ -140,7 +111,12 @@ fn start_motion<'a>(
             let mut curves = shared.open()?;
             let first = from.map_or(0, |p| feed::plan_start(&mut curves, p).curve);
             let tip = curves.tip_dim();
-            let source = Source::streamed(shared.clone(), limits.clone(), from.copied(), feed_override);
+            let source = match args.planner {
+                PlannerKind::Reach => {
+                    Source::streamed_blocks(shared.clone(), limits.clone(), from.copied(), args.stop_fraction)
+                }
+                _ => Source::streamed(shared.clone(), limits.clone(), from.copied(), feed_override),
+            };
             (source, first, tip)
         }
         PathSource::Whole(path) => {
@@ -152,11 +128,10 @@ fn start_motion<'a>(
             }
             // The whole plan and its stop checks come before the motion: in a thread, so that a
             // signal still ends the planner at once.
-            let (plan_limits, start, fraction, kind) =
-                (limits.clone(), from.copied(), args.stop_fraction, args.planner);
+            let (plan_limits, start, fraction) = (limits.clone(), from.copied(), args.stop_fraction);
             let (sender, receiver) = std::sync::mpsc::channel();
             std::thread::spawn(move || {
-                let planned = whole_plan(kind, &path, &plan_limits, start.as_ref()).and_then(|plan| {
+                let planned = feed::vpop_plan(&path, &plan_limits, start.as_ref()).and_then(|plan| {
                     feed::block_plan(&path, (&plan.points, &plan.limits), start.as_ref(), fraction)
                         .map(|blocks| (plan, blocks))
                 });
@@ -172,12 +147,12 @@ fn start_motion<'a>(
                     Err(e) => return Err(format!("the planner thread ended: {e}")),
                 }
             };
-            let (ends, stored, worst) = blocks.stops();
+            let (ends, stored, worst) = blocks.stops;
             say!(
                 "nurbs-planner: {:?}: {} periods in {} path blocks, motion {:.6} s, planned in {:.3} s; stops within the limits at {ends} block ends ({stored} stored sequences, worst {worst:.4} x an axis limit), checked in {:.3} s",
                 args.planner,
                 plan.points.len(),
-                blocks.blocks.len(),
+                blocks.blocks().count(),
                 plan.motion_time,
                 plan.plan_time,
                 began.elapsed().as_secs_f64() - plan.plan_time
@@ -241,16 +216,24 @@ fn motion_over(channel: &Channel, generation: u32, from: Option<StopPoint>) -> b
 fn run(args: &Args) -> Result<&'static str, String> {
     // The chord tolerance first (the G1 rounding needs it), then the path as `nurbs-plan plan`
     // prepares it with the same tolerance (and `verify` checks it).
-    // The Erwinski planner reads the file as it plans (here only its first element, for the
-    // dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
+    // The Erwinski and the reachability planner read the file as they plan (here only its first
+    // element, for the dimension); VPOp plans the whole path. Before touching HAL: a clear refusal, not a
     // half-started component.
     let (path, tip) = match args.planner {
-        PlannerKind::Erwinski => {
+        PlannerKind::Erwinski | PlannerKind::Reach => {
             let shared = open_path(args)?;
-            let tip = shared.open()?.tip_dim();
+            let first = shared.open()?;
+            let tip = first.tip_dim();
+            let five_axis = first.get(0).is_some_and(|e| e.curve.dim() > tip);
+            if five_axis && args.planner == PlannerKind::Reach {
+                // (Its blocks would refuse it at the first point; before touching HAL, here.)
+                feed::check_tip_path(&Toolpath {
+                    elements: vec![first.element(0).clone()],
+                })?;
+            }
             (PathSource::Stream(shared), tip)
         }
-        PlannerKind::Vpop | PlannerKind::Reach => {
+        PlannerKind::Vpop => {
             let prepared = prepare(&args.toolpath, args.round_corners, &args.limits).map_err(|e| e.to_string())?;
             feed::check_tip_path(&prepared.toolpath)?;
             let tip = prepared.toolpath.tip_dim();

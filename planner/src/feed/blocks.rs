@@ -1,6 +1,8 @@
 //! Path blocks (VPOp, the reachability planner): the plan's per-period positions packed into
-//! blocks, the module's stop from every block end run and checked by finite differences
-//! ([`choose_block_stops`]), stored stop sequences where its own stop does not pass.
+//! blocks as the plan hands them over, the stop from every block end chosen and checked by
+//! finite differences ([`BlockBuilder`], with [`super::block_stops`]), the blocks in groups that
+//! end at a checked stop; a whole plan's groups ([`block_plan`]) or a streamed one's
+//! ([`spawn_reach_blocks`]).
 
 use super::*;
 
@@ -46,26 +48,29 @@ pub fn fractions(max_fraction: f64) -> Vec<f64> {
 /// path with a tool-axis (top) curve would need the machine's joint kinematics in the module.
 pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
     if toolpath.elements.iter().any(|e| e.curve.dim() > e.curve.tip_dim()) {
-        return Err(
-            "this is a 5-axis toolpath (tool tip and tool axis): the realtime module drives the \
-                    tool tip only, so VPOp plans of 5-axis paths (joint positions of the machine) cannot \
-                    run through it; plan 2-/3-axis tool-tip paths"
-                .into(),
-        );
+        return Err(TIP_ONLY.into());
     }
     Ok(())
 }
 
+/// Why a 5-axis path is refused as path blocks.
+const TIP_ONLY: &str = "this is a 5-axis toolpath (tool tip and tool axis): the realtime module drives the \
+     tool tip only, so plans of one position per period of 5-axis paths (joint positions of the machine) \
+     cannot run through it; plan 2-/3-axis tool-tip paths";
+
 /// Arc length of path points in the module's measure: per element from its curve start
 /// (Gauss-Legendre, the measure of the stop points), except on the element of the anchor (a
-/// stop point, or the last sample before a stored stop), where it is shifted so that the
-/// anchor's `u` has exactly its `s`, the arc length the module holds there.
-pub(super) struct ArcLengths<'a> {
-    toolpath: &'a Toolpath,
-    /// Each element's table, built when first needed (a 1,000-line G1 program has 2,000).
-    tables: Vec<OnceCell<ArcLengthTable>>,
-    /// Path length before each element, as far as asked for (summed in path order).
-    before: RefCell<Vec<f64>>,
+/// stop point a re-plan starts from), where it is shifted so that the anchor's `u` has exactly
+/// its `s`, the arc length the module holds there. The elements come from the `PathCurves`
+/// each call is given (read as far as the points asked about); what lies behind
+/// [`Self::forget_before`] is dropped.
+pub(super) struct ArcLengths {
+    /// Each element's table, built when first needed.
+    tables: RefCell<BTreeMap<usize, ArcLengthTable>>,
+    /// The first element measured, and the path length from its start to the start of each
+    /// element from there on, as far as asked for (summed in path order; only differences are
+    /// used).
+    before: RefCell<(usize, Vec<f64>)>,
     /// The anchor's element, arc length, and Gauss-Legendre length to its parameter.
     anchor: Option<(usize, f64, f64)>,
     /// Lengths of elements to parameters asked for lately, by element and the parameter's
@@ -79,45 +84,58 @@ pub(super) struct ArcLengths<'a> {
 /// Lengths each generation of [`ArcLengths`]'s memory keeps (some 2 MB).
 pub(super) const LENGTHS_KEPT: usize = 1 << 16;
 
-impl<'a> ArcLengths<'a> {
-    fn new(toolpath: &'a Toolpath) -> Self {
+impl ArcLengths {
+    /// Measures from element `first` on.
+    fn new(first: usize) -> Self {
         ArcLengths {
-            toolpath,
-            tables: toolpath.elements.iter().map(|_| OnceCell::new()).collect(),
-            before: RefCell::new(vec![0.0]),
+            tables: RefCell::new(BTreeMap::new()),
+            before: RefCell::new((first, vec![0.0])),
             anchor: None,
             lengths: RefCell::new([HashMap::new(), HashMap::new()]),
         }
     }
 
-    fn table(&self, e: usize) -> &ArcLengthTable {
-        self.tables[e].get_or_init(|| ArcLengthTable::new(&self.toolpath.elements[e].curve))
+    fn with_table<R>(&self, curves: &PathCurves, e: usize, f: impl FnOnce(&ArcLengthTable, &Nurbs) -> R) -> R {
+        let curve = &curves.element(e).curve;
+        let mut tables = self.tables.borrow_mut();
+        f(tables.entry(e).or_insert_with(|| ArcLengthTable::new(curve)), curve)
     }
 
-    /// Path length before element `e`.
-    fn before(&self, e: usize) -> f64 {
+    /// Length of element `e`.
+    pub(super) fn total(&self, curves: &PathCurves, e: usize) -> f64 {
+        self.with_table(curves, e, |t, _| t.total())
+    }
+
+    /// Path length before element `e` (from the first element measured).
+    fn before(&self, curves: &PathCurves, e: usize) -> f64 {
         let mut before = self.before.borrow_mut();
-        while before.len() <= e {
-            let k = before.len() - 1;
-            let next = before[k] + self.table(k).total();
-            before.push(next);
+        let first = before.0;
+        let k = e.saturating_sub(first);
+        while before.1.len() <= k {
+            let last = before.1.len() - 1;
+            let next = before.1[last] + self.total(curves, first + last);
+            before.1.push(next);
         }
-        before[e]
+        before.1[k]
     }
 
     /// From now on, element `e` is measured so that `u` has arc length `s`.
-    fn set_anchor(&mut self, e: usize, u: f64, s: f64) {
-        self.anchor = (e < self.tables.len()).then(|| (e, s, self.length_to(e, u)));
+    fn set_anchor(&mut self, curves: &PathCurves, e: usize, u: f64, s: f64) {
+        self.anchor = Some((e, s, self.length_to(curves, e, u)));
     }
 
     /// Length of element `e` from its start to parameter `u`.
-    fn length_to(&self, e: usize, u: f64) -> f64 {
+    fn length_to(&self, curves: &PathCurves, e: usize, u: f64) -> f64 {
         let key = (e, u.to_bits());
-        let mut lengths = self.lengths.borrow_mut();
-        if let Some(&length) = lengths[0].get(&key).or_else(|| lengths[1].get(&key)) {
+        let known = {
+            let lengths = self.lengths.borrow();
+            lengths[0].get(&key).or_else(|| lengths[1].get(&key)).copied()
+        };
+        if let Some(length) = known {
             return length;
         }
-        let length = self.table(e).length_to(&self.toolpath.elements[e].curve, u);
+        let length = self.with_table(curves, e, |table, curve| table.length_to(curve, u));
+        let mut lengths = self.lengths.borrow_mut();
         if lengths[0].len() >= LENGTHS_KEPT {
             lengths[1] = std::mem::take(&mut lengths[0]);
         }
@@ -126,8 +144,8 @@ impl<'a> ArcLengths<'a> {
     }
 
     /// Arc length of `p` in the measure of element `e` (negative before it).
-    fn s(&self, p: &PathPoint, e: usize) -> f64 {
-        let own = self.length_to(p.element, p.u);
+    pub(super) fn s(&self, curves: &PathCurves, p: &PathPoint, e: usize) -> f64 {
+        let own = self.length_to(curves, p.element, p.u);
         if p.element == e {
             match self.anchor {
                 // Exactly the anchor's arc length at its parameter (the difference is 0 there).
@@ -136,42 +154,21 @@ impl<'a> ArcLengths<'a> {
             }
         } else {
             // An earlier element: minus the path length from `p` to the start of `e`.
-            (self.before(p.element) + own) - self.before(e)
+            (self.before(curves, p.element) + own) - self.before(curves, e)
         }
     }
-}
 
-/// Packs the points of a VPOp plan into path blocks: runs of at most [`BLOCK_SAMPLES`] points
-/// on one element (a new block at every element change), each with the arc lengths of its
-/// points and of the two points before it, the last flagged. `anchor`: the stop point a
-/// re-plan starts from (its arc length is kept exactly). Stop limits are left at zero
-/// ([`choose_block_stops`] sets them).
-pub(super) fn pack_blocks(arcs: &ArcLengths, points: &[PathPoint]) -> Vec<PathBlock> {
-    let mut blocks: Vec<PathBlock> = Vec::new();
-    let mut i = 0;
-    while i < points.len() {
-        let e = points[i].element;
-        let before = |k: usize| arcs.s(&points[i.saturating_sub(k)], e);
-        let mut b = PathBlock {
-            seq: blocks.len() as u32,
-            curve: e as u32,
-            s_before: [before(2), before(1)],
-            ..PathBlock::default()
-        };
-        let mut n = 0;
-        while n < BLOCK_SAMPLES && i < points.len() && points[i].element == e {
-            b.u[n] = points[i].u;
-            b.s[n] = arcs.s(&points[i], e);
-            n += 1;
-            i += 1;
+    /// Forgets the tables of the elements before `e` (no point before it is asked about again).
+    fn forget_before(&self, e: usize) {
+        let mut tables = self.tables.borrow_mut();
+        *tables = tables.split_off(&e);
+        let mut before = self.before.borrow_mut();
+        let drop = e.saturating_sub(before.0).min(before.1.len() - 1);
+        if drop > 0 {
+            before.1.drain(..drop);
+            before.0 += drop;
         }
-        b.count = n as u32;
-        blocks.push(b);
     }
-    if let Some(last) = blocks.last_mut() {
-        last.flags |= FLAG_LAST;
-    }
-    blocks
 }
 
 /// A stop sequence chosen after a block: its positions (path points, from the period after
@@ -183,19 +180,59 @@ pub struct StoredStop {
     pub choice: StopChoice,
 }
 
-/// Runs the blocks as the module does (each sample the curve point at its parameter) and, at
-/// every block end, VPOp's own deceleration sequence from there ([`brake_points`], after the
-/// plan's next positions where the block end's state has none), checked as the module plays
-/// it by finite differences continuing the motion; it is stored with the geometry. Where it
-/// does not pass (or cannot be stored: the last block), the module's tangential stop
-/// ([`block_stop`]) with jerk fractions of the tangential limits there and deceleration shares
-/// 1, 1/2, 1/4, 1/10 of each, looking for the largest fraction with a share that stays within
-/// the axis limits by finite differences, as [`StopChooser`] does for segment records, then
-/// bisecting towards the next larger fraction (the tangential limits hold for the direction at
-/// the block end only, so the largest stop that passes is often just below them); that search
-/// starts at the fraction that passed at the last block end that had one
-/// ([`StopSearch::starting_at`]; the first searches from the largest). Stores the limits in
-/// each block (the least violating ones where none passes) and returns the choices.
+/// Path blocks that go into the ring together: the module takes them only whole and stops
+/// only after the last, with the stop the planner checked there; with the arena data that
+/// stop needs, and the curves the group is the first to need.
+#[derive(Clone, Debug)]
+pub struct BlockGroup {
+    /// Group fields and stop limits set; the last block's arena offsets are the streamer's to
+    /// fill in.
+    pub blocks: Vec<PathBlock>,
+    /// The stop choice after each block (only the last one's is a stop the module runs).
+    pub choices: Vec<StopChoice>,
+    /// The stop after the last block: the planner's stored deceleration as arena values
+    /// ([`StopRun`]s), or `None`: the module's tangential stop.
+    pub stored: Option<Vec<f64>>,
+    /// The stop points that tangential stop respects: `(s, feed cap)` pairs on the last block's
+    /// curve ahead of it (every feed minimum of the plan known there, and the curve end at rest).
+    pub points: Vec<f64>,
+    /// The curves this group is the first to need, from curve `first_curve` on.
+    pub curves: Vec<Nurbs>,
+    pub first_curve: u32,
+    /// Motion time (s).
+    pub time: f64,
+}
+
+/// What a streamed block plan's thread hands out.
+pub enum BlockEvent {
+    Group(BlockGroup),
+    /// The plan is complete (a line for the log); `error`: the file could not be read to its
+    /// end, and the plan ends at rest before the element that failed.
+    Done {
+        line: String,
+        error: Option<String>,
+    },
+    Failed(String),
+}
+
+/// Turns a plan of one point per period (VPOp's or the reachability planner's), handed over
+/// as it is planned, into path blocks in groups, each group ending where the module's stop is
+/// checked within the limits.
+///
+/// Blocks are runs of at most [`BLOCK_SAMPLES`] points on one element (a new block at every
+/// element change), each with the arc lengths of its points and of the two points before it;
+/// the path's last is flagged. At every block end, VPOp's own deceleration sequence from there
+/// ([`brake_points`], after the plan's next positions where the block end's state has none)
+/// is checked as the module plays it, by finite differences continuing the motion; it is
+/// stored with the geometry. Where it does not pass (or cannot be stored: the last block), the
+/// module's tangential stop ([`block_stop`]) with jerk fractions of the tangential limits there
+/// and deceleration shares 1, 1/2, 1/4, 1/10 of each, looking for the largest fraction with a
+/// share that stays within the axis limits by finite differences, then bisecting towards the
+/// next larger fraction (the tangential limits hold for the direction at the block end only,
+/// so the largest stop that passes is often just below them); that search starts at the
+/// fraction that passed at the last block end that had one ([`StopSearch::starting_at`]; the
+/// first searches from the largest). A block whose stop passes ends its group; one whose stop
+/// does not joins the next block's group (keeping the least violating limits tried).
 ///
 /// The sequence first, because it is the cheaper to find and check: VPOp's plan checks most
 /// of its states safe to brake from, with the same sequences. Measured (`cargo bench -p
@@ -203,41 +240,270 @@ pub struct StoredStop {
 /// 192 block ends and the butterfly's 848: 0.35 s and 2.0 s with the tangential stop first
 /// (128 and 784 stored), against 0.24 s and 1.3 s with the sequence first (all stored; the
 /// arena they take, 20 % and 3 % more values, is the price).
-pub fn choose_block_stops(
-    toolpath: &Toolpath,
-    limits: &Limits,
-    blocks: &mut [PathBlock],
-    stop_points: &[Vec<f64>],
-    fractions: &[f64],
-    points: &[PathPoint],
-) -> (Vec<StopChoice>, Vec<Option<StoredStop>>) {
-    let curves = PathCurves::new(toolpath);
-    let path = JointPath::tip(toolpath);
-    let mut sequences = Vec::with_capacity(blocks.len());
-    let mut end = 0;
-    let tip = limits.velocity.len();
-    let dt = limits.period;
-    let mut fd = FiniteDifferences::new(tip, dt);
-    let mut choices = Vec::with_capacity(blocks.len());
-    // Whether a search has run (the next starts from `last_passed`, the fraction index of the
-    // last tangential stop that passed).
-    let mut searched = false;
-    let mut last_passed = 0;
-    let mut brakes = BrakeMemo::default();
-    // The module's evaluation of a block's points (see `Interpolator::point_at`).
-    let mut spans = SpanCache::new();
-    for b in blocks.iter_mut() {
-        let view = curves.view(b.curve());
-        let curve = &mut CachedCurve::new(view, &mut spans);
-        for &u in &b.u[..b.len()] {
-            fd.push(&curve.point(u)[..tip], limits);
+///
+/// The tangential stop respects the plan's feed minima ahead on the block's curve (a cap of
+/// that feed: the path needs it there, e.g. at a sharp turn) and the curve end, at rest: those
+/// known when the block is decided. A block is decided once the points after it settle its
+/// stored stop, so a plan handed over whole ([`block_plan`]) knows them all, and a streamed one
+/// those planned so far (the check decides with exactly the list the module gets).
+pub struct BlockBuilder {
+    limits: Limits,
+    fractions: Vec<f64>,
+    /// The path as the module evaluates it, and as VPOp's deceleration search does.
+    curves: PathCurves,
+    path: JointPath,
+    arcs: ArcLengths,
+    /// Points received and still needed, the first being point number `base`.
+    points: VecDeque<PathPoint>,
+    base: usize,
+    /// The plan has handed over its last point.
+    ended: bool,
+    /// The first point not yet in a decided block.
+    packed: usize,
+    seq: u32,
+    /// Finite differences of the motion through the last decided block.
+    fd: FiniteDifferences,
+    /// Whether a tangential search has run, and the fraction index of the last that passed.
+    searched: bool,
+    last_passed: usize,
+    brakes: BrakeMemo,
+    /// Per curve, the plan's feed minima `(s, feed)` found so far, and the last two points'
+    /// `(curve, s, feed)` (the feed over the step into each).
+    minima: BTreeMap<usize, Vec<(f64, f64)>>,
+    recent: [Option<(usize, f64, f64)>; 2],
+    /// The undecided group's blocks so far.
+    group: Vec<(PathBlock, StopChoice)>,
+    /// The next curve to hand out with a group.
+    next_curve: usize,
+    /// Block ends with a stop within the limits, stored sequences among them, and the worst
+    /// ratio of those stops to an axis limit.
+    pub ends: usize,
+    pub stored: usize,
+    pub worst: f64,
+}
+
+impl BlockBuilder {
+    /// Blocks of a plan along `curves` (`path` reads the same elements) within `limits`, with
+    /// stop jerk fractions up to `max_fraction`; from the path start, or from rest at `anchor`
+    /// (a stop point: its arc length is kept exactly).
+    pub fn new(
+        mut curves: PathCurves,
+        path: JointPath,
+        limits: &Limits,
+        anchor: Option<&StopPoint>,
+        max_fraction: f64,
+    ) -> Result<Self, String> {
+        if !(max_fraction > 0.0 && max_fraction <= 1.0) {
+            return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
         }
-        end += b.len();
-        let curve_points = stop_points.get(b.curve()).map_or(&[][..], Vec::as_slice);
-        // Tangential limits at the block end: what the axes allow along the path direction
-        // there (each axis limit over its share of the unit tangent; at least the smallest axis
-        // limit). The fractions scale them down where the path turns during the stop.
-        let (a_max, j_max) = tangential_limits(&curves, limits, b);
+        let limits = limits.for_axes(curves.tip_dim()).map_err(|e| e.to_string())?;
+        let first = match anchor {
+            Some(a) => plan_start(&mut curves, a).curve,
+            None => curves.first(),
+        };
+        if !curves.load(first) {
+            return Err(format!("no path element {first} to plan from"));
+        }
+        let mut arcs = ArcLengths::new(first);
+        if let Some(a) = anchor {
+            let start = plan_start(&mut curves, a);
+            arcs.set_anchor(&curves, start.curve, start.u, start.s);
+        }
+        let tip = limits.velocity.len();
+        Ok(BlockBuilder {
+            fd: FiniteDifferences::new(tip, limits.period),
+            fractions: fractions(max_fraction),
+            limits,
+            curves,
+            path,
+            arcs,
+            points: VecDeque::new(),
+            base: 0,
+            ended: false,
+            packed: 0,
+            seq: 0,
+            searched: false,
+            last_passed: 0,
+            brakes: BrakeMemo::default(),
+            minima: BTreeMap::new(),
+            recent: [None, None],
+            group: Vec::new(),
+            next_curve: first,
+            ends: 0,
+            stored: 0,
+            worst: 0.0,
+        })
+    }
+
+    /// The limits as used (for the path's axes).
+    pub fn limits(&self) -> &Limits {
+        &self.limits
+    }
+
+    /// Points received so far.
+    fn received(&self) -> usize {
+        self.base + self.points.len()
+    }
+
+    fn point(&self, i: usize) -> Option<PathPoint> {
+        i.checked_sub(self.base).and_then(|k| self.points.get(k)).copied()
+    }
+
+    /// Takes the plan's next point.
+    pub fn push(&mut self, p: PathPoint) -> Result<(), String> {
+        if !self.curves.load(p.element) {
+            return Err(format!(
+                "a planned point on path element {}, beyond the path",
+                p.element
+            ));
+        }
+        let curve = &self.curves.element(p.element).curve;
+        if curve.dim() > curve.tip_dim() {
+            return Err(TIP_ONLY.into());
+        }
+        // The feed over the step into it, and whether the point before was a feed minimum.
+        let e = p.element;
+        let s = self.arcs.s(&self.curves, &p, e);
+        let before = self.points.back().map_or(s, |q| self.arcs.s(&self.curves, q, e));
+        let feed = (s - before) / self.limits.period;
+        if let [Some(a), Some((c, s1, f1))] = self.recent {
+            if f1 > 0.0 && f1 < a.2 && f1 <= feed {
+                self.minima.entry(c).or_default().push((s1, f1));
+            }
+        }
+        self.recent = [self.recent[1], Some((e, s, feed))];
+        self.points.push_back(p);
+        Ok(())
+    }
+
+    /// Decides the blocks the points received settle, handing each group out as it closes
+    /// (`out` returns false when nobody takes them any more: then false).
+    pub fn advance(&mut self, out: &mut dyn FnMut(BlockGroup) -> bool) -> bool {
+        while let Some(decided) = self.decide_next() {
+            if let Some(group) = decided {
+                if !out(group) {
+                    return false;
+                }
+            }
+        }
+        true
+    }
+
+    /// The plan has ended: decides the rest.
+    pub fn finish(&mut self, out: &mut dyn FnMut(BlockGroup) -> bool) -> bool {
+        self.ended = true;
+        self.advance(out)
+    }
+
+    /// Decides the next block, if the points received settle it: `Some(Some(group))` where
+    /// it closes a group.
+    fn decide_next(&mut self) -> Option<Option<BlockGroup>> {
+        let start = self.packed;
+        let e = self.point(start)?.element;
+        // The block: up to BLOCK_SAMPLES points on element e, complete once a point after it
+        // is known (or the plan has ended).
+        let mut end = start;
+        while end < self.received() && end - start < BLOCK_SAMPLES && self.point(end)?.element == e {
+            end += 1;
+        }
+        let last = self.ended && end == self.received();
+        if !(last || end < self.received()) {
+            return None;
+        }
+        let mut b = PathBlock {
+            seq: self.seq,
+            curve: e as u32,
+            count: (end - start) as u32,
+            ..PathBlock::default()
+        };
+        let at = |k: usize| self.point(k).map(|q| self.arcs.s(&self.curves, &q, e));
+        b.s_before = [at(start.saturating_sub(2))?, at(start.saturating_sub(1))?];
+        for (n, k) in (start..end).enumerate() {
+            b.u[n] = self.point(k)?.u;
+            b.s[n] = at(k)?;
+        }
+        if last {
+            b.flags |= FLAG_LAST;
+        }
+        let mut fd = self.fd;
+        let mut spans = SpanCache::new();
+        {
+            let curve = &mut CachedCurve::new(self.curves.view(e), &mut spans);
+            let tip = self.limits.velocity.len();
+            for &u in &b.u[..b.len()] {
+                fd.push(&curve.point(u)[..tip], &self.limits);
+            }
+        }
+        let (a_max, j_max) = tangential_limits(&self.curves, &self.limits, &b);
+        let points = self.stop_points(e, b.s[b.len() - 1]);
+        // VPOp's own deceleration first (the plan's states mostly brake at once: one sequence
+        // and its check), the module's tangential stop where it does not pass.
+        let sequence = if last {
+            None
+        } else {
+            let count = self.received();
+            let (points, base) = (&self.points, self.base);
+            let point = |i: usize| i.checked_sub(base).and_then(|k| points.get(k)).copied();
+            match planned_then_brake(&self.path, &self.limits, (&point, count), (end, 0), &mut self.brakes) {
+                Ok(points) => Some(points),
+                Err(_) if !self.ended => return None, // wait for more of the plan
+                Err(_) => None,
+            }
+        };
+        let from = self.point(end - 1)?;
+        let stored = sequence.and_then(|points| {
+            let reach = points.iter().map(|p| p.element).max().unwrap_or(e);
+            (self.curves.load(reach)).then_some(())?;
+            check_stored(&self.curves, &self.limits, fd, from, points)
+        });
+        let stored = stored.filter(|s| s.ratio <= 1.0 + SLACK).map(|s| StoredStop {
+            // The block keeps the tangential limits there (the module's stop, were it to
+            // need one) and the stored sequence's ratio.
+            choice: StopChoice {
+                stored: s.points.len(),
+                ..StopChoice::tangential((1.0, 1.0), (a_max, j_max), s.ratio)
+            },
+            from: s.from,
+            points: s.points,
+        });
+        let choice = match &stored {
+            Some(s) => s.choice,
+            None => self.tangential_stop(&b, &points, fd, (a_max, j_max)),
+        };
+        b.stop_accel = choice.accel;
+        b.stop_jerk = choice.jerk;
+        // Decided: the block joins the group.
+        self.fd = fd;
+        self.packed = end;
+        self.seq += 1;
+        self.group.push((b, choice));
+        let passes = choice.ratio <= 1.0 + SLACK;
+        let group = (passes || last).then(|| self.close_group(stored, points));
+        self.forget_behind();
+        Some(group)
+    }
+
+    /// The stop points a tangential stop after a block on curve `e` ending at arc length `s0`
+    /// respects, as `(s, cap)` pairs: the feed minima known ahead, and the curve end at rest.
+    fn stop_points(&self, e: usize, s0: f64) -> Vec<f64> {
+        let ahead = self.minima.get(&e).into_iter().flatten().filter(|(s, _)| *s > s0);
+        let end = (self.arcs.total(&self.curves, e), 0.0);
+        ahead
+            .chain(std::iter::once(&end))
+            .flat_map(|&(s, cap)| [s, cap])
+            .collect()
+    }
+
+    /// The module's tangential stop after `b`, the largest that passes (see [`BlockBuilder`]),
+    /// else the least violating one tried.
+    fn tangential_stop(
+        &mut self,
+        b: &PathBlock,
+        points: &[f64],
+        fd: FiniteDifferences,
+        (a_max, j_max): (f64, f64),
+    ) -> StopChoice {
+        let (curves, limits, dt) = (&self.curves, &self.limits, self.limits.period);
         // The module's stop with these limits, checked by finite differences; abandoned as soon
         // as it is worse than `bound` (it cannot be the choice then).
         let simulate = |fraction: f64, accel_share: f64, bound: f64| -> StopChoice {
@@ -245,12 +511,12 @@ pub fn choose_block_stops(
             let mut trial = *b;
             trial.stop_accel = untried.accel;
             trial.stop_jerk = untried.jerk;
-            let (stop, a0) = block_stop(curve_points, &trial, dt);
+            let (stop, a0) = block_stop(points, &trial, dt);
             let mut interp = Interpolator::new();
-            let started = interp.start_profile(&curves, stop, stop.profile().table_from(a0));
+            let started = interp.start_profile(curves, stop, stop.profile().table_from(a0));
             let mut step = || {
                 if started {
-                    interp.step(&curves, dt, &mut || None)
+                    interp.step(curves, dt, &mut || None)
                 } else {
                     Step::Finished
                 }
@@ -260,379 +526,111 @@ pub fn choose_block_stops(
         };
         let mut search = StopSearch {
             simulate: &simulate,
-            fractions,
+            fractions: &self.fractions,
             best: None,
         };
-        let point = |i: usize| points.get(i).copied();
-        let can_store = !b.is_last() && end >= 1;
-        // VPOp's own deceleration first (the plan's states mostly brake at once: one sequence
-        // and its check), the module's tangential stop where it does not pass.
-        let stored = can_store
-            .then(|| {
-                let from = (end, points[end - 1], 0);
-                stored_stop(&path, &curves, limits, (fd, &point, points.len()), from, &mut brakes)
-            })
-            .and_then(Result::ok)
-            .flatten()
-            .filter(|s| s.ratio <= 1.0 + SLACK)
-            .map(|s| StoredStop {
-                // The block keeps the tangential limits there (the module's stop, were it to
-                // need one) and the stored sequence's ratio.
-                choice: StopChoice {
-                    stored: s.points.len(),
-                    ..StopChoice::tangential((1.0, 1.0), (a_max, j_max), s.ratio)
-                },
-                from: s.from,
-                points: s.points,
-            });
-        let (best, sequence) = match stored {
-            Some(stored) => (Some(stored.choice), Some(stored)),
-            None => {
-                // From the last fraction that passed: 4 ms later the state is nearly the same.
-                let found = if searched {
-                    search.starting_at(last_passed)
-                } else {
-                    search.exhaustive()
-                };
-                searched = true;
-                if let Some((k, _)) = found {
-                    last_passed = k;
-                }
-                let best = match found {
-                    Some((k, share)) => Some(search.refine(k, share)),
-                    None => search.best,
-                };
-                (best, None)
-            }
-        };
-        sequences.push(sequence);
-        if let Some(c) = best {
-            b.stop_accel = c.accel;
-            b.stop_jerk = c.jerk;
-            choices.push(c);
-        }
-    }
-    (choices, sequences)
-}
-
-/// Deceleration shares of the module's stop tried at each jerk fraction, largest first (for
-/// segment records and path blocks alike).
-pub(super) const SHARES: [f64; 4] = [1.0, 0.5, 0.25, 0.1];
-
-/// The search for a block end's stop: `simulate(fraction, share, bound)` checks one (see
-/// [`choose_block_stops`]); the least violating stop tried so far is kept.
-pub(super) struct StopSearch<'s> {
-    simulate: &'s dyn Fn(f64, f64, f64) -> StopChoice,
-    fractions: &'s [f64],
-    best: Option<StopChoice>,
-}
-
-impl StopSearch<'_> {
-    /// Whether the stop with `fractions[k]` and `SHARES[share]` stays within the limits.
-    fn passes(&mut self, k: usize, share: usize) -> bool {
-        let bound = self.best.map_or(f64::INFINITY, |c| c.ratio.max(1.0 + SLACK));
-        let c = (self.simulate)(self.fractions[k], SHARES[share], bound);
-        if self.best.is_none_or(|b| c.ratio < b.ratio) {
-            self.best = Some(c);
-        }
-        c.ratio <= 1.0 + SLACK
-    }
-
-    /// The first (fraction, share) that passes, largest fraction first, then largest share,
-    /// trying each in turn.
-    fn exhaustive(&mut self) -> Option<(usize, usize)> {
-        (0..self.fractions.len()).find_map(|k| self.first_share(k).map(|share| (k, share)))
-    }
-
-    /// The largest share that passes with `fractions[k]` (a gentler deceleration is a longer
-    /// stop, which can reach a tighter bend: it may fail where a steeper one passes).
-    fn first_share(&mut self, k: usize) -> Option<usize> {
-        (0..SHARES.len()).find(|&share| self.passes(k, share))
-    }
-
-    /// The (fraction, share) of [`Self::exhaustive`], searched from fraction index `warm`, taking a
-    /// fraction that passes to pass at every smaller one too: upwards from `warm` while the
-    /// fractions pass, else downwards from it, and only if none passes there, the larger ones.
-    fn starting_at(&mut self, warm: usize) -> Option<(usize, usize)> {
-        let warm = warm.min(self.fractions.len() - 1);
-        if let Some(share) = self.first_share(warm) {
-            let mut found = (warm, share);
-            for k in (0..warm).rev() {
-                match self.first_share(k) {
-                    Some(share) => found = (k, share),
-                    None => break,
-                }
-            }
-            return Some(found);
-        }
-        let n = self.fractions.len();
-        (warm + 1..n)
-            .chain(0..warm)
-            .find_map(|k| self.first_share(k).map(|share| (k, share)))
-    }
-
-    /// The stop of fraction index `k` and `share`, which passes, refined towards the next
-    /// larger fraction (bisection, 5 steps: the tangential limits hold for the direction at
-    /// the block end only, so the largest stop that passes is often just below them).
-    fn refine(&mut self, k: usize, share: usize) -> StopChoice {
-        let mut good = (self.simulate)(self.fractions[k], SHARES[share], 1.0 + SLACK);
-        if k > 0 {
-            let mut bad = self.fractions[k - 1];
-            for _ in 0..5 {
-                let mid = 0.5 * (good.fraction + bad);
-                let c = (self.simulate)(mid, SHARES[share], 1.0 + SLACK);
-                if c.ratio <= 1.0 + SLACK {
-                    good = c;
-                } else {
-                    bad = mid;
-                }
-            }
-        }
-        good
-    }
-}
-
-/// The stop after the first `end` of the planned positions `point(0..count)` (VPOp's, or the
-/// interpolator's samples of segment records): VPOp's deceleration sequence from there, or,
-/// where that does not reach rest (VPOp checks its deceleration only where it has to, so not
-/// every planned state has one), the plan's own next positions up to the first state whose
-/// deceleration sequence does. Every step is a planned or a braking step, so all pass VPOp's
-/// constraints; the sequence may cross element joins (only onwards). The search for that state
-/// starts at position `resume_at` (or at the stop's start); `Err(resume_at)` if the `count`
-/// positions known end first (call again from there with more, or the plan ends there).
-pub(super) fn planned_then_brake(
-    path: &JointPath,
-    limits: &Limits,
-    (point, count): (&dyn Fn(usize) -> Option<PathPoint>, usize),
-    (end, resume_at): (usize, usize),
-    memo: &mut BrakeMemo,
-) -> Result<Vec<PathPoint>, usize> {
-    // The deceleration is chosen within the limits themselves, as VPOp's plan is: the module
-    // plays its positions from its own (de Boor) evaluation of the curve, which differs from
-    // VPOp's power basis by rounding, and the check of the played positions allows that
-    // ([`SLACK`]). A margin inside the limits would make the plan's own states, which ride
-    // them, unsafe to brake from: with 1e-5 the search walked on along the plan for a state
-    // that brakes, and the stops took 2.5 times as long to find.
-    let first = resume_at.max(end.max(1) - 1);
-    let mut i = first;
-    while i < count.saturating_sub(1) {
-        // What an earlier search (from an earlier end) found out about position i.
-        if memo.failed.contains(&i) {
-            i = memo.failed.end;
-            continue;
-        }
-        let brake = match &memo.found {
-            Some((at, brake)) if *at == i => Some(brake.clone()),
-            _ => {
-                let last = [point(i.saturating_sub(2)), point(i.saturating_sub(1)), point(i)];
-                match last {
-                    [Some(a), Some(b), Some(c)] => brake_points(path, limits, SearchOptions::default(), [a, b, c])
-                        .ok()
-                        .flatten(),
-                    _ => None,
-                }
-            }
-        };
-        if let Some(brake) = brake {
-            let Some(planned) = (end..=i).map(point).collect::<Option<Vec<PathPoint>>>() else {
-                // Not a failure of position i: nothing to remember from this search.
-                return Err(first.max(count.saturating_sub(1)));
-            };
-            memo.remember(first..i, Some((i, brake.clone())));
-            return Ok(planned.into_iter().chain(brake).collect());
-        }
-        i += 1;
-    }
-    memo.remember(first..i.max(first), None);
-    Err(first.max(count.saturating_sub(1)))
-}
-
-/// What the searches of [`planned_then_brake`] found out, kept for the next one (the block or
-/// record ends come in path order, 4 ms apart, and a search from one end often runs past the
-/// next): the positions in `failed` have no deceleration to rest, `found` has one. The results
-/// are the same as without it (each position's deceleration depends on it alone).
-#[derive(Default)]
-pub(super) struct BrakeMemo {
-    failed: std::ops::Range<usize>,
-    found: Option<(usize, Vec<PathPoint>)>,
-}
-
-impl BrakeMemo {
-    /// A search tried `failed` in vain (positions where no deceleration was tried count too:
-    /// they are missing or not on the path) and ended at `found`, if anywhere.
-    fn remember(&mut self, failed: std::ops::Range<usize>, found: Option<(usize, Vec<PathPoint>)>) {
-        // Join the failures when the new run starts inside or right after the old one.
-        self.failed = if self.failed.contains(&failed.start) || self.failed.end == failed.start {
-            self.failed.start..self.failed.end.max(failed.end)
+        // From the last fraction that passed: 4 ms later the state is nearly the same.
+        let found = if self.searched {
+            search.starting_at(self.last_passed)
         } else {
-            failed
+            search.exhaustive()
         };
-        if found.is_some() {
-            self.found = found;
-        }
-    }
-}
-
-/// [`planned_then_brake`] after the first `end` of the `count` planned positions known
-/// (searching from `resume_at`), checked as the module runs it (each position the curve point
-/// at its `u`) by finite differences continuing `fd` (the motion up to `from`, the last
-/// position before the stop): its positions and worst ratio to an axis limit, `None` where it
-/// would step back over an element; `Err` as from [`planned_then_brake`].
-pub(super) fn stored_stop(
-    path: &JointPath,
-    curves: &PathCurves,
-    limits: &Limits,
-    (fd, point, count): (FiniteDifferences, &dyn Fn(usize) -> Option<PathPoint>, usize),
-    (end, from, resume_at): (usize, PathPoint, usize),
-    memo: &mut BrakeMemo,
-) -> Result<Option<CheckedStop>, usize> {
-    let points = planned_then_brake(path, limits, (point, count), (end, resume_at), memo)?;
-    // Elements only onwards, one at a time (the module checks each step).
-    let onwards = points.iter().try_fold(from.element, |e, p| {
-        (p.element == e || p.element == e + 1).then_some(p.element)
-    });
-    if points.is_empty() || onwards.is_none() {
-        return Ok(None);
-    }
-    let tip = limits.velocity.len();
-    let mut f = fd;
-    f.reset_peaks();
-    let mut spans = SpanCache::new();
-    for p in &points {
-        let point = CachedCurve::new(curves.view(p.element), &mut spans).point(p.u);
-        f.push(&point[..tip], limits);
-    }
-    f.finish(limits);
-    Ok(Some(CheckedStop {
-        from,
-        points,
-        ratio: f.worst_ratio(limits),
-    }))
-}
-
-/// A stored stop sequence as [`stored_stop`] checked it.
-pub(super) struct CheckedStop {
-    from: PathPoint,
-    points: Vec<PathPoint>,
-    ratio: f64,
-}
-
-/// The arena values of the stored stop `points` that follow `from`: a [`StopRun`] per element,
-/// each position as `(u, s)` in its element's measure.
-pub(super) fn stop_runs(arcs: &ArcLengths, from: PathPoint, points: &[PathPoint]) -> Vec<f64> {
-    let mut values = Vec::with_capacity(2 * points.len() + StopRun::VALUES);
-    let mut before = from;
-    for run in points.chunk_by(|a, b| a.element == b.element) {
-        let e = run[0].element;
-        let header = StopRun {
-            curve: e,
-            count: run.len(),
-            s_before: arcs.s(&before, e),
+        let best = match found {
+            Some((k, share)) => Some(search.refine(k, share)),
+            None => search.best,
         };
-        values.extend(header.to_values());
-        values.extend(run.iter().flat_map(|p| [p.u, arcs.s(p, e)]));
-        before = run[run.len() - 1];
+        self.searched = true;
+        if let Some((k, _)) = found {
+            self.last_passed = k;
+        }
+        // `simulate` always gives a choice; the first fraction tried is the fallback.
+        best.unwrap_or_else(|| StopChoice::tangential((self.fractions[0], 1.0), (a_max, j_max), f64::INFINITY))
     }
-    values
-}
 
-/// Worst ratio to an axis limit of a stop whose samples `step` yields, by finite differences
-/// continuing `fd` (the motion before it) and at rest after it; abandoned (a value above
-/// `bound`) as soon as it is worse than `bound`, as it cannot be the choice then.
-pub(super) fn stop_ratio(limits: &Limits, fd: FiniteDifferences, bound: f64, step: &mut dyn FnMut() -> Step) -> f64 {
-    let tip = limits.velocity.len();
-    let mut f = fd;
-    f.reset_peaks();
-    while let Step::Sample(s) = step() {
-        f.push(&s.point[..tip], limits);
-        let ratio = f.worst_ratio(limits);
-        if ratio > bound {
-            return ratio;
+    /// Closes the group with its last block's stop: `stored` (the planner's sequence) or the
+    /// tangential one with stop `points`.
+    fn close_group(&mut self, stored: Option<StoredStop>, points: Vec<f64>) -> BlockGroup {
+        let mut group = std::mem::take(&mut self.group);
+        let n = group.len();
+        let (last, choice) = group[n - 1];
+        let mut needed = last.curve();
+        let values = stored.map(|s| {
+            needed = needed.max(s.points.iter().map(|p| p.element).max().unwrap_or(needed));
+            group[n - 1].0.stop_len = s.points.len() as u32;
+            stop_runs(&self.arcs, &self.curves, s.from, &s.points)
+        });
+        if choice.ratio <= 1.0 + SLACK && !last.is_last() {
+            self.ends += 1;
+            self.stored += usize::from(values.is_some());
+            self.worst = self.worst.max(choice.ratio);
+        }
+        for (k, (b, _)) in group.iter_mut().enumerate() {
+            b.group_left = (n - k) as u32;
+            b.curve_needed = needed as u32;
+        }
+        let first_curve = self.next_curve;
+        let curves = (first_curve..=needed)
+            .map(|c| self.curves.element(c).curve.clone())
+            .collect();
+        self.next_curve = self.next_curve.max(needed + 1);
+        let samples: usize = group.iter().map(|(b, _)| b.len()).sum();
+        // A stored stop needs no stop points.
+        let points = if values.is_some() { Vec::new() } else { points };
+        BlockGroup {
+            time: samples as f64 * self.limits.period,
+            choices: group.iter().map(|(_, c)| *c).collect(),
+            blocks: group.into_iter().map(|(b, _)| b).collect(),
+            stored: values,
+            points,
+            curves,
+            first_curve: first_curve as u32,
         }
     }
-    f.finish(limits);
-    f.worst_ratio(limits)
-}
 
-/// Tangential deceleration and jerk the axes allow at the end of `b`: min over the axes of the
-/// limit over the axis' share of the unit tangent.
-pub(super) fn tangential_limits(curves: &PathCurves, limits: &Limits, b: &PathBlock) -> (f64, f64) {
-    crate::hold_stops::tangential_limits(curves, limits, b.curve(), b.u[b.len().saturating_sub(1)])
-}
-
-/// Per curve, the points the module's stop after a path block must respect: where the VPOp plan
-/// itself passes slowest (every local minimum of its feed, as a cap of that feed: the path
-/// needs it there, e.g. at a sharp turn) and the curve end, at rest. The stop is compressed to
-/// pass them no faster; the simulation check decides whether that stays within the limits.
-pub fn block_stop_points(toolpath: &Toolpath, blocks: &[PathBlock], period: f64) -> Vec<Vec<(f64, f64)>> {
-    let mut stops: Vec<Vec<(f64, f64)>> = toolpath
-        .elements
-        .iter()
-        .map(|e| vec![(ArcLengthTable::new(&e.curve).total(), 0.0)])
-        .collect();
-    // (curve, s, feed) of every sample, the feed over the step into it.
-    let samples: Vec<(usize, f64, f64)> = blocks
-        .iter()
-        .flat_map(|b| (0..b.len()).map(move |k| (b.curve(), b.s[k], (b.s[k] - b.s_history(k + 1)) / period)))
-        .collect();
-    for w in samples.windows(3) {
-        let (c, s, f) = w[1];
-        if f > 0.0 && f < w[0].2 && f <= w[2].2 {
-            if let Some(list) = stops.get_mut(c) {
-                list.push((s, f));
-            }
+    /// Forgets the points, minima and elements no later block can ask about: a block needs the
+    /// two points before it, a stored stop's search the three before its block's end.
+    fn forget_behind(&mut self) {
+        let keep = self.packed.saturating_sub(3);
+        while self.base < keep && self.points.pop_front().is_some() {
+            self.base += 1;
         }
+        let Some(oldest) = self.points.front().map(|p| p.element) else {
+            return;
+        };
+        let e = oldest.min(self.next_curve);
+        self.minima = self.minima.split_off(&e);
+        self.arcs.forget_before(e);
+        self.curves.release_before(e);
+        self.path.release_before(e as f64);
     }
-    for list in &mut stops {
-        list.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    stops
 }
 
-/// A VPOp plan ready for the channel: its blocks in groups (a block whose stop the planner
-/// could not bring within the limits joins the next block's group), and the arena data their
-/// stops need, which the streamer writes before the block goes out and whose offsets it
-/// fills in: per block its stored stop sequence ([`StopRun`]s), per curve its stop points.
+/// A whole plan's blocks in groups ([`block_plan`]).
 #[derive(Clone)]
 pub struct BlockPlan {
-    pub blocks: Vec<PathBlock>,
-    /// The stored stop sequence after each block, as arena values (a group's last block only).
-    pub stored: Vec<Option<Vec<f64>>>,
-    /// Per curve, its stop points as `(s, feed cap)` pairs.
-    pub points: Vec<Vec<f64>>,
-    /// The stop choice of each block.
-    pub choices: Vec<StopChoice>,
+    pub groups: Vec<BlockGroup>,
     /// Motion time of one block sample (s).
     pub period: f64,
-    /// The path's curves, for the geometry stream.
-    pub curves: Vec<Nurbs>,
+    /// Block ends with a stop within the limits, stored sequences among them, and the worst
+    /// ratio of those stops to an axis limit.
+    pub stops: (usize, usize, f64),
 }
 
 impl BlockPlan {
-    /// Motion time of block `k`.
-    pub fn time(&self, k: usize) -> f64 {
-        self.blocks.get(k).map_or(0.0, |b| b.len() as f64 * self.period)
+    /// The blocks in path order.
+    pub fn blocks(&self) -> impl Iterator<Item = &PathBlock> {
+        self.groups.iter().flat_map(|g| &g.blocks)
     }
 
-    /// Block ends with a stop within the limits, stored sequences among them, and the worst
-    /// ratio of those stops to an axis limit.
-    pub fn stops(&self) -> (usize, usize, f64) {
-        let ends = self.blocks.iter().filter(|b| b.group_left == 1 && !b.is_last()).count();
-        let stored = self.stored.iter().filter(|s| s.is_some()).count();
-        let worst = self
-            .blocks
-            .iter()
-            .zip(&self.choices)
-            .filter(|(b, _)| b.group_left == 1 && !b.is_last())
-            .map(|(_, c)| c.ratio)
-            .fold(0.0, f64::max);
-        (ends, stored, worst)
+    /// Motion time (s).
+    pub fn time(&self) -> f64 {
+        self.groups.iter().map(|g| g.time).sum()
     }
 }
 
-/// The blocks of a plan of one point per period (`points`, planned within `limits`: VPOp's or
-/// the reachability planner's) with their checked stops (jerk fractions up to
-/// `max_fraction`), in groups, and the data their stops need. `anchor`: the stop point a
+/// The blocks of a whole plan of one point per period (`points`, planned within `limits`:
+/// VPOp's or the reachability planner's) of `toolpath` with their checked stops (jerk fractions
+/// up to `max_fraction`), in groups, and the data their stops need. `anchor`: the stop point a
 /// re-plan starts from (its arc length is kept exactly).
 pub fn block_plan(
     toolpath: &Toolpath,
@@ -641,56 +639,98 @@ pub fn block_plan(
     max_fraction: f64,
 ) -> Result<BlockPlan, String> {
     check_tip_path(toolpath)?;
-    if !(max_fraction > 0.0 && max_fraction <= 1.0) {
-        return Err(format!("stop fraction {max_fraction} must be in (0, 1]"));
+    let curves = PathCurves::new(toolpath);
+    let mut builder = BlockBuilder::new(curves, JointPath::tip(toolpath), limits, anchor, max_fraction)?;
+    for p in points {
+        builder.push(*p)?;
     }
-    let mut arcs = ArcLengths::new(toolpath);
-    if let Some(a) = anchor {
-        let start = plan_start(&mut PathCurves::new(toolpath), a);
-        arcs.set_anchor(start.curve, start.u, start.s);
-    }
-    let mut blocks = pack_blocks(&arcs, points);
-    let stop_points: Vec<Vec<f64>> = block_stop_points(toolpath, &blocks, limits.period)
-        .iter()
-        .map(|list| list.iter().flat_map(|&(s, cap)| [s, cap]).collect())
-        .collect();
-    let (choices, sequences) = choose_block_stops(
-        toolpath,
-        limits,
-        &mut blocks,
-        &stop_points,
-        &fractions(max_fraction),
-        points,
-    );
-    // From the last block back: a block ends its group where its stop passed (or at the path
-    // end); the group's curves reach as far as the stored stop at its end.
-    let mut stored = vec![None; blocks.len()];
-    let (mut group_left, mut needed) = (0u32, 0u32);
-    for (k, (b, sequence)) in blocks.iter_mut().zip(sequences).enumerate().rev() {
-        let passes = choices.get(k).is_some_and(|c| c.ratio <= 1.0 + SLACK);
-        if passes || b.is_last() {
-            group_left = 1;
-            needed = b.curve;
-            if let Some(seq) = sequence.filter(|_| passes) {
-                needed = needed.max(seq.points.last().map_or(0, |p| p.element as u32));
-                stored[k] = Some(stop_runs(&arcs, seq.from, &seq.points));
-                b.stop_len = seq.points.len() as u32;
-            }
-        } else {
-            group_left += 1;
-            needed = needed.max(b.curve);
-        }
-        b.group_left = group_left;
-        b.curve_needed = needed;
-    }
+    let mut groups = Vec::new();
+    builder.finish(&mut |g| {
+        groups.push(g);
+        true
+    });
     Ok(BlockPlan {
-        blocks,
-        stored,
-        points: stop_points,
-        choices,
-        period: limits.period,
-        curves: toolpath.elements.iter().map(|e| e.curve.clone()).collect(),
+        groups,
+        period: builder.limits().period,
+        stops: (builder.ends, builder.stored, builder.worst),
     })
+}
+
+/// The reachability plan of the path `shared` (tool tip; from its start, or from rest at the
+/// module's stop point `from`) in look-ahead windows, in a thread of its own that reads the path
+/// as it plans, its blocks in groups handed out as they close (at most [`EVENTS_AHEAD`]
+/// waiting): the same positions as `nurbs-plan plan --planner reach --stream`.
+pub fn spawn_reach_blocks(
+    shared: SharedPath,
+    limits: Limits,
+    from: Option<StopPoint>,
+    max_fraction: f64,
+) -> Receiver<BlockEvent> {
+    let (sender, receiver) = mpsc::sync_channel(EVENTS_AHEAD);
+    std::thread::spawn(move || {
+        let send = |e: BlockEvent| sender.send(e).is_ok();
+        match reach_blocks(&shared, &limits, from.as_ref(), max_fraction, &mut |g| {
+            send(BlockEvent::Group(g))
+        }) {
+            Ok((line, error)) => send(BlockEvent::Done { line, error }),
+            Err(e) => send(BlockEvent::Failed(e)),
+        };
+    });
+    receiver
+}
+
+/// [`spawn_reach_blocks`]'s plan, its groups handed to `out`: a line for the log, and why the
+/// file could not be read to its end (the plan ends at rest before the element that failed).
+fn reach_blocks(
+    shared: &SharedPath,
+    limits: &Limits,
+    from: Option<&StopPoint>,
+    max_fraction: f64,
+    out: &mut dyn FnMut(BlockGroup) -> bool,
+) -> Result<(String, Option<String>), String> {
+    let mut curves = shared.open()?;
+    let start = from.map(|p| {
+        let start = plan_start(&mut curves, p);
+        (start.curve, start.u)
+    });
+    let mut builder = BlockBuilder::new(
+        shared.open()?,
+        JointPath::over(shared.open()?),
+        limits,
+        from,
+        max_fraction,
+    )?;
+    let options = ReachOptions {
+        window: Some(WindowOptions::default()),
+        ..ReachOptions::default()
+    };
+    let (mut count, mut waiting) = (0usize, 0usize);
+    let (_, stats, plan_time) = reach::run(&mut curves, limits, &options, start, &mut |p| {
+        builder.push(*p)?;
+        count += 1;
+        waiting += 1;
+        // A block is at most BLOCK_SAMPLES points: deciding more often finds nothing new.
+        if waiting >= BLOCK_SAMPLES {
+            waiting = 0;
+            if !builder.advance(out) {
+                return Err("the streamer stopped taking the plan".into());
+            }
+        }
+        Ok(())
+    })
+    .map_err(|e| match from {
+        None => e.to_string(),
+        Some(_) => format!("re-plan from the stop point: {e}"),
+    })?;
+    if !builder.finish(out) {
+        return Err("the streamer stopped taking the plan".into());
+    }
+    let motion = count.saturating_sub(1) as f64 * builder.limits().period;
+    let line = format!(
+        "Reach: {count} periods, motion {motion:.6} s, planned in {plan_time:.3} s ({} windows, first points after {:.3} s); stops within the limits at {} block ends ({} stored sequences, worst {:.4} x an axis limit)",
+        stats.windows, stats.first_points_time, builder.ends, builder.stored, builder.worst
+    );
+    Ok((line, curves.error().map(|e| e.to_string())))
 }
 
 /// The VPOp plan of `toolpath` (tool tip), from its start or from rest at the stop point `from`.

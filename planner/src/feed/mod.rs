@@ -7,17 +7,18 @@
 //! final, and the last one of each run carries its stop, the next segment re-planned to rest
 //! and checked by the planner itself ([`FinalRecord`]). A run and its stop make a group
 //! ([`Grouper`]): the module takes a group only whole, so it stops only where a checked stop
-//! is. Path blocks (VPOp): the planner runs the module's stop from every block end and checks
-//! it by finite differences ([`choose_block_stops`]); a block whose stop it cannot bring within
-//! the limits joins the next block's group.
+//! is. Path blocks (VPOp, the reachability planner): the planner runs the module's stop from
+//! every block end and checks it by finite differences ([`BlockBuilder`]); a block whose stop
+//! it cannot bring within the limits joins the next block's group.
 //!
-//! One file per job: `segments` (the Erwinski plan into groups), `blocks` (whole plans into
-//! path blocks and their checked stops), `source` (where a motion's groups come from, re-plans
+//! One file per job: `segments` (the Erwinski plan into groups), `blocks` (plans of one point
+//! per period into path blocks in groups), `block_stops` (the stop after a block: found and
+//! checked), `source` (where a motion's groups come from, re-plans
 //! at another feed override, the start rule), `streamer` (one motion into the channel). The
 //! imports are shared here.
 
-use std::cell::{OnceCell, RefCell};
-use std::collections::{HashMap, VecDeque};
+use std::cell::RefCell;
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::mpsc::{self, Receiver, TryRecvError};
 use std::time::Instant;
 
@@ -33,7 +34,7 @@ use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
-use nurbs_motion::planner::reach::{self, ReachOptions, ReachPlan};
+use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions, ReachPlan};
 use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};
@@ -42,11 +43,13 @@ use nurbs_rtcore::block_stop::block_stop;
 use nurbs_rtcore::interpolator::{Interpolator, Step};
 use nurbs_rtcore::{CachedCurve, SegmentRecord, SpanCache, StopRun};
 
+mod block_stops;
 mod blocks;
 mod segments;
 mod source;
 mod streamer;
 
+use block_stops::*;
 pub use blocks::*;
 pub use segments::*;
 pub use source::*;

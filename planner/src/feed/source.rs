@@ -43,12 +43,21 @@ pub enum Source {
         /// The servo period the plan was made for (s).
         period: f64,
     },
-    /// A VPOp plan with its checked stops, sent block group by block group.
+    /// Path blocks in groups: a whole plan's (VPOp), or a streamed plan's (the reachability
+    /// planner, in a thread of its own that reads the path as it plans).
     Blocks {
-        plan: BlockPlan,
-        next: usize,
-        /// Where each curve's stop points lie in the arena, once written.
-        points: HashMap<usize, (u32, u32)>,
+        events: Option<Receiver<BlockEvent>>,
+        queue: VecDeque<BlockGroup>,
+        /// Motion time of the groups in `queue` (s).
+        queued: f64,
+        /// The plan has ended; its motion time.
+        total: Option<f64>,
+        /// The plan ended before the file did (it could not be read further).
+        error: Option<String>,
+        /// The path a streamed plan reads (released behind the module).
+        path: Option<SharedPath>,
+        /// The servo period the plan was made for (s).
+        period: f64,
     },
 }
 
@@ -57,10 +66,9 @@ pub struct Group {
     pub(super) slots: Vec<Slot>,
     pub(super) times: Vec<f64>,
     pub(super) curve_needed: u32,
-    /// Path blocks: the blocks' indices in the plan, and how many of them have their arena
-    /// data written (and their slots made with its offsets).
-    pub(super) blocks: Vec<usize>,
-    pub(super) written: usize,
+    /// Path blocks: the arena data of the stop after the last block, still to be written (its
+    /// offsets go into the last slot).
+    pub(super) block_stop: Option<BlockStopData>,
     /// Segment records: the stop chain of the last slot, still to be written to the arena.
     pub(super) chain: Option<Vec<f64>>,
     /// Segment records: per slot, the checked stops inside it, and how many slots have theirs
@@ -71,6 +79,13 @@ pub struct Group {
     pub(super) end: Option<Box<GroupEnd>>,
     /// Segment records: what a cut into them needs ([`RingGroup`]).
     pub(super) cut_data: Option<RingGroup>,
+}
+
+/// The arena data of the stop after a block group: its stored sequence, or the stop points of
+/// its tangential stop (each emptied once written).
+pub(super) struct BlockStopData {
+    pub(super) stored: Option<Vec<f64>>,
+    pub(super) points: Option<Vec<f64>>,
 }
 
 /// A group of segment records in the ring (or running), as a plan at another feed override
@@ -253,25 +268,46 @@ impl Source {
     pub(super) fn period(&self) -> f64 {
         match self {
             Source::Segments { period, .. } => *period,
-            Source::Blocks { plan, .. } => plan.period,
+            Source::Blocks { period, .. } => *period,
         }
     }
 
-    /// A VPOp plan's blocks.
+    /// A whole plan's blocks ([`block_plan`]).
     pub fn blocks(plan: BlockPlan) -> Source {
+        let total = plan.time();
         Source::Blocks {
-            plan,
-            next: 0,
-            points: HashMap::new(),
+            events: None,
+            queue: plan.groups.into(),
+            queued: total,
+            total: Some(total),
+            error: None,
+            path: None,
+            period: plan.period,
+        }
+    }
+
+    /// The reachability plan of `path` (from its start, or from rest at the stop point `from`)
+    /// as a stream of block groups ([`spawn_reach_blocks`]); the streamer releases the path
+    /// behind the module.
+    pub fn streamed_blocks(path: SharedPath, limits: Limits, from: Option<StopPoint>, max_fraction: f64) -> Source {
+        let period = limits.period;
+        let events = spawn_reach_blocks(path.clone(), limits, from, max_fraction);
+        Source::Blocks {
+            events: Some(events),
+            queue: VecDeque::new(),
+            queued: 0.0,
+            total: None,
+            error: None,
+            path: Some(path),
+            period,
         }
     }
 
     /// Motion time planned so far.
     pub(super) fn planned(&self) -> f64 {
         match self {
-            Source::Segments { total: Some(t), .. } => *t,
-            Source::Segments { .. } => 0.0,
-            Source::Blocks { plan, .. } => plan.blocks.iter().map(|b| b.len() as f64 * plan.period).sum(),
+            Source::Segments { total: Some(t), .. } | Source::Blocks { total: Some(t), .. } => *t,
+            Source::Segments { .. } | Source::Blocks { .. } => 0.0,
         }
     }
 }

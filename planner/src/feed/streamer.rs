@@ -182,26 +182,28 @@ impl<'a> Streamer<'a> {
                 Source::Segments {
                     events, queue, total, ..
                 } => events.is_none() && queue.is_empty() && total.is_some(),
-                Source::Blocks { plan, next, .. } => *next >= plan.blocks.len(),
+                Source::Blocks {
+                    events, queue, total, ..
+                } => events.is_none() && queue.is_empty() && total.is_some(),
             }
     }
 
     /// Why the plan ended before the toolpath file did, once it has ended.
     pub fn plan_error(&self) -> Option<&str> {
         match &self.source {
-            Source::Segments { error, .. } => error.as_deref(),
-            Source::Blocks { .. } => None,
+            Source::Segments { error, .. } | Source::Blocks { error, .. } => error.as_deref(),
         }
     }
 
     /// Whether [`QUEUED_AHEAD`] seconds of motion wait to be sent (the planner waits for them).
     fn queue_full(&self) -> bool {
-        matches!(&self.source, Source::Segments { queued, events: Some(_), .. } if *queued >= QUEUED_AHEAD)
+        matches!(&self.source, Source::Segments { queued, events: Some(_), .. } | Source::Blocks { queued, events: Some(_), .. } if *queued >= QUEUED_AHEAD)
     }
 
     /// Takes what the planner thread has handed out so far, up to [`QUEUED_AHEAD`].
     fn receive(&mut self) -> Result<(), String> {
         self.receive_replan();
+        self.receive_blocks()?;
         let Source::Segments {
             events,
             queue,
@@ -241,6 +243,50 @@ impl<'a> Streamer<'a> {
                 Err(TryRecvError::Empty) => break,
                 Err(TryRecvError::Disconnected) => {
                     // A panic in the planning thread (its message kept by nurbs_motion::panics).
+                    let why = nurbs_motion::panics::take_last();
+                    return Err(format!(
+                        "the planner thread ended before the plan did{}",
+                        why.map_or(String::new(), |w| format!(": {w}"))
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Takes the block groups a streamed plan has handed out so far, up to [`QUEUED_AHEAD`].
+    fn receive_blocks(&mut self) -> Result<(), String> {
+        let Source::Blocks {
+            events,
+            queue,
+            queued,
+            total,
+            error,
+            ..
+        } = &mut self.source
+        else {
+            return Ok(());
+        };
+        while let Some(rx) = events {
+            if *queued >= QUEUED_AHEAD {
+                break;
+            }
+            match rx.try_recv() {
+                Ok(BlockEvent::Group(g)) => {
+                    self.planned += g.time;
+                    self.groups_planned += 1;
+                    *queued += g.time;
+                    queue.push_back(g);
+                }
+                Ok(BlockEvent::Done { line, error: failed }) => {
+                    say!("nurbs-planner: {line}");
+                    *total = Some(self.planned);
+                    *events = None;
+                    *error = failed;
+                }
+                Ok(BlockEvent::Failed(e)) => return Err(e),
+                Err(TryRecvError::Empty) => break,
+                Err(TryRecvError::Disconnected) => {
                     let why = nurbs_motion::panics::take_last();
                     return Err(format!(
                         "the planner thread ended before the plan did{}",
@@ -607,6 +653,7 @@ impl<'a> Streamer<'a> {
     /// The next group from the source, if one is ready; the curves it is the first to need
     /// join the queue of curves to publish.
     fn next_group(&mut self) -> Result<Option<Group>, String> {
+        let period = self.source.period();
         match &mut self.source {
             Source::Segments {
                 queue,
@@ -629,30 +676,20 @@ impl<'a> Streamer<'a> {
                         slot.hold_stops_len = stops.count as u32;
                     }
                 }
-                if !g.curves.is_empty() && g.first_curve > self.next_queued {
-                    return Err(format!(
-                        "a group brings curves from {}, but curve {} comes next",
-                        g.first_curve, self.next_queued
-                    ));
-                }
-                // A re-plan may bring curves again that an earlier plan's groups brought (the
-                // same path): those are queued already.
-                let known = (self.next_queued.saturating_sub(g.first_curve) as usize).min(g.curves.len());
-                self.next_queued += (g.curves.len() - known) as u32;
-                self.curves.extend(g.curves.into_iter().skip(known));
+                let feed_override = replanner.as_ref().map_or(1.0, |r| r.feed_override);
+                self.queue_curves(g.first_curve, std::mem::take(&mut g.curves))?;
                 let cut_data = g.begin.map(|begin| RingGroup {
                     first: 0, // set as it goes into the ring
                     records: g.slots.iter().map(|s| s.record).collect(),
                     begin,
                     hold_samples: g.hold_stops.iter().map(|stops| stops.samples().collect()).collect(),
-                    feed_override: replanner.as_ref().map_or(1.0, |r| r.feed_override),
+                    feed_override,
                 });
                 Ok(Some(Group {
                     curve_needed,
                     times: g.slots.iter().map(|s| s.record.profile().total_time()).collect(),
                     slots: g.slots.iter().map(Slot::segment).collect(),
-                    blocks: Vec::new(),
-                    written: 0,
+                    block_stop: None,
                     chain: (!g.chain.is_empty()).then_some(g.chain),
                     hold_stops: g.hold_stops,
                     hold_stops_written: 0,
@@ -660,29 +697,21 @@ impl<'a> Streamer<'a> {
                     cut_data,
                 }))
             }
-            Source::Blocks { plan, next, .. } => {
-                let first = *next;
-                if first >= plan.blocks.len() {
+            Source::Blocks { queue, queued, .. } => {
+                let Some(g) = queue.pop_front() else {
                     return Ok(None);
-                }
-                let n = (plan.blocks[first].group_left as usize).max(1);
-                let range = first..(first + n).min(plan.blocks.len());
-                *next = range.end;
-                let needed = plan.blocks[first].curve_needed;
-                while self.next_queued <= needed {
-                    let c = plan
-                        .curves
-                        .get(self.next_queued as usize)
-                        .ok_or_else(|| format!("a block needs curve {}, beyond the path", self.next_queued))?;
-                    self.curves.push_back(c.clone());
-                    self.next_queued += 1;
-                }
+                };
+                *queued -= g.time;
+                self.queue_curves(g.first_curve, g.curves)?;
+                let last = g.blocks.len() - 1;
                 Ok(Some(Group {
-                    curve_needed: needed,
-                    times: range.clone().map(|k| plan.time(k)).collect(),
-                    slots: range.clone().map(|k| Slot::block(&plan.blocks[k])).collect(),
-                    blocks: range.collect(),
-                    written: 0,
+                    curve_needed: g.blocks[last].curve_needed,
+                    times: g.blocks.iter().map(|b| b.len() as f64 * period).collect(),
+                    slots: g.blocks.iter().map(Slot::block).collect(),
+                    block_stop: Some(BlockStopData {
+                        stored: g.stored,
+                        points: Some(g.points),
+                    }),
                     chain: None,
                     hold_stops: Vec::new(),
                     hold_stops_written: 0,
@@ -691,6 +720,22 @@ impl<'a> Streamer<'a> {
                 }))
             }
         }
+    }
+
+    /// Queues the curves a group is the first to need (`curves`, from curve `first` on) for
+    /// the geometry stream: a re-plan may bring curves again that an earlier plan's groups
+    /// brought (the same path), which are queued already.
+    fn queue_curves(&mut self, first: u32, curves: Vec<Nurbs>) -> Result<(), String> {
+        if !curves.is_empty() && first > self.next_queued {
+            return Err(format!(
+                "a group brings curves from {first}, but curve {} comes next",
+                self.next_queued
+            ));
+        }
+        let known = (self.next_queued.saturating_sub(first) as usize).min(curves.len());
+        self.next_queued += (curves.len() - known) as u32;
+        self.curves.extend(curves.into_iter().skip(known));
+        Ok(())
     }
 
     /// Publishes the curves up to `needed`; false if there is no room for them yet.
@@ -770,47 +815,40 @@ impl<'a> Streamer<'a> {
         Ok(true)
     }
 
-    /// Path blocks: writes the arena data of the group's blocks (their curve's stop points,
-    /// their stored stop) and fills in the offsets; false if there is no room yet.
+    /// Path blocks: writes the arena data of the stop after the group's last block (its stored
+    /// sequence, or its stop points) and fills in the offsets; false if there is no room yet
+    /// (what is written stays written). Needed until the module runs past that block.
     fn write_block_data(&mut self, group: &mut Group) -> Result<bool, String> {
-        let Source::Blocks { plan, points, .. } = &mut self.source else {
+        let Some(data) = &mut group.block_stop else {
             return Ok(true);
         };
-        let first_push = self.pushed;
-        while let Some(&k) = group.blocks.get(group.written) {
-            let mut b = plan.blocks[k];
-            let curve = b.curve();
-            let placed = match points.get(&curve) {
-                Some(&placed) => placed,
-                None => {
-                    let list = plan.points.get(curve).map_or(&[][..], Vec::as_slice);
-                    match self.writer.put(list, Release::Curve(b.curve)) {
-                        Ok(offset) => {
-                            let placed = (offset, (list.len() / 2) as u32);
-                            points.insert(curve, placed);
-                            placed
-                        }
-                        Err(WriteError::Full) => return Ok(false),
-                        Err(WriteError::Refused(e)) => return Err(e),
-                    }
-                }
+        let last = group.slots.len() - 1;
+        let release = Release::Slot(self.pushed + last as u64);
+        let Some(Record::Block(mut b)) = group.slots[last].decode() else {
+            return Err("a block group's last slot holds no block".into());
+        };
+        for (values, stored) in [(&mut data.stored, true), (&mut data.points, false)] {
+            let Some(list) = values.as_ref() else {
+                continue;
             };
-            (b.points_offset, b.points_len) = placed;
-            if let Some(values) = &plan.stored[k] {
-                // Needed until the module runs past the block's end.
-                match self
-                    .writer
-                    .put(values, Release::Slot(first_push + group.written as u64))
-                {
-                    Ok(offset) => b.stop_offset = offset,
+            let offset = if list.is_empty() {
+                0
+            } else {
+                match self.writer.put(list, release) {
+                    Ok(offset) => offset,
                     Err(WriteError::Full) => return Ok(false),
                     Err(WriteError::Refused(e)) => return Err(e),
                 }
-                plan.stored[k] = None;
+            };
+            if stored {
+                b.stop_offset = offset;
+            } else {
+                (b.points_offset, b.points_len) = (offset, (list.len() / 2) as u32);
             }
-            group.slots[group.written] = Slot::block(&b);
-            group.written += 1;
+            *values = None;
+            group.slots[last] = Slot::block(&b);
         }
+        group.block_stop = None;
         Ok(true)
     }
 
@@ -888,8 +926,10 @@ impl<'a> Streamer<'a> {
             .and_then(|g| g.records.first())
             .map(|r| r.curve);
         let floor = replayed.map_or(module, |c| c.min(module)).saturating_sub(1);
-        if let Source::Segments { replanner: Some(r), .. } = &self.source {
-            r.path.release_before(floor as usize);
+        match &self.source {
+            Source::Segments { replanner: Some(r), .. } => r.path.release_before(floor as usize),
+            Source::Blocks { path: Some(path), .. } => path.release_before(floor as usize),
+            _ => {}
         }
     }
 
@@ -922,7 +962,7 @@ impl<'a> Streamer<'a> {
         }
         let total = match &self.source {
             Source::Segments { total, .. } => total.unwrap_or(f64::INFINITY),
-            Source::Blocks { .. } => self.planned,
+            Source::Blocks { total, .. } => total.unwrap_or(f64::INFINITY),
         };
         let rate = self.planned / self.began.elapsed().as_secs_f64().max(1e-9);
         // With the queue full the planner waits for the motion: it cannot get further ahead.

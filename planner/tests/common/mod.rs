@@ -382,8 +382,20 @@ pub fn paced_run<'a>(
     mut control: impl FnMut(&mut Streamer<'a>, usize),
 ) -> (Vec<Out>, Streamer<'a>) {
     let source = Source::streamed(SharedPath::whole(toolpath), limits.clone(), None, 1.0);
+    paced_source_run(l, toolpath.tip_dim(), source, speed, periods, &mut control)
+}
+
+/// [`paced_run`] of any source of a `tip`-axis path.
+pub fn paced_source_run<'a>(
+    l: &'a Loaded,
+    tip: usize,
+    source: Source,
+    speed: f64,
+    periods: usize,
+    control: &mut dyn FnMut(&mut Streamer<'a>, usize),
+) -> (Vec<Out>, Streamer<'a>) {
     let began = Instant::now();
-    let mut s = Streamer::new(l.channel, toolpath.tip_dim(), source, 0, 0.25, began).unwrap();
+    let mut s = Streamer::new(l.channel, tip, source, 0, 0.25, began).unwrap();
     let mut got: Vec<Out> = Vec::new();
     let mut pace = Pace::new(began, speed);
     for k in 0..periods {

@@ -86,12 +86,13 @@ const C_TABLE: usize = 4096;
 
 impl Store {
     fn new(curves: PathCurves) -> Self {
+        let first = curves.first();
         Store {
             curves,
-            elements: Window::default(),
+            elements: Window::starting_at(first),
             stops: VecDeque::new(),
             count: None,
-            view: 0,
+            view: first,
             most_held: 0,
         }
     }
@@ -169,7 +170,9 @@ impl JointPath {
         Ok(Self::over(PathCurves::streamed(source)?))
     }
 
-    fn over(curves: PathCurves) -> Self {
+    /// The tool-tip path of `curves`, read as the queries reach them (a streamed path may begin
+    /// past element 0: a re-plan from a stop point further on).
+    pub fn over(curves: PathCurves) -> Self {
         let tip = curves.tip_dim();
         JointPath {
             store: RefCell::new(Store::new(curves)),
