@@ -205,20 +205,33 @@ pub(super) struct CheckedStop {
 }
 
 /// The arena values of the stored stop `points` that follow `from`: a [`StopRun`] per element,
-/// each position as `(u, s)` in its element's measure.
+/// each position as `(u, s)` in its element's measure. The arc length of a run's first step
+/// is exact (from the curve's start), each later step adds its chord, which the module checks
+/// against it (a chord within 1e-9 of its step, and an arc of one period differs from its
+/// chord by far less; exact lengths cost an adaptive quadrature per position).
 pub(super) fn stop_runs(arcs: &ArcLengths, curves: &PathCurves, from: PathPoint, points: &[PathPoint]) -> Vec<f64> {
+    let tip = curves.tip_dim();
+    let mut spans = SpanCache::new();
+    let mut position = |p: &PathPoint| CachedCurve::new(curves.view(p.element), &mut spans).point(p.u);
     let mut values = Vec::with_capacity(2 * points.len() + StopRun::VALUES);
-    let mut before = from;
+    let mut before = (from, position(&from));
     for run in points.chunk_by(|a, b| a.element == b.element) {
         let e = run[0].element;
-        let header = StopRun {
-            curve: e,
-            count: run.len(),
-            s_before: arcs.s(curves, &before, e),
-        };
-        values.extend(header.to_values());
-        values.extend(run.iter().flat_map(|p| [p.u, arcs.s(curves, p, e)]));
-        before = run[run.len() - 1];
+        let mut s = arcs.s(curves, &before.0, e);
+        values.extend(
+            StopRun {
+                curve: e,
+                count: run.len(),
+                s_before: s,
+            }
+            .to_values(),
+        );
+        for p in run {
+            let here = position(p);
+            s += (0..tip).map(|i| (here[i] - before.1[i]).powi(2)).sum::<f64>().sqrt();
+            values.extend([p.u, s]);
+            before = (*p, here);
+        }
     }
     values
 }

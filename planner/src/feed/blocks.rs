@@ -436,8 +436,10 @@ impl BlockBuilder {
         }
         let (a_max, j_max) = tangential_limits(&self.curves, &self.limits, &b);
         let points = self.stop_points(e, b.s[b.len() - 1]);
-        // VPOp's own deceleration first (the plan's states mostly brake at once: one sequence
-        // and its check), the module's tangential stop where it does not pass.
+        // VPOp's own deceleration first (VPOp's own plan's states mostly brake at once; from the
+        // reachability planner's, it walks on along the plan some 8 positions), the module's
+        // tangential stop where it does not pass.
+        let from = self.point(end - 1)?;
         let sequence = if last {
             None
         } else {
@@ -450,7 +452,6 @@ impl BlockBuilder {
                 Err(_) => None,
             }
         };
-        let from = self.point(end - 1)?;
         let stored = sequence.and_then(|points| {
             let reach = points.iter().map(|p| p.element).max().unwrap_or(e);
             (self.curves.load(reach)).then_some(())?;
