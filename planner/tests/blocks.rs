@@ -11,9 +11,9 @@ use common::*;
 use nurbs_hal::channel::{PathBlock, Slot, StopPoint};
 use nurbs_hal::module::FaultCode;
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions};
+use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions, ReachPlan};
 use nurbs_motion::planner::vpop::VpopPlan;
-use nurbs_motion::planner::PathCurves;
+use nurbs_motion::planner::{Limits, PathCurves};
 use nurbs_planner::feed::{block_plan, plan_start, vpop_plan, BlockPlan, Source, Streamer};
 use nurbs_planner::shared_path::SharedPath;
 
@@ -88,6 +88,20 @@ fn vpop_blocks_run_exactly_the_planned_positions() {
     }
 }
 
+/// The bundled curve `name`, lab set 1, and its reachability plan in look-ahead windows (the
+/// positions `nurbs-planner --planner reach` streams).
+fn windowed_reach(name: &str) -> (Toolpath, Limits, ReachPlan) {
+    let toolpath = job(name).toolpath;
+    let tip = toolpath.tip_dim();
+    let limits = lab1(tip).for_axes(tip).unwrap();
+    let options = ReachOptions {
+        window: Some(WindowOptions::default()),
+        ..ReachOptions::default()
+    };
+    let plan = reach::plan_tip(&toolpath, &limits, &options, None).unwrap();
+    (toolpath, limits, plan)
+}
+
 /// The reachability planner streamed as `nurbs-planner --planner reach` runs it (in look-ahead
 /// windows, in its own thread, the blocks decided as the points come): the module plays the
 /// positions `nurbs-plan plan --planner reach --stream` plans, one per period, within the
@@ -97,14 +111,8 @@ fn reach_blocks_stream_the_windowed_plan() {
     let _guard = lock_module();
     let mut windows = 0;
     for name in ["trident.json", "butterfly.json"] {
-        let toolpath = job(name).toolpath;
+        let (toolpath, limits, plan) = windowed_reach(name);
         let tip = toolpath.tip_dim();
-        let limits = lab1(tip).for_axes(tip).unwrap();
-        let options = ReachOptions {
-            window: Some(WindowOptions::default()),
-            ..ReachOptions::default()
-        };
-        let plan = reach::plan_tip(&toolpath, &limits, &options, None).unwrap();
         windows += plan.stats.windows;
         let l = load();
         let source = Source::streamed_blocks(SharedPath::whole(&toolpath), limits.clone(), None, 1.0);
@@ -305,4 +313,99 @@ fn bad_blocks_are_refused_with_the_position_held() {
         }
     }
     assert_eq!(u32_pin("nurbs_interp.fault-code"), FaultCode::RecordKind as u32);
+}
+
+/// Holds at random samples of the reachability plan in windows (the positions `nurbs-planner
+/// --planner reach` streams) as path blocks: every stop within the limits, at rest; how soon
+/// the motion leaves the plan (the first sample that is not the plan's) and decelerates (the
+/// first sample from which the feed falls at every sample to rest), printed as distributions.
+/// `HOLD_INSTANTS` (default 12 per path) selects a longer run; docs/testing.md records one.
+#[test]
+fn reach_blocks_hold_within_the_limits() {
+    let _guard = lock_module();
+    let per_path: usize = std::env::var("HOLD_INSTANTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(12);
+    let mut instants = Instants::new(0x9e37_79b9_7f4a_7c15);
+    for name in ["trident.json", "butterfly.json"] {
+        let (toolpath, limits, plan) = windowed_reach(name);
+        let tip = toolpath.tip_dim();
+        let blocks = block_plan(&toolpath, (&plan.points, &plan.limits), None, 1.0).unwrap();
+        let job = Job {
+            toolpath,
+            limits,
+            groups: Vec::new(),
+            samples: Vec::new(),
+        };
+        let (mut leaves, mut brakes) = (Vec::new(), Vec::new());
+        for _ in 0..per_path {
+            let at = instants.next(plan.points.len() - 2);
+            let l = load();
+            let source = Source::blocks(blocks.clone());
+            let mut s = Streamer::new(l.channel, tip, source, 0, f64::INFINITY, Instant::now()).unwrap();
+            let mut got: Vec<Out> = Vec::new();
+            for _ in 0..plan.points.len() + 20_000 {
+                s.fill().unwrap();
+                if got.len() >= at {
+                    set_bit("nurbs_interp.hold", true);
+                }
+                assert!(!period(), "the update path allocated");
+                if bit("nurbs_interp.active") {
+                    got.push(out());
+                }
+                if bit("nurbs_interp.held") || bit("nurbs_interp.done") || bit("nurbs_interp.fault") {
+                    break;
+                }
+            }
+            set_bit("nurbs_interp.hold", false);
+            assert!(!bit("nurbs_interp.fault"), "{name}: hold at {at}: fault");
+            let held = bit("nurbs_interp.held");
+            drop(s);
+            drop(l);
+            if !held {
+                continue; // the motion ended first (a hold in its last group)
+            }
+            hold_position(&mut got);
+            assert_eq!(
+                violations(&job, &got, false),
+                Vec::<String>::new(),
+                "{name}: hold at {at}"
+            );
+            let left = got
+                .iter()
+                .zip(&plan.points)
+                .position(|(o, p)| o.u != p.u || o.curve != p.element)
+                .unwrap_or(got.len());
+            let leave = left.saturating_sub(at);
+            // The last sample before rest whose feed did not fall: the deceleration starts there.
+            let rest = (at..got.len()).find(|&k| got[k].feed <= 0.0).unwrap_or(got.len());
+            let from = (at.max(1)..rest)
+                .rev()
+                .find(|&k| got[k].feed >= got[k - 1].feed)
+                .unwrap_or(at);
+            leaves.push(leave);
+            brakes.push(from.saturating_sub(at).min(leave));
+        }
+        leaves.sort_unstable();
+        brakes.sort_unstable();
+        let ms = |k: usize| k as f64 * PERIOD * 1e3;
+        let show = |v: &[usize]| {
+            format!(
+                "median {:.2} ms, 99 % {:.2} ms, worst {:.2} ms; within 5 ms: {} of {}",
+                ms(quantile(v, 0.5)),
+                ms(quantile(v, 0.99)),
+                ms(v.last().copied().unwrap_or(0)),
+                v.iter().filter(|&&k| ms(k) <= 5.0).count(),
+                v.len()
+            )
+        };
+        println!(
+            "{name}: {} holds: leaves the plan after {}",
+            leaves.len(),
+            show(&leaves)
+        );
+        println!("{name}: decelerates to rest after {}", show(&brakes));
+        assert!(!leaves.is_empty(), "{name}: some hold stopped the motion");
+    }
 }

@@ -204,16 +204,7 @@ pub struct BlockGroup {
 }
 
 /// What a streamed block plan's thread hands out.
-pub enum BlockEvent {
-    Group(BlockGroup),
-    /// The plan is complete (a line for the log); `error`: the file could not be read to its
-    /// end, and the plan ends at rest before the element that failed.
-    Done {
-        line: String,
-        error: Option<String>,
-    },
-    Failed(String),
-}
+pub type BlockEvent = PlanEvent<BlockGroup>;
 
 /// Turns a plan of one point per period (VPOp's or the reachability planner's), handed over
 /// as it is planned, into path blocks in groups, each group ending where the module's stop is

@@ -143,9 +143,9 @@ pub(super) fn curve_needed(r: &FinalRecord) -> u32 {
 
 /// What [`stream_plan`] hands out, in order.
 #[derive(Clone, Debug)]
-pub enum PlanEvent {
-    /// The next group of final records.
-    Group(SegmentGroup),
+pub enum PlanEvent<G = SegmentGroup> {
+    /// The next group (of final records, or of path blocks: [`BlockEvent`]).
+    Group(G),
     /// The plan is complete (a line for the log); `error`: the file could not be read to its
     /// end, and the plan ends at rest before the element that failed.
     Done {

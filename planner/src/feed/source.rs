@@ -323,6 +323,9 @@ pub const START_AHEAD: f64 = 0.1;
 /// Motion time (s) of the groups a streamed plan hands out ahead of the ring: the planner
 /// thread waits beyond it, so that memory follows the look-ahead, not the program's length.
 pub const QUEUED_AHEAD: f64 = 20.0;
+/// The same for a streamed plan's path blocks, whose stored stops make a second of motion
+/// weigh some 2 MB (LinuxCNC's `3D_Chips.ngc`: 880 arena values per 4 ms block).
+pub const BLOCKS_QUEUED_AHEAD: f64 = 4.0;
 /// While a re-plan at another feed override is on its way, the plan it is to replace is not
 /// read further once this much of its motion (s) waits to be sent: its thread then waits (its
 /// channel full), and the re-plan has the processor (on two cores, a plan still running ahead

@@ -3,6 +3,16 @@
 
 use super::*;
 
+/// Why a plan's events stopped before its end: a panic in the planning thread (its message kept
+/// by `nurbs_motion::panics`).
+fn planner_thread_ended() -> String {
+    let why = nurbs_motion::panics::take_last();
+    format!(
+        "the planner thread ended before the plan did{}",
+        why.map_or(String::new(), |w| format!(": {w}"))
+    )
+}
+
 /// Streams one motion into the channel: its curves into the geometry stream, its groups of
 /// slots into the ring within the time margin.
 pub struct Streamer<'a> {
@@ -195,9 +205,22 @@ impl<'a> Streamer<'a> {
         }
     }
 
-    /// Whether [`QUEUED_AHEAD`] seconds of motion wait to be sent (the planner waits for them).
+    /// Whether [`QUEUED_AHEAD`] seconds of motion ([`BLOCKS_QUEUED_AHEAD`] of path blocks) wait
+    /// to be sent (the planner waits for them).
     fn queue_full(&self) -> bool {
-        matches!(&self.source, Source::Segments { queued, events: Some(_), .. } | Source::Blocks { queued, events: Some(_), .. } if *queued >= QUEUED_AHEAD)
+        match &self.source {
+            Source::Segments {
+                queued,
+                events: Some(_),
+                ..
+            } => *queued >= QUEUED_AHEAD,
+            Source::Blocks {
+                queued,
+                events: Some(_),
+                ..
+            } => *queued >= BLOCKS_QUEUED_AHEAD,
+            _ => false,
+        }
     }
 
     /// Takes what the planner thread has handed out so far, up to [`QUEUED_AHEAD`].
@@ -241,20 +264,14 @@ impl<'a> Streamer<'a> {
                 }
                 Ok(PlanEvent::Failed(e)) => return Err(e),
                 Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => {
-                    // A panic in the planning thread (its message kept by nurbs_motion::panics).
-                    let why = nurbs_motion::panics::take_last();
-                    return Err(format!(
-                        "the planner thread ended before the plan did{}",
-                        why.map_or(String::new(), |w| format!(": {w}"))
-                    ));
-                }
+                Err(TryRecvError::Disconnected) => return Err(planner_thread_ended()),
             }
         }
         Ok(())
     }
 
-    /// Takes the block groups a streamed plan has handed out so far, up to [`QUEUED_AHEAD`].
+    /// Takes the block groups a streamed plan has handed out so far, up to
+    /// [`BLOCKS_QUEUED_AHEAD`].
     fn receive_blocks(&mut self) -> Result<(), String> {
         let Source::Blocks {
             events,
@@ -268,7 +285,7 @@ impl<'a> Streamer<'a> {
             return Ok(());
         };
         while let Some(rx) = events {
-            if *queued >= QUEUED_AHEAD {
+            if *queued >= BLOCKS_QUEUED_AHEAD {
                 break;
             }
             match rx.try_recv() {
@@ -286,13 +303,7 @@ impl<'a> Streamer<'a> {
                 }
                 Ok(BlockEvent::Failed(e)) => return Err(e),
                 Err(TryRecvError::Empty) => break,
-                Err(TryRecvError::Disconnected) => {
-                    let why = nurbs_motion::panics::take_last();
-                    return Err(format!(
-                        "the planner thread ended before the plan did{}",
-                        why.map_or(String::new(), |w| format!(": {w}"))
-                    ));
-                }
+                Err(TryRecvError::Disconnected) => return Err(planner_thread_ended()),
             }
         }
         Ok(())
