@@ -563,7 +563,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// is planned; every setpoint is written once its stretch (rest to rest) passed the
 /// finite-difference check.
 fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use nurbs_motion::planner::reach::{run, window::WindowOptions, ReachOptions};
+    use nurbs_motion::planner::reach::{run, window::WindowOptions, Planned, ReachOptions};
     let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
     let program = stream.program()?;
     let mut curves = PathCurves::streamed(stream.take_elements())?;
@@ -575,7 +575,10 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         window: args.stream.then(WindowOptions::default),
         ..ReachOptions::default()
     };
-    let planned = run(&mut curves, &limits, &options, None, &mut |p| writer.emit(p));
+    let planned = run(&mut curves, &limits, &options, None, &mut |p| match p {
+        Planned::Point(p) => writer.emit(p),
+        Planned::Stop(_) => Ok(()),
+    });
     writer.write_error()?;
     let (limits, stats, plan_time) = planned?;
     let (check, deviation, points, rows) = writer.finish()?;

@@ -14,7 +14,7 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions, ReachPlan};
 use nurbs_motion::planner::vpop::VpopPlan;
 use nurbs_motion::planner::{Limits, PathCurves};
-use nurbs_planner::feed::{block_plan, plan_start, vpop_plan, BlockPlan, Source, Streamer};
+use nurbs_planner::feed::{block_plan, plan_start, reach_block_plan, vpop_plan, BlockPlan, Source, Streamer};
 use nurbs_planner::shared_path::SharedPath;
 
 struct BlockJob {
@@ -317,8 +317,10 @@ fn bad_blocks_are_refused_with_the_position_held() {
 
 /// Holds at random samples of the reachability plan in windows (the positions `nurbs-planner
 /// --planner reach` streams) as path blocks: every stop within the limits, at rest; how soon
-/// the motion leaves the plan (the first sample that is not the plan's) and decelerates (the
-/// first sample from which the feed falls at every sample to rest), printed as distributions.
+/// the motion leaves the plan (the first sample that is not the plan's) and brakes (the first
+/// sample after which, at every sample to rest, the feed or its rate of change falls), printed
+/// as distributions. The blocks are those `nurbs-planner` streams, with the stops the plan
+/// offers: every block end has one stored.
 /// `HOLD_INSTANTS` (default 12 per path) selects a longer run; docs/testing.md records one.
 #[test]
 fn reach_blocks_hold_within_the_limits() {
@@ -331,7 +333,18 @@ fn reach_blocks_hold_within_the_limits() {
     for name in ["trident.json", "butterfly.json"] {
         let (toolpath, limits, plan) = windowed_reach(name);
         let tip = toolpath.tip_dim();
-        let blocks = block_plan(&toolpath, (&plan.points, &plan.limits), None, 1.0).unwrap();
+        // The blocks `nurbs-planner --planner reach` streams, with the stops the plan offers.
+        let (blocks, line) = reach_block_plan(&SharedPath::whole(&toolpath), &limits, 1.0).unwrap();
+        println!("{name}: {line}");
+        let played: Vec<f64> = blocks.blocks().flat_map(|b| b.u[..b.len()].to_vec()).collect();
+        let planned: Vec<f64> = plan.points.iter().map(|p| p.u).collect();
+        assert_eq!(played, planned, "{name}: the blocks hold the windowed plan");
+        let (ends, stored, worst) = blocks.stops;
+        let blocks_count = blocks.blocks().count();
+        assert!(
+            stored == ends && ends + 1 == blocks_count && worst <= 1.0 + 1e-6,
+            "{name}: a stored stop within the limits at every block end but the last ({stored} stored, {ends} ends, {blocks_count} blocks)"
+        );
         let job = Job {
             toolpath,
             limits,
@@ -378,11 +391,14 @@ fn reach_blocks_hold_within_the_limits() {
                 .position(|(o, p)| o.u != p.u || o.curve != p.element)
                 .unwrap_or(got.len());
             let leave = left.saturating_sub(at);
-            // The last sample before rest whose feed did not fall: the deceleration starts there.
+            // The stop brakes from the first sample after which, at every sample to rest, the
+            // feed falls or its rate of change does (a jerk-limited stop from an accelerating
+            // state first brings the acceleration down).
             let rest = (at..got.len()).find(|&k| got[k].feed <= 0.0).unwrap_or(got.len());
-            let from = (at.max(1)..rest)
+            let rate = |k: usize| got[k].feed - got[k - 1].feed;
+            let from = (at.max(2)..rest)
                 .rev()
-                .find(|&k| got[k].feed >= got[k - 1].feed)
+                .find(|&k| rate(k) >= 0.0 && rate(k) - rate(k - 1) >= 0.0)
                 .unwrap_or(at);
             leaves.push(leave);
             brakes.push(from.saturating_sub(at).min(leave));
@@ -405,7 +421,7 @@ fn reach_blocks_hold_within_the_limits() {
             leaves.len(),
             show(&leaves)
         );
-        println!("{name}: decelerates to rest after {}", show(&brakes));
+        println!("{name}: brakes to rest after {}", show(&brakes));
         assert!(!leaves.is_empty(), "{name}: some hold stopped the motion");
     }
 }

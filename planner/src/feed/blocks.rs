@@ -232,6 +232,12 @@ pub type BlockEvent = PlanEvent<BlockGroup>;
 /// (128 and 784 stored), against 0.24 s and 1.3 s with the sequence first (all stored; the
 /// arena they take, 20 % and 3 % more values, is the price).
 ///
+/// A plan that offers stops of its own ([`Self::offer_stop`]: the reachability planner's, the
+/// quickest stop its controllable sets allow from a station's state) needs no deceleration
+/// search: a block ends where an offered stop branches off inside it, and its stored stop is
+/// the plan's positions to the first offered stop at or after its end, then that stop, checked
+/// the same way; the tangential stop where it does not pass.
+///
 /// The tangential stop respects the plan's feed minima ahead on the block's curve (a cap of
 /// that feed: the path needs it there, e.g. at a sharp turn) and the curve end, at rest: those
 /// known when the block is decided. A block is decided once the points after it settle its
@@ -258,6 +264,11 @@ pub struct BlockBuilder {
     searched: bool,
     last_passed: usize,
     brakes: BrakeMemo,
+    /// Stops the plan offers (the reachability planner's, from its controllable sets), by the
+    /// number of the point they follow: where it offers them, they replace VPOp's deceleration
+    /// search, and blocks end where they branch off.
+    offered: BTreeMap<usize, Vec<PathPoint>>,
+    offers: bool,
     /// Per curve, the plan's feed minima `(s, feed)` found so far, and the last two points'
     /// `(curve, s, feed)` (the feed over the step into each).
     minima: BTreeMap<usize, Vec<(f64, f64)>>,
@@ -316,6 +327,8 @@ impl BlockBuilder {
             searched: false,
             last_passed: 0,
             brakes: BrakeMemo::default(),
+            offered: BTreeMap::new(),
+            offers: false,
             minima: BTreeMap::new(),
             recent: [None, None],
             group: Vec::new(),
@@ -367,6 +380,24 @@ impl BlockBuilder {
         Ok(())
     }
 
+    /// Takes a stop the plan offers after the last point pushed (its positions from the next
+    /// period on, to rest). Once a plan offers stops, only they and the module's tangential
+    /// stop are tried.
+    pub fn offer_stop(&mut self, points: &[PathPoint]) {
+        self.offers = true;
+        if let Some(last) = self.received().checked_sub(1) {
+            self.offered.insert(last, points.to_vec());
+        }
+    }
+
+    /// The stop after position `end - 1` from the offered ones: the plan's positions from `end`
+    /// to the first that has an offered stop, then that stop. `Err` where none is known yet.
+    fn planned_then_offered(&self, end: usize) -> Result<Vec<PathPoint>, ()> {
+        let (&i, stop) = self.offered.range(end.saturating_sub(1)..).next().ok_or(())?;
+        let planned = (end..=i).map(|k| self.point(k)).collect::<Option<Vec<_>>>().ok_or(())?;
+        Ok(planned.into_iter().chain(stop.iter().copied()).collect())
+    }
+
     /// Decides the blocks the points received settle, handing each group out as it closes
     /// (`out` returns false when nobody takes them any more: then false).
     pub fn advance(&mut self, out: &mut dyn FnMut(BlockGroup) -> bool) -> bool {
@@ -396,6 +427,10 @@ impl BlockBuilder {
         let mut end = start;
         while end < self.received() && end - start < BLOCK_SAMPLES && self.point(end)?.element == e {
             end += 1;
+        }
+        // An offered stop inside the block ends it there.
+        if let Some((&i, _)) = self.offered.range(start..end.saturating_sub(1)).next_back() {
+            end = i + 1;
         }
         let last = self.ended && end == self.received();
         if !(last || end < self.received()) {
@@ -433,6 +468,12 @@ impl BlockBuilder {
         let from = self.point(end - 1)?;
         let sequence = if last {
             None
+        } else if self.offers {
+            match self.planned_then_offered(end) {
+                Ok(points) => Some(points),
+                Err(()) if !self.ended => return None, // wait for more of the plan
+                Err(()) => None,
+            }
         } else {
             let count = self.received();
             let (points, base) = (&self.points, self.base);
@@ -582,6 +623,7 @@ impl BlockBuilder {
     /// Forgets the points, minima and elements no later block can ask about: a block needs the
     /// two points before it, a stored stop's search the three before its block's end.
     fn forget_behind(&mut self) {
+        self.offered = self.offered.split_off(&self.packed);
         let keep = self.packed.saturating_sub(3);
         while self.base < keep && self.points.pop_front().is_some() {
             self.base += 1;
@@ -603,10 +645,12 @@ pub struct BlockPlan {
     pub groups: Vec<BlockGroup>,
     /// Motion time of one block sample (s).
     pub period: f64,
-    /// Block ends with a stop within the limits, stored sequences among them, and the worst
-    /// ratio of those stops to an axis limit.
-    pub stops: (usize, usize, f64),
+    pub stops: StopCounts,
 }
+
+/// Block ends with a stop within the limits, stored sequences among them, and the worst ratio
+/// of those stops to an axis limit.
+pub type StopCounts = (usize, usize, f64);
 
 impl BlockPlan {
     /// The blocks in path order.
@@ -648,6 +692,13 @@ pub fn block_plan(
     })
 }
 
+/// Periods between the stops the reachability planner offers on the machine, at least. A
+/// hold waits for the next, and they branch off at its stations, up to some 6 ms apart where
+/// the plan is fast: measured on the trident and the butterfly at lab set 1 (200 holds each),
+/// 8 periods brake within 5.0 / 7.0 ms at worst for stops costing 37 / 82 % of the motion, 14
+/// periods within 5.5 / 10 ms for 31 / 67 %.
+const STOPS_EVERY: f64 = 8.0;
+
 /// The reachability plan of the path `shared` (tool tip; from its start, or from rest at the
 /// module's stop point `from`) in look-ahead windows, in a thread of its own that reads the path
 /// as it plans, its blocks in groups handed out as they close (at most [`EVENTS_AHEAD`]
@@ -664,22 +715,45 @@ pub fn spawn_reach_blocks(
         match reach_blocks(&shared, &limits, from.as_ref(), max_fraction, &mut |g| {
             send(BlockEvent::Group(g))
         }) {
-            Ok((line, error)) => send(BlockEvent::Done { line, error }),
+            Ok((line, error, _)) => send(BlockEvent::Done { line, error }),
             Err(e) => send(BlockEvent::Failed(e)),
         };
     });
     receiver
 }
 
-/// [`spawn_reach_blocks`]'s plan, its groups handed to `out`: a line for the log, and why the
-/// file could not be read to its end (the plan ends at rest before the element that failed).
+/// [`spawn_reach_blocks`]'s groups all at once, and its line for the log (tests, benches).
+pub fn reach_block_plan(
+    shared: &SharedPath,
+    limits: &Limits,
+    max_fraction: f64,
+) -> Result<(BlockPlan, String), String> {
+    let mut groups = Vec::new();
+    let (line, error, stops) = reach_blocks(shared, limits, None, max_fraction, &mut |g| {
+        groups.push(g);
+        true
+    })?;
+    if let Some(e) = error {
+        return Err(e);
+    }
+    let plan = BlockPlan {
+        groups,
+        period: limits.period,
+        stops,
+    };
+    Ok((plan, line))
+}
+
+/// [`spawn_reach_blocks`]'s plan, its groups handed to `out`: a line for the log, why the file
+/// could not be read to its end (the plan ends at rest before the element that failed), and
+/// the block ends' stops as [`BlockPlan::stops`] counts them.
 fn reach_blocks(
     shared: &SharedPath,
     limits: &Limits,
     from: Option<&StopPoint>,
     max_fraction: f64,
     out: &mut dyn FnMut(BlockGroup) -> bool,
-) -> Result<(String, Option<String>), String> {
+) -> Result<(String, Option<String>, StopCounts), String> {
     let mut curves = shared.open()?;
     let start = from.map(|p| {
         let start = plan_start(&mut curves, p);
@@ -694,10 +768,18 @@ fn reach_blocks(
     )?;
     let options = ReachOptions {
         window: Some(WindowOptions::default()),
+        stops_every: Some(STOPS_EVERY * limits.period),
         ..ReachOptions::default()
     };
     let (mut count, mut waiting) = (0usize, 0usize);
     let (_, stats, plan_time) = reach::run(&mut curves, limits, &options, start, &mut |p| {
+        let p = match p {
+            Planned::Point(p) => p,
+            Planned::Stop(stop) => {
+                builder.offer_stop(stop);
+                return Ok(());
+            }
+        };
         builder.push(*p)?;
         count += 1;
         waiting += 1;
@@ -722,7 +804,8 @@ fn reach_blocks(
         "Reach: {count} periods, motion {motion:.6} s, planned in {plan_time:.3} s ({} windows, first points after {:.3} s); stops within the limits at {} block ends ({} stored sequences, worst {:.4} x an axis limit)",
         stats.windows, stats.first_points_time, builder.ends, builder.stored, builder.worst
     );
-    Ok((line, curves.error().map(|e| e.to_string())))
+    let stops = (builder.ends, builder.stored, builder.worst);
+    Ok((line, curves.error().map(|e| e.to_string()), stops))
 }
 
 /// The VPOp plan of `toolpath` (tool tip), from its start or from rest at the stop point `from`.

@@ -34,7 +34,7 @@ use nurbs_hal::slot::{PathBlock, Record, SegmentSlot, BLOCK_SAMPLES, FLAG_LAST};
 use nurbs_motion::geometry::{ArcLengthTable, Nurbs, Toolpath};
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::erwinski::PlanStart;
-use nurbs_motion::planner::reach::{self, window::WindowOptions, ReachOptions, ReachPlan};
+use nurbs_motion::planner::reach::{self, window::WindowOptions, Planned, ReachOptions, ReachPlan};
 use nurbs_motion::planner::simulate::SimState;
 use nurbs_motion::planner::verify::SLACK;
 use nurbs_motion::planner::vpop::{brake_points, plan_tip, JointPath, PathPoint, SearchOptions, VpopPlan};

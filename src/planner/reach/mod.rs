@@ -68,6 +68,10 @@ pub struct ReachOptions {
     /// Long stretches planned window by window (their points handed out as each window is
     /// done), or whole.
     pub window: Option<window::WindowOptions>,
+    /// Stops offered along the plan about this often (s of motion), each the quickest stop
+    /// the controllable sets allow from the state at a station, sampled from the next period
+    /// ([`Planned::Stop`]); none where `None`.
+    pub stops_every: Option<f64>,
 }
 
 impl Default for ReachOptions {
@@ -85,9 +89,21 @@ impl Default for ReachOptions {
             margin: 1e-4,
             repairs: 8,
             window: None,
+            stops_every: None,
         }
     }
 }
+
+/// What the planner hands out, in path order: the plan's next point, or a stop branching off
+/// after the last point handed out (its positions from the next period on, to rest).
+#[derive(Clone, Copy, Debug)]
+pub enum Planned<'p> {
+    Point(&'p PathPoint),
+    Stop(&'p [PathPoint]),
+}
+
+/// A plan's handing out: [`Planned`] to `emit`, which may refuse (the planning then ends).
+pub type Emit<'e> = dyn FnMut(Planned<'_>) -> Result<(), String> + 'e;
 
 /// A plan: one point per servo period, at rest before the first and after the last.
 #[derive(Clone, Debug)]
@@ -145,7 +161,9 @@ pub fn plan_tip(
     let mut curves = PathCurves::new(toolpath);
     let mut points = Vec::new();
     let (limits, stats, plan_time) = run(&mut curves, limits, options, start, &mut |p| {
-        points.push(*p);
+        if let Planned::Point(p) = p {
+            points.push(*p);
+        }
         Ok(())
     })?;
     let motion_time = points.len().saturating_sub(1) as f64 * limits.period;
@@ -159,14 +177,15 @@ pub fn plan_tip(
 }
 
 /// Plans `curves` stretch by stretch (rest to rest between tangent breaks), from its start or
-/// from rest at `start` (element, curve parameter), handing every point to `emit` once its
-/// stretch passed the check. The limits as used, the figures and the planning time.
+/// from rest at `start` (element, curve parameter), handing every point (and the stops of
+/// [`ReachOptions::stops_every`]) to `emit` once its stretch passed the check. The limits as
+/// used, the figures and the planning time.
 pub fn run(
     curves: &mut PathCurves,
     limits: &Limits,
     options: &ReachOptions,
     start: Option<(usize, f64)>,
-    emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+    emit: &mut Emit<'_>,
 ) -> Result<(Limits, ReachStats, f64), ReachError> {
     let started = Instant::now();
     let first_element = start.map_or(0, |s| s.0);
@@ -200,10 +219,10 @@ pub fn run(
         }
     };
     check.push(&first.tip);
-    emit(&first).map_err(ReachError::Plan)?;
+    emit(Planned::Point(&first)).map_err(ReachError::Plan)?;
     // The time the first planned points leave.
     let mut first_points: Option<f64> = None;
-    let mut out = |p: &PathPoint| {
+    let mut out = |p: Planned<'_>| {
         first_points.get_or_insert_with(|| started.elapsed().as_secs_f64());
         emit(p)
     };
@@ -229,14 +248,12 @@ pub fn run(
         };
         if let Some(mut stretch) = whole {
             read_on(curves, &mut stretch, f64::INFINITY);
-            let (grid, _motion, passes, repairs, points) = planner.plan_stretch(curves, &stretch, last, &mut check)?;
-            stats.stations += grid.stations.len();
-            stats.passes += passes;
-            stats.repairs += repairs;
-            for p in &points {
-                out(p).map_err(ReachError::Plan)?;
-            }
-            last = points.last().copied().or(last);
+            let plan = planner.plan_stretch(curves, &stretch, last, &mut check)?;
+            stats.stations += plan.stations;
+            stats.passes += plan.passes;
+            stats.repairs += plan.repairs;
+            hand_out(&plan.points, &plan.stops, &mut out)?;
+            last = plan.points.last().copied().or(last);
             from = stretch.to;
         }
         if from.0 >= curves.len() - 1 && from.1 >= curves.view(from.0).u_max() {
@@ -455,15 +472,15 @@ impl<'o> Planner<'o> {
     }
 
     /// Plans one rest-to-rest stretch: passes, a second grid, more passes, then sampled and
-    /// checked, tightened where samples ran over. The grid, the motion, the passes run, the
-    /// re-plans and the checked points.
+    /// checked, tightened where samples ran over; the stops of [`ReachOptions::stops_every`]
+    /// along it.
     fn plan_stretch(
         &self,
         curves: &PathCurves,
         stretch: &Stretch,
         before: Option<PathPoint>,
         check: &mut Check,
-    ) -> Result<(Grid, Motion, usize, usize, Vec<PathPoint>), ReachError> {
+    ) -> Result<StretchPlan, ReachError> {
         let o = self.options;
         let first_guess = |s: f64, here: &Local| self.first_guess(stretch, s, here);
         let mut grid = Grid::build(curves, stretch, &self.caps, &o.grid, &first_guess);
@@ -565,7 +582,21 @@ impl<'o> Planner<'o> {
             );
             if sampled.over.is_empty() {
                 *check = trial;
-                return Ok((grid, motion, passes, repairs, sampled.points));
+                let along = Along {
+                    grid: &grid,
+                    lin: &lin,
+                    tight: &tight,
+                    start: Start::default(),
+                    motion: &motion,
+                };
+                let stops = self.branch_stops(curves, &along, grid.len(), self.period, &sampled.points);
+                return Ok(StretchPlan {
+                    stations: grid.stations.len(),
+                    passes,
+                    repairs,
+                    points: sampled.points,
+                    stops,
+                });
             }
             self.tighten(&mut tight, &motion, &sampled.over, &mut repairs)?;
             let floors = (o.floor > 0.0).then(|| lin.scaled(o.floor));
@@ -573,6 +604,110 @@ impl<'o> Planner<'o> {
                 .passes(&grid, &lin, floors.as_ref(), &tight, Start::default(), &mut passes)
                 .map_err(|e| self.describe(&grid, 0, e))?;
         }
+    }
+
+    /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
+    /// to `upto`, about that often, where the state there can stop within the sets of the rows
+    /// the motion was planned with (no floors): each with the number of `samples` (the
+    /// motion's, the first `first` into it) before it, sampled from the next period, and
+    /// checked by finite differences continuing the three samples before it (a stop that runs
+    /// over is left out: the block builder has others).
+    fn branch_stops(
+        &self,
+        curves: &PathCurves,
+        along: &Along<'_>,
+        upto: usize,
+        first: f64,
+        samples: &[PathPoint],
+    ) -> Vec<Branch> {
+        let Some(every) = self.options.stops_every else {
+            return Vec::new();
+        };
+        let grid = along.grid;
+        // The sets keep the motion's own states through their simplification (the motion
+        // rides the boundary of sets built with floors, simplified otherwise).
+        let through: Vec<(f64, f64)> = along
+            .motion
+            .a
+            .iter()
+            .copied()
+            .zip(along.motion.b.iter().copied())
+            .collect();
+        let p = Passes {
+            grid,
+            limits: self.axis,
+            period: self.period,
+            lin_stations: &along.lin.stations,
+            lin_points: &along.lin.points,
+            floors: None,
+            tight: along.tight,
+            max_vertices: self.options.max_vertices,
+            jerk: true,
+            start: Start {
+                through: &through,
+                ..along.start
+            },
+        };
+        let Ok(sets) = p.backward() else {
+            return Vec::new();
+        };
+        let mut stops = Vec::new();
+        let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
+        for k in 1..upto.min(grid.len() - 1) {
+            t += along.motion.durations[k - 1];
+            if t - last < every || t < first {
+                continue;
+            }
+            // Samples at or before the station.
+            let n = ((t - first) / self.period).floor() as usize + 1;
+            if n < 3 || n > samples.len() {
+                continue;
+            }
+            let Some((motion, end, cut)) = p.brake(&sets, k, (along.motion.a[k], along.motion.b[k])) else {
+                continue;
+            };
+            let mut check = Check::new(&self.limits, self.caps.axes);
+            for q in &samples[n - 3..n] {
+                check.push(&q.tip);
+            }
+            let span = sampler::Span {
+                first: first + n as f64 * self.period - t,
+                at_rest: true,
+            };
+            let mut sub = grid.slice(k, end);
+            if let Some(length) = cut {
+                // The stop rests inside the last interval: it ends there.
+                let last = sub.len() - 1;
+                let (st, next) = (&sub.stations[last], &sub.stations[last + 1]);
+                let view = curves.view(st.element);
+                let u_end = if next.element == st.element {
+                    next.u
+                } else {
+                    view.u_max()
+                };
+                let u = sampler::invert(&view, st.u, 0.0, length, st.u, u_end, self.caps.axes);
+                let (element, s) = (st.element, st.s + length);
+                let end = &mut sub.stations[last + 1];
+                (end.element, end.u, end.s) = (element, u, s);
+                sub.intervals[last].length = length;
+            }
+            let sampled = sampler::sample(
+                curves,
+                &sub,
+                &motion,
+                &self.limits,
+                self.caps.axes,
+                Some(samples[n - 1]),
+                &mut check,
+                1e-9,
+                span,
+            );
+            if sampled.over.is_empty() {
+                stops.push((n, sampled.points));
+                last = t;
+            }
+        }
+        stops
     }
 
     /// One backward and one forward pass (again without floors where they leave no plan).
@@ -671,6 +806,41 @@ impl<'o> Planner<'o> {
         }
         Ok(())
     }
+}
+
+/// A rest-to-rest stretch planned whole: its stations, the passes and re-plans it took, its
+/// checked samples and the stops offered along them.
+struct StretchPlan {
+    stations: usize,
+    passes: usize,
+    repairs: usize,
+    points: Vec<PathPoint>,
+    stops: Vec<Branch>,
+}
+
+/// A stop branching off a motion after its first `.0` samples: its samples from the next
+/// period to rest.
+type Branch = (usize, Vec<PathPoint>);
+
+/// A motion and what it was planned with.
+struct Along<'a> {
+    grid: &'a Grid,
+    lin: &'a Linearisation,
+    tight: &'a [f64],
+    start: Start<'a>,
+    motion: &'a Motion,
+}
+
+/// Hands `points` to `emit`, each stop of `stops` after the points before it.
+fn hand_out(points: &[PathPoint], stops: &[Branch], emit: &mut Emit<'_>) -> Result<(), ReachError> {
+    let mut stops = stops.iter().peekable();
+    for (i, p) in points.iter().enumerate() {
+        emit(Planned::Point(p)).map_err(ReachError::Plan)?;
+        while let Some((_, stop)) = stops.next_if(|(n, _)| *n == i + 1) {
+            emit(Planned::Stop(stop)).map_err(ReachError::Plan)?;
+        }
+    }
+    Ok(())
 }
 
 /// Values of a at every station and collocation point of a grid.

@@ -229,16 +229,15 @@ impl Passes<'_> {
     }
 
     /// The state rows of station `k` alone (θ = 0 of interval `k`, or the end station).
-    fn station_polygon(&self, k: usize, mut poly: Polygon, rows: &mut Vec<Row>) -> Polygon {
+    fn station_rows(&self, k: usize, rows: &mut Vec<Row>) {
         rows.clear();
         let g = self.grid;
         let f = self.tight[k.min(g.len() - 1)];
-        let st = &g.stations[k];
         point_rows(
             rows,
             &Point {
                 theta: 0.0,
-                local: &st.right,
+                local: &g.stations[k].right,
                 a_lin: self.lin_stations[k],
                 state: true,
                 jerk: false,
@@ -250,6 +249,11 @@ impl Passes<'_> {
             f * f,
             self.period,
         );
+    }
+
+    /// `poly` clipped by the state rows of station `k`.
+    fn station_polygon(&self, k: usize, mut poly: Polygon, rows: &mut Vec<Row>) -> Polygon {
+        self.station_rows(k, rows);
         for r in rows.iter() {
             poly.clip(HalfPlane {
                 na: r.a,
@@ -258,6 +262,13 @@ impl Passes<'_> {
             });
         }
         poly
+    }
+
+    /// Whether the state `(a, b)` keeps the state rows of station `k` (to rounding).
+    fn station_holds(&self, k: usize, (a, b): (f64, f64), rows: &mut Vec<Row>) -> bool {
+        self.station_rows(k, rows);
+        rows.iter()
+            .all(|r| r.a * a + r.b * b <= r.d + 1e-9 * (r.d.abs() + (r.a * a).abs() + (r.b * b).abs()))
     }
 
     /// The controllable sets from rest at the end of the grid back to station 0.
@@ -377,15 +388,7 @@ impl Passes<'_> {
             sets.sets[k + 1].half_planes(&mut hp);
             let d = g.intervals[k].length;
             rows.extend(hp.iter().map(|h| successor_row(h.na, h.nb, h.d, d)));
-            let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-            for r in &rows {
-                let rest = r.d - r.a * a - r.b * b;
-                if r.c > 0.0 {
-                    hi = hi.min(rest / r.c);
-                } else if r.c < 0.0 {
-                    lo = lo.max(rest / r.c);
-                }
-            }
+            let (lo, hi) = c_range(&rows, a, b);
             let c = if lo <= hi {
                 if hi.is_finite() {
                     hi
@@ -440,6 +443,90 @@ impl Passes<'_> {
         Ok(m)
     }
 
+    /// The quickest stop the sets allow from the state `(a, b)` at station `from`: the least
+    /// control whose successor stays in the next set, until a successor on the stop line of the
+    /// interval after it is in the rows' range (a constant-jerk stop over that interval within
+    /// its jerk and the station's rows); then that control and that stop. Every state of the
+    /// sets can stop, so this needs no simulation: it is the forward pass with the other bound.
+    /// Where the speed would reach zero inside an interval (the least control keeps it only
+    /// just above: a crawl), a constant-jerk stop within the interval's jerk ends the motion
+    /// there instead. The motion from `from`, the station after its last interval, and where
+    /// that interval is cut short, its length to the rest; `None` where the state lies
+    /// outside its set or rounding leaves no control.
+    pub fn brake(&self, sets: &Sets, from: usize, (mut a, mut b): (f64, f64)) -> Option<(Motion, usize, Option<f64>)> {
+        let g = self.grid;
+        let n = g.len();
+        if a.is_nan() || a <= 0.0 || from + 1 >= n || !sets.sets[from].contains(a, b, 1e-9) {
+            return None;
+        }
+        let mut m = Motion {
+            a: vec![a],
+            b: vec![b],
+            ..Motion::default()
+        };
+        let (mut rows, mut hp, mut station) = (Vec::new(), Vec::new(), Vec::new());
+        for k in from..n - 1 {
+            let d = g.intervals[k].length;
+            // A stop inside this interval.
+            if let Some((stop, duration, length)) = Piece::stop(a, b) {
+                if length <= d {
+                    if let Piece::Stop { jerk, .. } = stop {
+                        if jerk <= self.piece_jerk(k) {
+                            m.pieces.push(stop);
+                            m.durations.push(duration);
+                            m.a.push(0.0);
+                            m.b.push(0.0);
+                            return Some((m, k + 1, Some(length)));
+                        }
+                    }
+                }
+            }
+            self.stage_rows(k, &sets.lins[k], &mut rows);
+            // A successor on the next interval's stop line: a1 + 1.5·d1·b1 = 0.
+            let d1 = g.intervals[k + 1].length;
+            let c_stop = -(a + 2.0 * b * d + 1.5 * d1 * b) / (d * d + 1.5 * d1 * d);
+            let (lo, hi) = c_range(&rows, a, b);
+            if c_stop >= lo && c_stop <= hi {
+                let (a1, b1) = (a + 2.0 * b * d + c_stop * d * d, b + c_stop * d);
+                let be = (2.0 * self.piece_jerk(k + 1) * (1.5 * d1).sqrt()).powf(2.0 / 3.0);
+                let piece = Piece::quadratic(a, b, c_stop);
+                let stop = Piece::stop(a1, b1);
+                if let (Some(duration), Some((stop, stop_duration, _)), true) = (
+                    piece.duration(d),
+                    stop,
+                    -b1 <= be && self.station_holds(k + 1, (a1, b1), &mut station),
+                ) {
+                    m.pieces.extend([piece, stop]);
+                    m.durations.extend([duration, stop_duration]);
+                    m.a.extend([a1, 0.0]);
+                    m.b.extend([b1, 0.0]);
+                    return Some((m, k + 2, None));
+                }
+            }
+            sets.sets[k + 1].half_planes(&mut hp);
+            rows.extend(hp.iter().map(|h| successor_row(h.na, h.nb, h.d, d)));
+            let (lo, hi) = c_range(&rows, a, b);
+            if !lo.is_finite() || lo - hi > 1e-7 * (lo.abs() + hi.abs()) {
+                return None;
+            }
+            let c = lo.max(no_dip(a, b, d));
+            let piece = Piece::quadratic(a, b, c);
+            let duration = piece.duration(d)?;
+            a = (a + 2.0 * b * d + c * d * d).max(0.0);
+            b += c * d;
+            m.pieces.push(piece);
+            m.durations.push(duration);
+            m.a.push(a);
+            m.b.push(b);
+        }
+        let (piece, duration, _) = Piece::stop(a, b)?;
+        m.pieces.push(piece);
+        m.durations.push(duration);
+        m.a.push(0.0);
+        m.b.push(0.0);
+        Some((m, n, None))
+    }
+
     /// Ends `m` (at state a) with a constant-jerk stop over the next interval (length `d`)
     /// whatever its tangential acceleration, at rest for the `left - 1` intervals after it.
     fn stop_here(mut m: Motion, a: f64, d: f64, left: usize) -> Motion {
@@ -461,6 +548,20 @@ impl Passes<'_> {
         m.b.push(0.0);
         m
     }
+}
+
+/// The range of c the rows leave at the state `(a, b)`: (highest lower bound, lowest upper).
+fn c_range(rows: &[Row], a: f64, b: f64) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for r in rows {
+        let rest = r.d - r.a * a - r.b * b;
+        if r.c > 0.0 {
+            hi = hi.min(rest / r.c);
+        } else if r.c < 0.0 {
+            lo = lo.max(rest / r.c);
+        }
+    }
+    (lo, hi)
 }
 
 /// The least c that keeps a(θ) = a + 2bθ + cθ² ≥ 0 over [0, d].

@@ -202,7 +202,15 @@ pub fn sample(
 
 /// The parameter in `[lo, hi]` at arc length `target` from the interval start, from the
 /// known point `(u0, s0)` (Newton on the arc length, safeguarded by bisection).
-fn invert(view: &nurbs_rtcore::CurveView, u0: f64, s0: f64, target: f64, lo: f64, hi: f64, axes: usize) -> f64 {
+pub(super) fn invert(
+    view: &nurbs_rtcore::CurveView,
+    u0: f64,
+    s0: f64,
+    target: f64,
+    lo: f64,
+    hi: f64,
+    axes: usize,
+) -> f64 {
     let (mut lo_u, mut hi_u) = (u0.max(lo), hi);
     let sp0 = view.speed(u0, axes);
     let mut u = if sp0 > 0.0 {

@@ -57,7 +57,7 @@ pub(super) struct WindowRun {
 
 impl Grid {
     /// Stations `from..=to` and the intervals between them (arc lengths kept).
-    fn slice(&self, from: usize, to: usize) -> Grid {
+    pub(super) fn slice(&self, from: usize, to: usize) -> Grid {
         Grid {
             stations: self.stations[from..=to].to_vec(),
             intervals: self.intervals[from..to].to_vec(),
@@ -272,7 +272,7 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         window: &WindowOptions,
-        emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+        emit: &mut Emit<'_>,
     ) -> Result<Result<WindowRun, Stretch>, ReachError> {
         let mut laid = Laid {
             stretch,
@@ -286,7 +286,7 @@ impl Planner<'_> {
             complete: false,
         };
         let mut emitted = false;
-        let mut counted = |p: &PathPoint| {
+        let mut counted = |p: Planned<'_>| {
             emitted = true;
             emit(p)
         };
@@ -313,7 +313,7 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         window: &WindowOptions,
-        emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+        emit: &mut Emit<'_>,
     ) -> Result<Option<WindowRun>, ReachError> {
         let gap_at = |v: f64| window.margin * self.stop_distance(v);
         let mut run = WindowRun {
@@ -404,7 +404,16 @@ impl Planner<'_> {
                             first: first_sample,
                             at_rest: true,
                         };
-                        match self.commit(curves, &sub, &motion, run.last, check, span, emit)? {
+                        let along = Along {
+                            grid: &sub,
+                            lin: &lin_sub,
+                            tight: &laid.tight[m..e],
+                            start,
+                            motion: &motion,
+                        };
+                        let stops =
+                            |samples: &[PathPoint]| self.branch_stops(curves, &along, sub.len(), first_sample, samples);
+                        match self.commit(curves, &sub, &motion, run.last, check, span, &stops, emit)? {
                             Ok((last, _)) => {
                                 run.last = last.or(run.last);
                                 run.repairs += tries;
@@ -461,7 +470,16 @@ impl Planner<'_> {
                         first: first_sample,
                         at_rest: false,
                     };
-                    match self.commit(curves, &laid.grid.slice(m, m + m2), &part, run.last, check, span, emit)? {
+                    let along = Along {
+                        grid: &sub,
+                        lin: &lin_sub,
+                        tight: &reserved,
+                        start,
+                        motion: &stop,
+                    };
+                    let stops = |samples: &[PathPoint]| self.branch_stops(curves, &along, m2, first_sample, samples);
+                    let committed = laid.grid.slice(m, m + m2);
+                    match self.commit(curves, &committed, &part, run.last, check, span, &stops, emit)? {
                         Ok((last, next)) => {
                             run.last = last.or(run.last);
                             first_sample = next;
@@ -657,8 +675,8 @@ impl Planner<'_> {
     }
 
     /// Samples `motion` over `grid` and checks the samples; if none runs over, hands them out
-    /// and gives the last and the time from the motion's end to the next sample; if some do,
-    /// where.
+    /// with the stops `stops` branches off them, and gives the last and the time from the
+    /// motion's end to the next sample; if some do, where.
     #[allow(clippy::too_many_arguments)]
     fn commit(
         &self,
@@ -668,7 +686,8 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         span: sampler::Span,
-        emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+        stops: &dyn Fn(&[PathPoint]) -> Vec<Branch>,
+        emit: &mut Emit<'_>,
     ) -> Result<Committed, ReachError> {
         let mut trial = check.clone();
         let sampled = sampler::sample(
@@ -686,9 +705,7 @@ impl Planner<'_> {
             return Ok(Err(sampled.over));
         }
         *check = trial;
-        for p in &sampled.points {
-            emit(p).map_err(ReachError::Plan)?;
-        }
+        hand_out(&sampled.points, &stops(&sampled.points), emit)?;
         Ok(Ok((sampled.points.last().copied(), sampled.next)))
     }
 
@@ -705,7 +722,7 @@ impl Planner<'_> {
         first: f64,
         check: &mut Check,
         run: &mut WindowRun,
-        emit: &mut dyn FnMut(&PathPoint) -> Result<(), String>,
+        emit: &mut Emit<'_>,
     ) -> Result<usize, ReachError> {
         let Some((from, stop)) = last_stop.take() else {
             return Err(ReachError::Plan("a window's start state has no continuation".into()));
@@ -718,7 +735,17 @@ impl Planner<'_> {
         let tail = stop.tail(m - from);
         let rest = tail.durations.len();
         let span = sampler::Span { first, at_rest: true };
-        match self.commit(curves, &grid.slice(m, m + rest), &tail, run.last, check, span, emit)? {
+        let no_stops = |_: &[PathPoint]| Vec::new();
+        match self.commit(
+            curves,
+            &grid.slice(m, m + rest),
+            &tail,
+            run.last,
+            check,
+            span,
+            &no_stops,
+            emit,
+        )? {
             Ok((last, _)) => {
                 run.last = last.or(run.last);
                 run.restarts += 1;
