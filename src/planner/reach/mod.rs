@@ -663,9 +663,16 @@ impl<'o> Planner<'o> {
             if n < 3 || n > samples.len() {
                 continue;
             }
-            let Some((motion, end, cut)) = p.brake(&sets, k, (along.motion.a[k], along.motion.b[k])) else {
+            let state = (along.motion.a[k], along.motion.b[k]);
+            if state.0 < SLOWEST_BRANCH * SLOWEST_BRANCH {
+                continue; // as good as at rest: the plan's own next points stop as well
+            }
+            let Some((motion, end, cut)) = p.brake(&sets, k, state) else {
                 continue;
             };
+            if motion.time() > LONGEST_STOP {
+                continue;
+            }
             let mut check = Check::new(&self.limits, self.caps.axes);
             for q in &samples[n - 3..n] {
                 check.push(&q.tip);
@@ -817,6 +824,13 @@ struct StretchPlan {
     points: Vec<PathPoint>,
     stops: Vec<Branch>,
 }
+
+/// Speed (mm/s) below which no stop branches off: from there the least control creeps (a
+/// speed of 1e-5 mm/s took 800 s to rest on `3D_Chips.ngc`).
+const SLOWEST_BRANCH: f64 = 1e-3;
+/// Longest stop offered (s): each is stored sample by sample (the slowest measured on
+/// `3D_Chips.ngc`, from 2 mm/s, take 0.9 s).
+const LONGEST_STOP: f64 = 2.0;
 
 /// A stop branching off a motion after its first `.0` samples: its samples from the next
 /// period to rest.
