@@ -25,6 +25,7 @@ pub mod pieces;
 pub mod polygon;
 pub mod rows;
 pub mod sampler;
+pub mod stops;
 pub mod window;
 
 use std::time::Instant;
@@ -36,6 +37,7 @@ use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
 use passes::{Motion, PassError, Passes, Start};
 use rows::AxisLimits;
 use sampler::Check;
+use stops::{hand_out, Along, Branch};
 
 const NC: usize = COLLOCATION.len();
 
@@ -606,117 +608,6 @@ impl<'o> Planner<'o> {
         }
     }
 
-    /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
-    /// to `upto`, about that often, where the state there can stop within the sets of the rows
-    /// the motion was planned with (no floors): each with the number of `samples` (the
-    /// motion's, the first `first` into it) before it, sampled from the next period, and
-    /// checked by finite differences continuing the three samples before it (a stop that runs
-    /// over is left out: the block builder has others).
-    fn branch_stops(
-        &self,
-        curves: &PathCurves,
-        along: &Along<'_>,
-        upto: usize,
-        first: f64,
-        samples: &[PathPoint],
-    ) -> Vec<Branch> {
-        let Some(every) = self.options.stops_every else {
-            return Vec::new();
-        };
-        let grid = along.grid;
-        // The sets keep the motion's own states through their simplification (the motion
-        // rides the boundary of sets built with floors, simplified otherwise).
-        let through: Vec<(f64, f64)> = along
-            .motion
-            .a
-            .iter()
-            .copied()
-            .zip(along.motion.b.iter().copied())
-            .collect();
-        let p = Passes {
-            grid,
-            limits: self.axis,
-            period: self.period,
-            lin_stations: &along.lin.stations,
-            lin_points: &along.lin.points,
-            floors: None,
-            tight: along.tight,
-            max_vertices: self.options.max_vertices,
-            jerk: true,
-            start: Start {
-                through: &through,
-                ..along.start
-            },
-        };
-        let Ok(sets) = p.backward() else {
-            return Vec::new();
-        };
-        let mut stops = Vec::new();
-        let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
-        for k in 1..upto.min(grid.len() - 1) {
-            t += along.motion.durations[k - 1];
-            if t - last < every || t < first {
-                continue;
-            }
-            // Samples at or before the station.
-            let n = ((t - first) / self.period).floor() as usize + 1;
-            if n < 3 || n > samples.len() {
-                continue;
-            }
-            let state = (along.motion.a[k], along.motion.b[k]);
-            if state.0 < SLOWEST_BRANCH * SLOWEST_BRANCH {
-                continue; // as good as at rest: the plan's own next points stop as well
-            }
-            let Some((motion, end, cut)) = p.brake(&sets, k, state) else {
-                continue;
-            };
-            if motion.time() > LONGEST_STOP {
-                continue;
-            }
-            let mut check = Check::new(&self.limits, self.caps.axes);
-            for q in &samples[n - 3..n] {
-                check.push(&q.tip);
-            }
-            let span = sampler::Span {
-                first: first + n as f64 * self.period - t,
-                at_rest: true,
-            };
-            let mut sub = grid.slice(k, end);
-            if let Some(length) = cut {
-                // The stop rests inside the last interval: it ends there.
-                let last = sub.len() - 1;
-                let (st, next) = (&sub.stations[last], &sub.stations[last + 1]);
-                let view = curves.view(st.element);
-                let u_end = if next.element == st.element {
-                    next.u
-                } else {
-                    view.u_max()
-                };
-                let u = sampler::invert(&view, st.u, 0.0, length, st.u, u_end, self.caps.axes);
-                let (element, s) = (st.element, st.s + length);
-                let end = &mut sub.stations[last + 1];
-                (end.element, end.u, end.s) = (element, u, s);
-                sub.intervals[last].length = length;
-            }
-            let sampled = sampler::sample(
-                curves,
-                &sub,
-                &motion,
-                &self.limits,
-                self.caps.axes,
-                Some(samples[n - 1]),
-                &mut check,
-                1e-9,
-                span,
-            );
-            if sampled.over.is_empty() {
-                stops.push((n, sampled.points));
-                last = t;
-            }
-        }
-        stops
-    }
-
     /// One backward and one forward pass (again without floors where they leave no plan).
     fn passes(
         &self,
@@ -823,38 +714,6 @@ struct StretchPlan {
     repairs: usize,
     points: Vec<PathPoint>,
     stops: Vec<Branch>,
-}
-
-/// Speed (mm/s) below which no stop branches off: from there the least control creeps (a
-/// speed of 1e-5 mm/s took 800 s to rest on `3D_Chips.ngc`).
-const SLOWEST_BRANCH: f64 = 1e-3;
-/// Longest stop offered (s): each is stored sample by sample (the slowest measured on
-/// `3D_Chips.ngc`, from 2 mm/s, take 0.9 s).
-const LONGEST_STOP: f64 = 2.0;
-
-/// A stop branching off a motion after its first `.0` samples: its samples from the next
-/// period to rest.
-type Branch = (usize, Vec<PathPoint>);
-
-/// A motion and what it was planned with.
-struct Along<'a> {
-    grid: &'a Grid,
-    lin: &'a Linearisation,
-    tight: &'a [f64],
-    start: Start<'a>,
-    motion: &'a Motion,
-}
-
-/// Hands `points` to `emit`, each stop of `stops` after the points before it.
-fn hand_out(points: &[PathPoint], stops: &[Branch], emit: &mut Emit<'_>) -> Result<(), ReachError> {
-    let mut stops = stops.iter().peekable();
-    for (i, p) in points.iter().enumerate() {
-        emit(Planned::Point(p)).map_err(ReachError::Plan)?;
-        while let Some((_, stop)) = stops.next_if(|(n, _)| *n == i + 1) {
-            emit(Planned::Stop(stop)).map_err(ReachError::Plan)?;
-        }
-    }
-    Ok(())
 }
 
 /// Values of a at every station and collocation point of a grid.
