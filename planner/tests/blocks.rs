@@ -6,7 +6,7 @@ mod common;
 
 use std::time::Instant;
 
-use common::test_paths::rounded_polyline;
+use common::test_paths::{g1_zigzag, line, rounded_polyline};
 use common::*;
 use nurbs_hal::channel::{PathBlock, Slot, StopPoint};
 use nurbs_hal::module::FaultCode;
@@ -91,7 +91,11 @@ fn vpop_blocks_run_exactly_the_planned_positions() {
 /// The bundled curve `name`, lab set 1, and its reachability plan in look-ahead windows (the
 /// positions `nurbs-planner --planner reach` streams).
 fn windowed_reach(name: &str) -> (Toolpath, Limits, ReachPlan) {
-    let toolpath = job(name).toolpath;
+    windowed_reach_of(job(name).toolpath)
+}
+
+/// [`windowed_reach`] of any tool-tip path.
+fn windowed_reach_of(toolpath: Toolpath) -> (Toolpath, Limits, ReachPlan) {
     let tip = toolpath.tip_dim();
     let limits = lab1(tip).for_axes(tip).unwrap();
     let options = ReachOptions {
@@ -330,8 +334,19 @@ fn reach_blocks_hold_within_the_limits() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(12);
     let mut instants = Instants::new(0x9e37_79b9_7f4a_7c15);
-    for name in ["trident.json", "butterfly.json"] {
-        let (toolpath, limits, plan) = windowed_reach(name);
+    let paths = [
+        ("trident", job("trident.json").toolpath),
+        ("butterfly", job("butterfly.json").toolpath),
+        ("star_g1", job("star_g1.ngc").toolpath),
+        ("G1 zigzag", g1_zigzag(150)),
+        (
+            "dense G1 (2000 lines)",
+            job_at(&dense_g1(2000, &std::env::temp_dir())).toolpath,
+        ),
+        ("2000 mm line", line(2000.0)),
+    ];
+    for (name, toolpath) in paths {
+        let (toolpath, limits, plan) = windowed_reach_of(toolpath);
         let tip = toolpath.tip_dim();
         // The blocks `nurbs-planner --planner reach` streams, with the stops the plan offers.
         let (blocks, line) = reach_block_plan(&SharedPath::whole(&toolpath), &limits, 1.0).unwrap();
@@ -403,6 +418,24 @@ fn reach_blocks_hold_within_the_limits() {
                 .map_or(at, |k| k + 1);
             leaves.push(leave);
             brakes.push(from.saturating_sub(at));
+            if from.saturating_sub(at) > 20 {
+                let mut k = 0usize;
+                for g in &blocks.groups {
+                    let n: usize = g.blocks.iter().map(|b| b.len()).sum();
+                    if k + n + 40 > at && k < at + 40 {
+                        let first_diff = g.stored.as_ref().map(|v| v.len());
+                        eprintln!(
+                            "DBG {name} at {at}: group {k}..{} blocks {} curves {:?} stored {:?} choice {:?}",
+                            k + n,
+                            g.blocks.len(),
+                            g.blocks.iter().map(|b| (b.curve, b.len())).collect::<Vec<_>>(),
+                            first_diff,
+                            g.choices.last().map(|c| (c.ratio, c.stored))
+                        );
+                    }
+                    k += n;
+                }
+            }
         }
         leaves.sort_unstable();
         brakes.sort_unstable();

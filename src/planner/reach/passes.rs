@@ -55,6 +55,10 @@ pub struct Start<'a> {
     /// continuation an earlier window accepted the start state with (the sets' simplification
     /// must not cut it off).
     pub through: &'a [(f64, f64)],
+    /// Whether `through` is a motion to rest at the grid's end under these very rows (the
+    /// stops along a plan): then the sets keep its states even where the projection's rounding
+    /// leaves them just outside (a set is convex, so the hull stays within it).
+    pub through_rests: bool,
 }
 
 /// The linearisation points of the jerk rows of one interval: at its start, its collocation
@@ -324,7 +328,8 @@ impl Passes<'_> {
             }
             // The continuation an earlier window accepted stays in the set where the exact
             // projection holds it (the simplification alone could cut it off).
-            let keep = self.start.through.get(k).filter(|&&(a, b)| poly.contains(a, b, 1e-12));
+            let keep =
+                (self.start.through.get(k)).filter(|&&(a, b)| self.start.through_rests || poly.contains(a, b, 1e-12));
             poly.simplify(self.max_vertices);
             if let Some(&(a, b)) = keep {
                 if !poly.contains(a, b, 1e-12) {
@@ -456,7 +461,10 @@ impl Passes<'_> {
     pub fn brake(&self, sets: &Sets, from: usize, (mut a, mut b): (f64, f64)) -> Option<(Motion, usize, Option<f64>)> {
         let g = self.grid;
         let n = g.len();
-        if a.is_nan() || a <= 0.0 || from + 1 >= n || !sets.sets[from].contains(a, b, 1e-9) {
+        // A state the set does not quite hold (the forward pass crosses the sets' rounding where
+        // the rows leave no range, as here) still brakes as far as the rows allow; the sampled
+        // check judges the stop.
+        if a.is_nan() || a <= 0.0 || from + 1 >= n || !sets.sets[from].contains(a, b, BRAKE_OUTSIDE) {
             return None;
         }
         let mut m = Motion {
@@ -506,10 +514,13 @@ impl Passes<'_> {
             sets.sets[k + 1].half_planes(&mut hp);
             rows.extend(hp.iter().map(|h| successor_row(h.na, h.nb, h.d, d)));
             let (lo, hi) = c_range(&rows, a, b);
-            if !lo.is_finite() || lo - hi > 1e-7 * (lo.abs() + hi.abs()) {
+            if !lo.is_finite() {
                 return None;
             }
-            let c = lo.max(no_dip(a, b, d));
+            // Where the rows leave no range (rounding, or a state just outside its set), the
+            // middle, as the forward pass takes it.
+            let c = if lo <= hi { lo } else { 0.5 * (lo + hi) };
+            let c = c.max(no_dip(a, b, d));
             let piece = Piece::quadratic(a, b, c);
             let duration = piece.duration(d)?;
             a = (a + 2.0 * b * d + c * d * d).max(0.0);
@@ -579,6 +590,9 @@ fn no_dip(a: f64, b: f64, d: f64) -> f64 {
     // A hair above, so that the rounded minimum stays above zero.
     c + 1e-9 * c.abs()
 }
+
+/// How far (relative) outside its set a state may lie and still brake from the sets.
+const BRAKE_OUTSIDE: f64 = 1e-3;
 
 /// Relative gap between the bounds on c that a vertex of a projection may keep (rounding).
 const PROJECTION_SLACK: f64 = 1e-3;

@@ -32,6 +32,9 @@ pub enum Piece {
     Stop { v: f64, b: f64, jerk: f64 },
     /// The state (a, b) at the interval start and constant c.
     Quadratic { a: f64, b: f64, c: f64 },
+    /// From speed `v` and tangential acceleration `b` with constant jerk `jerk`: a phase of an
+    /// S-curve stop in time, which ends where its interval does (only ever sampled).
+    Jerk { v: f64, b: f64, jerk: f64 },
 }
 
 impl Piece {
@@ -66,7 +69,7 @@ impl Piece {
     pub fn at(&self, tau: f64) -> (f64, f64) {
         match *self {
             Piece::Start { jerk } => (jerk * tau * tau * tau / 6.0, 0.5 * jerk * tau * tau),
-            Piece::Stop { v, b, jerk } => (
+            Piece::Stop { v, b, jerk } | Piece::Jerk { v, b, jerk } => (
                 v * tau + 0.5 * b * tau * tau + jerk * tau * tau * tau / 6.0,
                 v + b * tau + 0.5 * jerk * tau * tau,
             ),
@@ -79,6 +82,18 @@ impl Piece {
                 (v * tau * s1 + 0.5 * b * tau * tau * sh * sh, v * c1 + b * tau * s1)
             }
         }
+    }
+
+    /// Distance σ, speed σ̇ and tangential acceleration σ̈ at time τ into the piece (for a
+    /// quadratic piece σ̈ = b + c·σ: b' = c along the arc length).
+    pub fn state_at(&self, tau: f64) -> (f64, f64, f64) {
+        let (sigma, speed) = self.at(tau);
+        let acceleration = match *self {
+            Piece::Start { jerk } => jerk * tau,
+            Piece::Stop { b, jerk, .. } | Piece::Jerk { b, jerk, .. } => b + jerk * tau,
+            Piece::Quadratic { b, c, .. } => b + c * sigma,
+        };
+        (sigma, speed, acceleration)
     }
 
     /// Time to cover `length` along the piece; `None` where the motion stops before.
@@ -152,6 +167,24 @@ impl Piece {
                 v * v
             }
             Piece::Quadratic { a, b, c } => (a + 2.0 * b * sigma + c * sigma * sigma).max(0.0),
+            Piece::Jerk { .. } => {
+                // The time at σ by bisection (the distance rises with it while the speed does
+                // not vanish).
+                let (mut lo, mut hi) = (0.0, 1.0);
+                while self.at(hi).0 < sigma && hi < 1e6 {
+                    hi *= 2.0;
+                }
+                for _ in 0..80 {
+                    let mid = 0.5 * (lo + hi);
+                    if self.at(mid).0 < sigma {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                let speed = self.at(0.5 * (lo + hi)).1.max(0.0);
+                speed * speed
+            }
         }
     }
 }

@@ -1,10 +1,20 @@
 //! The stops the planner offers along its plan ([`ReachOptions::stops_every`]): what the
-//! machine brakes with on a hold. Every state the forward pass accepts lies in its
-//! controllable set, so from the state at a station the set-based stop ([`Passes::brake`])
-//! needs no simulation. Each is sampled at the servo period from the period after its station
-//! and checked by finite differences continuing the three samples before it; the plan itself
-//! is unchanged.
+//! machine brakes with on a hold. From the state at a station, the quicker of two:
+//! - the stop the controllable sets allow ([`Passes::brake`]): every state the forward pass
+//!   accepts lies in its set, so it can stop without a simulation, but at speeds far below the
+//!   plan's the rows linearised at the plan let the deceleration fall with the speed (on a
+//!   straight line at lab set 1 a stop took 4-7 times the S-curve's time);
+//! - an S-curve in time (constant-jerk phases) with the tangential limits over the distance it
+//!   covers, less what the path's curvature there takes at the highest speed on the way
+//!   (nothing is left of them in tight bends).
+//!
+//! Where the stations lie further apart than two offers, S-curve stops also branch off at
+//! samples inside the interval. Each is sampled at the servo period from the period after its
+//! start and checked by finite differences continuing the three samples before it (the other
+//! where the quicker runs over); the plan itself is unchanged.
 
+use super::grid::{arc_derivatives, Interval, Local};
+use super::pieces::Piece;
 use super::*;
 
 /// Speed (mm/s) below which no stop branches off: from there the least control creeps (a
@@ -13,6 +23,12 @@ const SLOWEST_BRANCH: f64 = 1e-3;
 /// Longest stop offered (s): each is stored sample by sample (the slowest measured on
 /// `3D_Chips.ngc`, from 2 mm/s, take 0.9 s).
 const LONGEST_STOP: f64 = 2.0;
+
+/// Points per interval where the S-curve stop's limits also look at the path (the curvature
+/// peaks of fitted corners lie between collocation points), and the share of the limits it
+/// leaves for what they still miss.
+const DENSER: usize = 6;
+const STOP_MARGIN: f64 = 0.02;
 
 /// A stop branching off a motion after its first `.0` samples: its samples from the next
 /// period to rest.
@@ -39,12 +55,66 @@ pub(super) fn hand_out(points: &[PathPoint], stops: &[Branch], emit: &mut Emit<'
     Ok(())
 }
 
+/// The time-optimal stop of a point mass from speed `v0` and acceleration `a0` with |jerk| ≤
+/// `jerk` and deceleration ≤ `accel` (at least -a0): its phases as (jerk, duration).
+fn s_curve(v0: f64, a0: f64, accel: f64, jerk: f64) -> Option<Vec<(f64, f64)>> {
+    if !(v0 > 0.0 && accel > 0.0 && jerk > 0.0) {
+        return None;
+    }
+    let accel = accel.max(-a0);
+    // Jerk -J for t1, then +J back to zero acceleration exactly at rest: the deceleration
+    // peaks at √(a0²/2 + J·v0).
+    let peak = (0.5 * a0 * a0 + jerk * v0).sqrt();
+    if peak <= accel {
+        return Some(vec![(-jerk, (a0 + peak) / jerk), (jerk, peak / jerk)]);
+    }
+    let t1 = (a0 + accel) / jerk;
+    let v1 = v0 + a0 * t1 - 0.5 * jerk * t1 * t1;
+    let hold = ((v1 - 0.5 * accel * accel / jerk) / accel).max(0.0);
+    Some(vec![(-jerk, t1), (0.0, hold), (jerk, accel / jerk)])
+}
+
+/// Distance, speed and acceleration after `t` of a phase of constant `jerk` from `(v, a)`.
+fn advance(v: f64, a: f64, jerk: f64, t: f64) -> (f64, f64, f64) {
+    (
+        v * t + 0.5 * a * t * t + jerk * t * t * t / 6.0,
+        v + a * t + 0.5 * jerk * t * t,
+        a + jerk * t,
+    )
+}
+
+/// The distance an S-curve's `phases` cover from `(v0, a0)`.
+fn phases_length(v0: f64, a0: f64, phases: &[(f64, f64)]) -> f64 {
+    let (mut s, mut v, mut a) = (0.0, v0, a0);
+    for &(jerk, t) in phases {
+        let (ds, v1, a1) = advance(v, a, jerk, t);
+        (s, v, a) = (s + ds, v1, a1);
+    }
+    s
+}
+
+/// The time into a phase (from `(v, a)` with `jerk`, `duration` long) at distance `d`
+/// (bisection: the distance rises with time while the speed is positive).
+fn time_into(v: f64, a: f64, jerk: f64, d: f64, duration: f64) -> f64 {
+    let (mut lo, mut hi) = (0.0, duration);
+    for _ in 0..80 {
+        let mid = 0.5 * (lo + hi);
+        if advance(v, a, jerk, mid).0 < d {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 impl Planner<'_> {
     /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
     /// to `upto`, about that often: each with the number of `samples` (the motion's, the first
     /// `first` into it) before it, sampled from the next period, and checked by finite
-    /// differences continuing the three samples before it (one that runs over is left out: the
-    /// block builder has others).
+    /// differences continuing the three samples before it: the quicker of the two stops (see
+    /// the module), the other where it runs over, none where both do (the block builder has
+    /// others).
     pub(super) fn branch_stops(
         &self,
         curves: &PathCurves,
@@ -79,42 +149,86 @@ impl Planner<'_> {
             jerk: true,
             start: Start {
                 through: &through,
+                through_rests: true,
                 ..along.start
             },
         };
         let sets = p.backward().ok();
         let mut stops = Vec::new();
+        let motion = along.motion;
         let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
         for k in 1..upto.min(grid.len() - 1) {
-            t += along.motion.durations[k - 1];
+            let t0 = t;
+            t += motion.durations[k - 1];
+            // Where the stations lie further apart than the stops should (the grid was laid
+            // from a faster pass), S-curve stops from samples inside the interval before.
+            while last.is_finite() && t - last > 2.0 * every {
+                let at = (last + every).max(first);
+                let n = ((at - first) / self.period).floor() as usize + 1;
+                let at = first + (n - 1) as f64 * self.period;
+                last += every;
+                if at <= t0 || n < 3 || n > samples.len() {
+                    continue;
+                }
+                let (sigma, v, acc) = motion.pieces[k - 1].state_at(at - t0);
+                if v < SLOWEST_BRANCH {
+                    continue;
+                }
+                let candidate = self.s_curve_stop(curves, grid, along.tight, (k - 1, sigma), (v * v, acc));
+                if let Some(points) = self.first_passing(curves, candidate.into_iter(), samples, n, self.period) {
+                    stops.push((n, points));
+                    last = at;
+                }
+            }
             if t - last < every || t < first {
                 continue;
             }
             // Samples at or before the station.
             let n = ((t - first) / self.period).floor() as usize + 1;
-            let state = (along.motion.a[k], along.motion.b[k]);
+            let state = (motion.a[k], motion.b[k]);
             if n < 3 || n > samples.len() || state.0 < SLOWEST_BRANCH * SLOWEST_BRANCH {
                 continue;
             }
-            let Some((motion, end, cut)) = sets.as_ref().and_then(|sets| p.brake(sets, k, state)) else {
-                continue;
-            };
-            if motion.time() > LONGEST_STOP {
-                continue;
+            // The candidates, quicker first.
+            let mut candidates: Vec<(Grid, Motion)> = Vec::with_capacity(2);
+            candidates.extend(self.s_curve_stop(curves, grid, along.tight, (k, 0.0), state));
+            if let Some((stop, end, cut)) = sets.as_ref().and_then(|sets| p.brake(sets, k, state)) {
+                candidates.push((self.cut_grid(curves, grid.slice(k, end), cut), stop));
             }
-            let sub = self.cut_grid(curves, grid.slice(k, end), cut);
+            candidates.sort_by(|x, y| x.1.time().total_cmp(&y.1.time()));
+            let next = first + n as f64 * self.period - t;
+            if let Some(points) = self.first_passing(curves, candidates.into_iter(), samples, n, next) {
+                stops.push((n, points));
+                last = t;
+            }
+        }
+        stops
+    }
+
+    /// The samples of the first of `candidates` (stops, each over a grid of its own) that passes
+    /// the check continuing the three `samples` before the `n`-th, its first sample `next` after
+    /// its start; none longer than [`LONGEST_STOP`].
+    fn first_passing(
+        &self,
+        curves: &PathCurves,
+        candidates: impl Iterator<Item = (Grid, Motion)>,
+        samples: &[PathPoint],
+        n: usize,
+        next: f64,
+    ) -> Option<Vec<PathPoint>> {
+        for (sub, stop) in candidates.filter(|(_, m)| m.time() <= LONGEST_STOP) {
             let mut check = Check::new(&self.limits, self.caps.axes);
             for q in &samples[n - 3..n] {
                 check.push(&q.tip);
             }
             let span = sampler::Span {
-                first: first + n as f64 * self.period - t,
+                first: next,
                 at_rest: true,
             };
             let sampled = sampler::sample(
                 curves,
                 &sub,
-                &motion,
+                &stop,
                 &self.limits,
                 self.caps.axes,
                 Some(samples[n - 1]),
@@ -123,11 +237,10 @@ impl Planner<'_> {
                 span,
             );
             if sampled.over.is_empty() {
-                stops.push((n, sampled.points));
-                last = t;
+                return Some(sampled.points);
             }
         }
-        stops
+        None
     }
 
     /// `sub` with its last interval ending `cut` (its length) into it, where a stop rests there.
@@ -153,5 +266,208 @@ impl Planner<'_> {
             view.u_max()
         };
         sampler::invert(&view, st.u, 0.0, sigma, st.u, u_end, self.caps.axes)
+    }
+
+    /// The S-curve stop from the state `(a, b)` at `sigma0` into interval `k` of `grid` (see the
+    /// module), as a grid of its own (a station where it starts, the grid's from there on, more
+    /// where its phases change inside an interval, the last where it rests) and its motion;
+    /// `None` where the limits leave it nothing or it would run past the grid.
+    fn s_curve_stop(
+        &self,
+        curves: &PathCurves,
+        grid: &Grid,
+        tight: &[f64],
+        (k, sigma0): (usize, f64),
+        (a, b): (f64, f64),
+    ) -> Option<(Grid, Motion)> {
+        let v0 = a.sqrt();
+        let s0 = grid.stations[k].s + sigma0;
+        // The limits over the distance the stop covers, until that distance settles.
+        let (mut reach, mut settled) = (0.0, None);
+        for _ in 0..4 {
+            let (accel, jerk) = self.limits_along(curves, grid, tight, k, s0 + reach, v0, b)?;
+            let phases = s_curve(v0, b, accel, jerk)?;
+            let length = phases_length(v0, b, &phases);
+            if length <= reach {
+                settled = Some((phases, length));
+                break;
+            }
+            reach = length * 1.05;
+        }
+        let (phases, length) = settled?;
+        if s0 + length >= grid.stations[grid.len()].s {
+            return None;
+        }
+        // The phases' starts: distance, time, speed, acceleration.
+        let mut starts = Vec::with_capacity(phases.len());
+        let (mut d, mut t, mut v, mut acc) = (0.0, 0.0, v0, b);
+        for &(jerk, duration) in &phases {
+            starts.push((d, t, v, acc));
+            let (dd, v1, a1) = advance(v, acc, jerk, duration);
+            (d, t, v, acc) = (d + dd, t + duration, v1, a1);
+        }
+        let eps = 1e-12 * (1.0 + length);
+        // The bounds of the stop's intervals: the grid's stations before its rest (Some) and
+        // where a phase starts inside an interval (None), in path order, then the rest.
+        let mut bounds: Vec<(f64, Option<usize>)> = vec![(0.0, (sigma0 == 0.0).then_some(k))];
+        bounds.extend(
+            (k + 1..=grid.len())
+                .map(|j| (grid.stations[j].s - s0, Some(j)))
+                .take_while(|&(dj, _)| dj < length - eps),
+        );
+        for &(ds, ..) in starts.iter().skip(1) {
+            if ds > eps && ds < length - eps && bounds.iter().all(|(x, _)| (x - ds).abs() > eps) {
+                bounds.push((ds, None));
+            }
+        }
+        bounds.sort_by(|x, y| x.0.total_cmp(&y.0));
+        bounds.push((length, None));
+        let mut sub = Grid::default();
+        let mut motion = Motion::default();
+        let mut before: Option<(f64, f64, usize)> = None; // distance, time, grid interval
+        for (n, &(dist, station)) in bounds.iter().enumerate() {
+            // The grid interval the bound lies in (or starts).
+            let g = station.unwrap_or_else(|| grid.stations[..grid.len()].partition_point(|st| st.s - s0 <= dist) - 1);
+            let mut st = grid.stations[g];
+            if station.is_none() {
+                st.u = self.u_at(curves, grid, g, dist - (grid.stations[g].s - s0));
+                st.s = s0 + dist;
+            }
+            // The phase there (the last one starting at or before it), and the state.
+            let phase = starts.iter().rposition(|x| x.0 <= dist + eps).unwrap_or(0);
+            let (ds, ts, vs, as_) = starts[phase];
+            let (jerk, duration) = phases[phase];
+            let last = n + 1 == bounds.len();
+            let (time, vd, ad) = if last {
+                (t, 0.0, 0.0)
+            } else {
+                let tau = time_into(vs, as_, jerk, dist - ds, duration);
+                let (_, vd, ad) = advance(vs, as_, jerk, tau);
+                (ts + tau, vd.max(0.0), ad)
+            };
+            if let Some((d0, t0, g0)) = before {
+                sub.intervals.push(Interval {
+                    length: dist - d0,
+                    ..grid.intervals[g0]
+                });
+                motion.durations.push(time - t0);
+            }
+            sub.stations.push(st);
+            motion.a.push(vd * vd);
+            motion.b.push(ad);
+            if !last {
+                motion.pieces.push(Piece::Jerk { v: vd, b: ad, jerk });
+            }
+            before = Some((dist, time, g));
+        }
+        (motion.pieces.len() == sub.intervals.len() && !sub.intervals.is_empty()).then_some((sub, motion))
+    }
+
+    /// The tangential deceleration and jerk the axes allow from station `k` to arc length
+    /// `until` (its stations, collocation points and [`DENSER`] points more per interval, each
+    /// with its interval's tightening and [`STOP_MARGIN`]), less what the curvature takes at
+    /// the highest speed on the way (from `v0`, accelerating at `a0`): |q'ᵢ|·A + |q''ᵢ|·v² ≤ Aᵢ
+    /// and |q'ᵢ|·J + 3|q''ᵢ|·A·v + |q'''ᵢ|·v³ ≤ Jᵢ. `None` where nothing is left.
+    #[allow(clippy::too_many_arguments)]
+    fn limits_along(
+        &self,
+        curves: &PathCurves,
+        grid: &Grid,
+        tight: &[f64],
+        k: usize,
+        until: f64,
+        v0: f64,
+        a0: f64,
+    ) -> Option<(f64, f64)> {
+        let axes = self.caps.axes;
+        let mut locals: Vec<(Local, f64)> = Vec::new();
+        let mut j = k;
+        while j < grid.len() {
+            let f = tight[j.min(tight.len() - 1)] * (1.0 - STOP_MARGIN);
+            let (st, next) = (&grid.stations[j], &grid.stations[j + 1]);
+            locals.push((st.right, f));
+            locals.extend(grid.intervals[j].points.iter().map(|(_, l)| (*l, f)));
+            locals.push((next.left, f));
+            let view = curves.view(st.element);
+            let u_end = if next.element == st.element {
+                next.u
+            } else {
+                view.u_max()
+            };
+            for m in 1..=DENSER {
+                let u = st.u + (u_end - st.u) * m as f64 / (DENSER + 1) as f64;
+                let (_, q1, q2, q3) = arc_derivatives(&view, u, axes, false);
+                locals.push((Local { q1, q2, q3, cap: 0.0 }, f));
+            }
+            if next.s >= until {
+                break;
+            }
+            j += 1;
+        }
+        // The highest speed on the way: a rising acceleration first falls to zero (at the
+        // jerk found the round before; twice the speed before any).
+        let (mut accel, mut jerk) = (f64::INFINITY, f64::INFINITY);
+        for _ in 0..2 {
+            let v = match (a0 > 0.0, jerk.is_finite()) {
+                (false, _) => v0,
+                (true, true) => v0 + 0.5 * a0 * a0 / jerk,
+                (true, false) => 2.0 * v0,
+            };
+            let mut acc = f64::INFINITY;
+            for (l, f) in &locals {
+                for i in (0..axes).filter(|&i| l.q1[i].abs() > 1e-12) {
+                    acc = acc.min((self.axis.acceleration[i] * f - l.q2[i].abs() * v * v) / l.q1[i].abs());
+                }
+            }
+            if acc.is_nan() || acc <= 0.0 {
+                return None;
+            }
+            let used = acc.max(a0.abs());
+            let mut jk = f64::INFINITY;
+            for (l, f) in &locals {
+                for i in (0..axes).filter(|&i| l.q1[i].abs() > 1e-12) {
+                    let room = self.axis.jerk[i] * f - 3.0 * l.q2[i].abs() * used * v - l.q3[i].abs() * v * v * v;
+                    jk = jk.min(room / l.q1[i].abs());
+                }
+            }
+            if jk.is_nan() || jk <= 0.0 {
+                return None;
+            }
+            (accel, jerk) = (acc, jk);
+        }
+        Some((accel, jerk))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{advance, phases_length, s_curve};
+
+    /// The S-curve comes to rest with no acceleration left, within its jerk and deceleration,
+    /// from cruise, from accelerating and from decelerating states, with and without a hold
+    /// at the deceleration limit.
+    #[test]
+    fn the_s_curve_stop_ends_at_rest_within_its_limits() {
+        for &(v0, a0, accel, jerk) in &[
+            (100.0, 0.0, 5000.0, 5e4),     // short: no hold
+            (2500.0, 0.0, 1e4, 6e4),       // long: a hold at the limit
+            (800.0, 9000.0, 1e4, 6e4),     // accelerating
+            (300.0, -4000.0, 5000.0, 5e4), // decelerating already
+            (1e-3, 0.0, 5000.0, 5e4),      // nearly at rest
+        ] {
+            let phases = s_curve(v0, a0, accel, jerk).unwrap();
+            let (mut v, mut a, mut peak) = (v0, a0, 0.0f64);
+            for &(j, t) in &phases {
+                assert!(t >= 0.0 && j.abs() <= jerk);
+                // The deceleration is largest at a phase end (linear in between).
+                let (_, v1, a1) = advance(v, a, j, t);
+                (v, a) = (v1, a1);
+                peak = peak.max(-a);
+            }
+            assert!(v.abs() <= 1e-9 * v0.max(1.0), "({v0}, {a0}): ends at {v} mm/s");
+            assert!(a.abs() <= 1e-9 * accel, "({v0}, {a0}): ends at {a} mm/s²");
+            assert!(peak <= accel * (1.0 + 1e-12), "({v0}, {a0}): decelerates at {peak}");
+            assert!(phases_length(v0, a0, &phases) > 0.0);
+        }
     }
 }

@@ -378,6 +378,7 @@ impl Planner<'_> {
                 state,
                 through: &through,
                 artificial_end: !(laid.complete && e == laid.grid.len()),
+                through_rests: false,
             };
             // The committed motion (to rest at `f`) and its ends, or none where the start state
             // lies outside the window's first set.
