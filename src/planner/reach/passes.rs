@@ -106,6 +106,18 @@ impl Motion {
     pub fn time(&self) -> f64 {
         self.durations.iter().sum()
     }
+
+    /// Appends the quadratic `piece` (from the last state, control `c`) over an interval of
+    /// length `d` taking `duration`; the state at its end.
+    fn advance(&mut self, piece: Piece, duration: f64, c: f64, d: f64) -> (f64, f64) {
+        let (a, b) = (self.a[self.a.len() - 1], self.b[self.b.len() - 1]);
+        let next = ((a + 2.0 * b * d + c * d * d).max(0.0), b + c * d);
+        self.pieces.push(piece);
+        self.durations.push(duration);
+        self.a.push(next.0);
+        self.b.push(next.1);
+        next
+    }
 }
 
 /// Jump of q'' at a station (a join where the curvature changes), if any.
@@ -420,12 +432,7 @@ impl Passes<'_> {
                 }
                 return Err(PassError::Stalls { interval: k });
             };
-            a = (a + 2.0 * b * d + c * d * d).max(0.0);
-            b += c * d;
-            m.pieces.push(piece);
-            m.durations.push(duration);
-            m.a.push(a);
-            m.b.push(b);
+            (a, b) = m.advance(piece, duration, c, d);
         }
         // The constant-jerk stop over the last interval (the state lies on its line up to the
         // set's rounding).
@@ -523,12 +530,7 @@ impl Passes<'_> {
             let c = c.max(no_dip(a, b, d));
             let piece = Piece::quadratic(a, b, c);
             let duration = piece.duration(d)?;
-            a = (a + 2.0 * b * d + c * d * d).max(0.0);
-            b += c * d;
-            m.pieces.push(piece);
-            m.durations.push(duration);
-            m.a.push(a);
-            m.b.push(b);
+            (a, b) = m.advance(piece, duration, c, d);
         }
         let (piece, duration, _) = Piece::stop(a, b)?;
         m.pieces.push(piece);
