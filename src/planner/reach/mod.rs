@@ -37,7 +37,7 @@ use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
 use passes::{Motion, PassError, Passes, Start};
 use rows::AxisLimits;
 use sampler::Check;
-use stops::{hand_out, Along, Branch};
+use stops::{hand_out, Along, Branches, FindStops};
 
 const NC: usize = COLLOCATION.len();
 
@@ -251,10 +251,19 @@ pub fn run(
         if let Some(mut stretch) = whole {
             read_on(curves, &mut stretch, f64::INFINITY);
             let plan = planner.plan_stretch(curves, &stretch, last, &mut check)?;
-            stats.stations += plan.stations;
+            stats.stations += plan.grid.stations.len();
             stats.passes += plan.passes;
             stats.repairs += plan.repairs;
-            hand_out(&plan.points, &plan.stops, &mut out)?;
+            let along = Along {
+                grid: &plan.grid,
+                lin: &plan.lin,
+                tight: &plan.tight,
+                start: Start::default(),
+                motion: &plan.motion,
+            };
+            let (n, period) = (plan.grid.len(), planner.period);
+            let stops = |found: &mut Branches<'_>| planner.branch_stops(curves, &along, n, period, &plan.points, found);
+            hand_out(&plan.points, &stops, &mut out)?;
             last = plan.points.last().copied().or(last);
             from = stretch.to;
         }
@@ -474,8 +483,7 @@ impl<'o> Planner<'o> {
     }
 
     /// Plans one rest-to-rest stretch: passes, a second grid, more passes, then sampled and
-    /// checked, tightened where samples ran over; the stops of [`ReachOptions::stops_every`]
-    /// along it.
+    /// checked, tightened where samples ran over.
     fn plan_stretch(
         &self,
         curves: &PathCurves,
@@ -584,20 +592,14 @@ impl<'o> Planner<'o> {
             );
             if sampled.over.is_empty() {
                 *check = trial;
-                let along = Along {
-                    grid: &grid,
-                    lin: &lin,
-                    tight: &tight,
-                    start: Start::default(),
-                    motion: &motion,
-                };
-                let stops = self.branch_stops(curves, &along, grid.len(), self.period, &sampled.points);
                 return Ok(StretchPlan {
-                    stations: grid.stations.len(),
                     passes,
                     repairs,
                     points: sampled.points,
-                    stops,
+                    grid,
+                    lin,
+                    tight,
+                    motion,
                 });
             }
             self.tighten(&mut tight, &motion, &sampled.over, &mut repairs)?;
@@ -706,14 +708,16 @@ impl<'o> Planner<'o> {
     }
 }
 
-/// A rest-to-rest stretch planned whole: its stations, the passes and re-plans it took, its
-/// checked samples and the stops offered along them.
+/// A rest-to-rest stretch planned whole: the passes and re-plans it took, its checked samples,
+/// and its motion with what it was planned with (the stops along it branch off that).
 struct StretchPlan {
-    stations: usize,
     passes: usize,
     repairs: usize,
     points: Vec<PathPoint>,
-    stops: Vec<Branch>,
+    grid: Grid,
+    lin: Linearisation,
+    tight: Vec<f64>,
+    motion: Motion,
 }
 
 /// Values of a at every station and collocation point of a grid.

@@ -30,9 +30,12 @@ const LONGEST_STOP: f64 = 2.0;
 const DENSER: usize = 6;
 const STOP_MARGIN: f64 = 0.02;
 
-/// A stop branching off a motion after its first `.0` samples: its samples from the next
-/// period to rest.
-pub(super) type Branch = (usize, Vec<PathPoint>);
+/// Where the stops branching off a motion's samples go as they are found, in path order: each
+/// after the motion's first `n` samples, its samples from the next period to rest.
+pub(super) type Branches<'a> = dyn FnMut(usize, Vec<PathPoint>) -> Result<(), ReachError> + 'a;
+
+/// What finds the stops branching off a motion's samples, handing each to the sink it is given.
+pub(super) type FindStops<'a> = dyn Fn(&[PathPoint], &mut Branches<'_>) -> Result<(), ReachError> + 'a;
 
 /// A motion and what it was planned with.
 pub(super) struct Along<'a> {
@@ -43,14 +46,23 @@ pub(super) struct Along<'a> {
     pub motion: &'a Motion,
 }
 
-/// Hands `points` to `emit`, each stop of `stops` after the points before it.
-pub(super) fn hand_out(points: &[PathPoint], stops: &[Branch], emit: &mut Emit<'_>) -> Result<(), ReachError> {
-    let mut stops = stops.iter().peekable();
-    for (i, p) in points.iter().enumerate() {
-        emit(Planned::Point(p)).map_err(ReachError::Plan)?;
-        while let Some((_, stop)) = stops.next_if(|(n, _)| *n == i + 1) {
-            emit(Planned::Stop(stop)).map_err(ReachError::Plan)?;
+/// Hands `points` to `emit`, each stop `stops` finds after the points before it, as it finds
+/// them (the first points leave once the first stop is found, not all).
+pub(super) fn hand_out(
+    points: &[PathPoint],
+    stops: &dyn Fn(&mut Branches<'_>) -> Result<(), ReachError>,
+    emit: &mut Emit<'_>,
+) -> Result<(), ReachError> {
+    let mut sent = 0;
+    stops(&mut |n, stop| {
+        for p in &points[sent..n] {
+            emit(Planned::Point(p)).map_err(ReachError::Plan)?;
         }
+        sent = n;
+        emit(Planned::Stop(&stop)).map_err(ReachError::Plan)
+    })?;
+    for p in &points[sent..] {
+        emit(Planned::Point(p)).map_err(ReachError::Plan)?;
     }
     Ok(())
 }
@@ -110,8 +122,8 @@ fn time_into(v: f64, a: f64, jerk: f64, d: f64, duration: f64) -> f64 {
 
 impl Planner<'_> {
     /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
-    /// to `upto`, about that often: each with the number of `samples` (the motion's, the first
-    /// `first` into it) before it, sampled from the next period, and checked by finite
+    /// to `upto`, about that often, handed to `found` as they are found: each with the number of
+    /// `samples` (the motion's, the first `first` into it) before it, sampled from the next period, and checked by finite
     /// differences continuing the three samples before it: the quicker of the two stops (see
     /// the module), the other where it runs over, none where both do (the block builder has
     /// others).
@@ -122,9 +134,10 @@ impl Planner<'_> {
         upto: usize,
         first: f64,
         samples: &[PathPoint],
-    ) -> Vec<Branch> {
+        found: &mut Branches<'_>,
+    ) -> Result<(), ReachError> {
         let Some(every) = self.options.stops_every else {
-            return Vec::new();
+            return Ok(());
         };
         let grid = along.grid;
         // The sets of the rows the motion was planned with, without floors (a stop goes below
@@ -154,7 +167,6 @@ impl Planner<'_> {
             },
         };
         let sets = p.backward().ok();
-        let mut stops = Vec::new();
         let motion = along.motion;
         let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
         for k in 1..upto.min(grid.len() - 1) {
@@ -176,7 +188,7 @@ impl Planner<'_> {
                 }
                 let candidate = self.s_curve_stop(curves, grid, along.tight, (k - 1, sigma), (v * v, acc));
                 if let Some(points) = self.first_passing(curves, candidate.into_iter(), samples, n, self.period) {
-                    stops.push((n, points));
+                    found(n, points)?;
                     last = at;
                 }
             }
@@ -198,11 +210,11 @@ impl Planner<'_> {
             candidates.sort_by(|x, y| x.1.time().total_cmp(&y.1.time()));
             let next = first + n as f64 * self.period - t;
             if let Some(points) = self.first_passing(curves, candidates.into_iter(), samples, n, next) {
-                stops.push((n, points));
+                found(n, points)?;
                 last = t;
             }
         }
-        stops
+        Ok(())
     }
 
     /// The samples of the first of `candidates` (stops, each over a grid of its own) that passes

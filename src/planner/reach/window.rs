@@ -412,8 +412,9 @@ impl Planner<'_> {
                             start,
                             motion: &motion,
                         };
-                        let stops =
-                            |samples: &[PathPoint]| self.branch_stops(curves, &along, sub.len(), first_sample, samples);
+                        let stops = |samples: &[PathPoint], found: &mut Branches<'_>| {
+                            self.branch_stops(curves, &along, sub.len(), first_sample, samples, found)
+                        };
                         match self.commit(curves, &sub, &motion, run.last, check, span, &stops, emit)? {
                             Ok((last, _)) => {
                                 run.last = last.or(run.last);
@@ -478,7 +479,9 @@ impl Planner<'_> {
                         start,
                         motion: &stop,
                     };
-                    let stops = |samples: &[PathPoint]| self.branch_stops(curves, &along, m2, first_sample, samples);
+                    let stops = |samples: &[PathPoint], found: &mut Branches<'_>| {
+                        self.branch_stops(curves, &along, m2, first_sample, samples, found)
+                    };
                     let committed = laid.grid.slice(m, m + m2);
                     match self.commit(curves, &committed, &part, run.last, check, span, &stops, emit)? {
                         Ok((last, next)) => {
@@ -687,7 +690,7 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         span: sampler::Span,
-        stops: &dyn Fn(&[PathPoint]) -> Vec<Branch>,
+        stops: &FindStops<'_>,
         emit: &mut Emit<'_>,
     ) -> Result<Committed, ReachError> {
         let mut trial = check.clone();
@@ -706,7 +709,7 @@ impl Planner<'_> {
             return Ok(Err(sampled.over));
         }
         *check = trial;
-        hand_out(&sampled.points, &stops(&sampled.points), emit)?;
+        hand_out(&sampled.points, &|found| stops(&sampled.points, found), emit)?;
         Ok(Ok((sampled.points.last().copied(), sampled.next)))
     }
 
@@ -736,7 +739,7 @@ impl Planner<'_> {
         let tail = stop.tail(m - from);
         let rest = tail.durations.len();
         let span = sampler::Span { first, at_rest: true };
-        let no_stops = |_: &[PathPoint]| Vec::new();
+        let no_stops = |_: &[PathPoint], _: &mut Branches<'_>| Ok(());
         match self.commit(
             curves,
             &grid.slice(m, m + rest),
