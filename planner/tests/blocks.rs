@@ -461,3 +461,32 @@ fn reach_blocks_hold_within_the_limits() {
         assert!(ms(worst) <= 5.0, "{name}: a hold braked only after {:.2} ms", ms(worst));
     }
 }
+
+#[derive(clap::Parser)]
+struct ProgramLimits {
+    #[command(flatten)]
+    limits: nurbs_cli::limits::LimitArgs,
+}
+
+/// What the reachability planner's blocks with their stops cost on a program of one's own, as
+/// `nurbs-planner --planner reach` makes them but without the module's pace:
+/// `REACH_PROGRAM=chips.ngc REACH_FLAGS="--feed 100 --accel 5000 --jerk 5e4 --chord-tol 0.01
+/// --period 0.00025" cargo test --release -p nurbs-planner --features linuxcnc --test blocks
+/// reach_blocks_of_a_program -- --ignored --nocapture` (docs/integration.md records one); every
+/// block end's stop is checked within the limits as the module plays it.
+#[test]
+#[ignore]
+fn reach_blocks_of_a_program() {
+    use clap::Parser;
+    let program = std::env::var("REACH_PROGRAM").expect("REACH_PROGRAM: the program to plan");
+    let flags = std::env::var("REACH_FLAGS").unwrap_or_default();
+    let args = ProgramLimits::parse_from(std::iter::once("limits").chain(flags.split_whitespace()));
+    let mut stream = nurbs_cli::corners::open(std::path::Path::new(&program), None, &args.limits).unwrap();
+    let shared = SharedPath::new(stream.take_elements());
+    let tip = shared.open().unwrap().tip_dim();
+    let limits = args.limits.limits(tip).unwrap();
+    let (plan, line) = reach_block_plan(&shared, &limits, 1.0).unwrap();
+    println!("{program}: {line}");
+    let (ends, stored, worst) = plan.stops;
+    assert!(ends > 0 && stored <= ends && worst <= 1.0 + 1e-6, "{program}: {line}");
+}

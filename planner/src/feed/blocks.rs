@@ -380,11 +380,15 @@ impl BlockBuilder {
         Ok(())
     }
 
-    /// Takes a stop the plan offers after the last point pushed (its positions from the next
-    /// period on, to rest). Once a plan offers stops, only they and the module's tangential
-    /// stop are tried.
-    pub fn offer_stop(&mut self, points: &[PathPoint]) {
+    /// The plan offers its own stops ([`Self::offer_stop`]): only they and the module's
+    /// tangential stop are tried, never VPOp's deceleration search.
+    pub fn expect_offered_stops(&mut self) {
         self.offers = true;
+    }
+
+    /// Takes a stop the plan offers after the last point pushed (its positions from the next
+    /// period on, to rest).
+    pub fn offer_stop(&mut self, points: &[PathPoint]) {
         if let Some(last) = self.received().checked_sub(1) {
             self.offered.insert(last, points.to_vec());
         }
@@ -765,6 +769,7 @@ fn reach_blocks(
         from,
         max_fraction,
     )?;
+    builder.expect_offered_stops();
     let options = ReachOptions {
         window: Some(WindowOptions::default()),
         stops_every: Some(STOPS_EVERY * limits.period),

@@ -4,8 +4,8 @@
 //!   accepts lies in its set, so it can stop without a simulation, but at speeds far below the
 //!   plan's the rows linearised at the plan let the deceleration fall with the speed (on a
 //!   straight line at lab set 1 a stop took 4-7 times the S-curve's time);
-//! - an S-curve in time (constant-jerk phases) with the tangential limits over the distance it
-//!   covers, less what the path's curvature there takes at the highest speed on the way
+//! - the S-curve stop the module also runs ([`stop_from`]: constant-jerk phases in time) with
+//!   the tangential limits over the distance it covers, less what the path's curvature there takes at the highest speed on the way
 //!   (nothing is left of them in tight bends).
 //!
 //! Where the stations lie further apart than two offers, S-curve stops also branch off at
@@ -16,6 +16,7 @@
 use super::grid::{arc_derivatives, Interval, Local};
 use super::pieces::Piece;
 use super::*;
+use nurbs_rtcore::scurve::{stop_from, SCurveState, SCurveTable, PHASES};
 
 /// Speed (mm/s) below which no stop branches off: from there the least control creeps (a
 /// speed of 1e-5 mm/s took 800 s to rest on `3D_Chips.ngc`).
@@ -67,51 +68,13 @@ pub(super) fn hand_out(
     Ok(())
 }
 
-/// The time-optimal stop of a point mass from speed `v0` and acceleration `a0` with |jerk| ≤
-/// `jerk` and deceleration ≤ `accel` (at least -a0): its phases as (jerk, duration).
-fn s_curve(v0: f64, a0: f64, accel: f64, jerk: f64) -> Option<Vec<(f64, f64)>> {
-    if !(v0 > 0.0 && accel > 0.0 && jerk > 0.0) {
-        return None;
-    }
-    let accel = accel.max(-a0);
-    // Jerk -J for t1, then +J back to zero acceleration exactly at rest: the deceleration
-    // peaks at √(a0²/2 + J·v0).
-    let peak = (0.5 * a0 * a0 + jerk * v0).sqrt();
-    if peak <= accel {
-        return Some(vec![(-jerk, (a0 + peak) / jerk), (jerk, peak / jerk)]);
-    }
-    let t1 = (a0 + accel) / jerk;
-    let v1 = v0 + a0 * t1 - 0.5 * jerk * t1 * t1;
-    let hold = ((v1 - 0.5 * accel * accel / jerk) / accel).max(0.0);
-    Some(vec![(-jerk, t1), (0.0, hold), (jerk, accel / jerk)])
-}
-
-/// Distance, speed and acceleration after `t` of a phase of constant `jerk` from `(v, a)`.
-fn advance(v: f64, a: f64, jerk: f64, t: f64) -> (f64, f64, f64) {
-    (
-        v * t + 0.5 * a * t * t + jerk * t * t * t / 6.0,
-        v + a * t + 0.5 * jerk * t * t,
-        a + jerk * t,
-    )
-}
-
-/// The distance an S-curve's `phases` cover from `(v0, a0)`.
-fn phases_length(v0: f64, a0: f64, phases: &[(f64, f64)]) -> f64 {
-    let (mut s, mut v, mut a) = (0.0, v0, a0);
-    for &(jerk, t) in phases {
-        let (ds, v1, a1) = advance(v, a, jerk, t);
-        (s, v, a) = (s + ds, v1, a1);
-    }
-    s
-}
-
-/// The time into a phase (from `(v, a)` with `jerk`, `duration` long) at distance `d`
-/// (bisection: the distance rises with time while the speed is positive).
-fn time_into(v: f64, a: f64, jerk: f64, d: f64, duration: f64) -> f64 {
+/// The time into a phase of constant `jerk` from `state`, `duration` long, at distance `d` from
+/// the phase's start (bisection: the distance rises with time while the feed is positive).
+fn time_into(state: &SCurveState, jerk: f64, d: f64, duration: f64) -> f64 {
     let (mut lo, mut hi) = (0.0, duration);
     for _ in 0..80 {
         let mid = 0.5 * (lo + hi);
-        if advance(v, a, jerk, mid).0 < d {
+        if state.advance(jerk, mid).s - state.s < d {
             lo = mid;
         } else {
             hi = mid;
@@ -123,10 +86,10 @@ fn time_into(v: f64, a: f64, jerk: f64, d: f64, duration: f64) -> f64 {
 impl Planner<'_> {
     /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
     /// to `upto`, about that often, handed to `found` as they are found: each with the number of
-    /// `samples` (the motion's, the first `first` into it) before it, sampled from the next period, and checked by finite
-    /// differences continuing the three samples before it: the quicker of the two stops (see
-    /// the module), the other where it runs over, none where both do (the block builder has
-    /// others).
+    /// `samples` (the motion's, the first `first` into it) before it, sampled from the next
+    /// period, and checked by finite differences continuing the three samples before it: the
+    /// quicker of the two stops (see the module), the other where it runs over, none where both
+    /// do (the block builder has others).
     pub(super) fn branch_stops(
         &self,
         curves: &PathCurves,
@@ -294,30 +257,24 @@ impl Planner<'_> {
     ) -> Option<(Grid, Motion)> {
         let v0 = a.sqrt();
         let s0 = grid.stations[k].s + sigma0;
-        // The limits over the distance the stop covers, until that distance settles.
-        let (mut reach, mut settled) = (0.0, None);
+        // The limits over the distance the stop covers, until that distance settles (the
+        // module's stop profile: jerk down, hold, jerk up to rest).
+        let (mut reach, mut settled): (f64, Option<SCurveTable>) = (0.0, None);
         for _ in 0..4 {
             let (accel, jerk) = self.limits_along(curves, grid, tight, k, s0 + reach, v0, b)?;
-            let phases = s_curve(v0, b, accel, jerk)?;
-            let length = phases_length(v0, b, &phases);
-            if length <= reach {
-                settled = Some((phases, length));
+            let table = stop_from(v0, b, accel, jerk).table_from(b);
+            if table.length() <= reach {
+                settled = Some(table);
                 break;
             }
-            reach = length * 1.05;
+            reach = table.length() * 1.05;
         }
-        let (phases, length) = settled?;
-        if s0 + length >= grid.stations[grid.len()].s {
+        let table = settled?;
+        let length = table.length();
+        if length.is_nan() || length <= 0.0 || s0 + length >= grid.stations[grid.len()].s {
             return None;
         }
-        // The phases' starts: distance, time, speed, acceleration.
-        let mut starts = Vec::with_capacity(phases.len());
-        let (mut d, mut t, mut v, mut acc) = (0.0, 0.0, v0, b);
-        for &(jerk, duration) in &phases {
-            starts.push((d, t, v, acc));
-            let (dd, v1, a1) = advance(v, acc, jerk, duration);
-            (d, t, v, acc) = (d + dd, t + duration, v1, a1);
-        }
+        let phases: Vec<usize> = (0..PHASES).filter(|&p| table.profile.durations[p] > 0.0).collect();
         let eps = 1e-12 * (1.0 + length);
         // The bounds of the stop's intervals: the grid's stations before its rest (Some) and
         // where a phase starts inside an interval (None), in path order, then the rest.
@@ -327,7 +284,8 @@ impl Planner<'_> {
                 .map(|j| (grid.stations[j].s - s0, Some(j)))
                 .take_while(|&(dj, _)| dj < length - eps),
         );
-        for &(ds, ..) in starts.iter().skip(1) {
+        for &p in phases.iter().skip(1) {
+            let ds = table.states[p].s;
             if ds > eps && ds < length - eps && bounds.iter().all(|(x, _)| (x - ds).abs() > eps) {
                 bounds.push((ds, None));
             }
@@ -346,17 +304,21 @@ impl Planner<'_> {
                 st.s = s0 + dist;
             }
             // The phase there (the last one starting at or before it), and the state.
-            let phase = starts.iter().rposition(|x| x.0 <= dist + eps).unwrap_or(0);
-            let (ds, ts, vs, as_) = starts[phase];
-            let (jerk, duration) = phases[phase];
+            let phase = phases
+                .iter()
+                .rev()
+                .copied()
+                .find(|&p| table.states[p].s <= dist + eps)
+                .unwrap_or(0);
+            let (start, jerk) = (table.states[phase], table.profile.jerks[phase]);
             let last = n + 1 == bounds.len();
-            let (time, vd, ad) = if last {
-                (t, 0.0, 0.0)
+            let (time, here) = if last {
+                (table.total_time(), SCurveState::default())
             } else {
-                let tau = time_into(vs, as_, jerk, dist - ds, duration);
-                let (_, vd, ad) = advance(vs, as_, jerk, tau);
-                (ts + tau, vd.max(0.0), ad)
+                let tau = time_into(&start, jerk, dist - start.s, table.profile.durations[phase]);
+                (table.starts[phase] + tau, start.advance(jerk, tau))
             };
+            let (vd, ad) = (here.v.max(0.0), here.a);
             if let Some((d0, t0, g0)) = before {
                 sub.intervals.push(Interval {
                     length: dist - d0,
@@ -448,38 +410,5 @@ impl Planner<'_> {
             (accel, jerk) = (acc, jk);
         }
         Some((accel, jerk))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{advance, phases_length, s_curve};
-
-    /// The S-curve comes to rest with no acceleration left, within its jerk and deceleration,
-    /// from cruise, from accelerating and from decelerating states, with and without a hold
-    /// at the deceleration limit.
-    #[test]
-    fn the_s_curve_stop_ends_at_rest_within_its_limits() {
-        for &(v0, a0, accel, jerk) in &[
-            (100.0, 0.0, 5000.0, 5e4),     // short: no hold
-            (2500.0, 0.0, 1e4, 6e4),       // long: a hold at the limit
-            (800.0, 9000.0, 1e4, 6e4),     // accelerating
-            (300.0, -4000.0, 5000.0, 5e4), // decelerating already
-            (1e-3, 0.0, 5000.0, 5e4),      // nearly at rest
-        ] {
-            let phases = s_curve(v0, a0, accel, jerk).unwrap();
-            let (mut v, mut a, mut peak) = (v0, a0, 0.0f64);
-            for &(j, t) in &phases {
-                assert!(t >= 0.0 && j.abs() <= jerk);
-                // The deceleration is largest at a phase end (linear in between).
-                let (_, v1, a1) = advance(v, a, j, t);
-                (v, a) = (v1, a1);
-                peak = peak.max(-a);
-            }
-            assert!(v.abs() <= 1e-9 * v0.max(1.0), "({v0}, {a0}): ends at {v} mm/s");
-            assert!(a.abs() <= 1e-9 * accel, "({v0}, {a0}): ends at {a} mm/s²");
-            assert!(peak <= accel * (1.0 + 1e-12), "({v0}, {a0}): decelerates at {peak}");
-            assert!(phases_length(v0, a0, &phases) > 0.0);
-        }
     }
 }
