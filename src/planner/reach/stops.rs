@@ -31,6 +31,44 @@ const LONGEST_STOP: f64 = 2.0;
 const DENSER: usize = 6;
 const STOP_MARGIN: f64 = 0.02;
 
+/// The points of each interval of a grid the S-curve stops' limits look at (its stations,
+/// collocation points and [`DENSER`] more), each with the interval's tightening and
+/// [`STOP_MARGIN`]: found once per interval, as every stop within reach of it looks there.
+struct LookedAt {
+    intervals: Vec<Option<Vec<(Local, f64)>>>,
+}
+
+impl LookedAt {
+    fn new(grid: &Grid) -> Self {
+        LookedAt {
+            intervals: vec![None; grid.len()],
+        }
+    }
+
+    fn interval(&mut self, curves: &PathCurves, grid: &Grid, tight: &[f64], axes: usize, j: usize) -> &[(Local, f64)] {
+        self.intervals[j].get_or_insert_with(|| {
+            let f = tight[j.min(tight.len() - 1)] * (1.0 - STOP_MARGIN);
+            let (st, next) = (&grid.stations[j], &grid.stations[j + 1]);
+            let mut locals = Vec::with_capacity(grid.intervals[j].points.len() + 2 + DENSER);
+            locals.push((st.right, f));
+            locals.extend(grid.intervals[j].points.iter().map(|(_, l)| (*l, f)));
+            locals.push((next.left, f));
+            let view = curves.view(st.element);
+            let u_end = if next.element == st.element {
+                next.u
+            } else {
+                view.u_max()
+            };
+            for m in 1..=DENSER {
+                let u = st.u + (u_end - st.u) * m as f64 / (DENSER + 1) as f64;
+                let (_, q1, q2, q3) = arc_derivatives(&view, u, axes, false);
+                locals.push((Local { q1, q2, q3, cap: 0.0 }, f));
+            }
+            locals
+        })
+    }
+}
+
 /// Where the stops branching off a motion's samples go as they are found, in path order: each
 /// after the motion's first `n` samples, its samples from the next period to rest.
 pub(super) type Branches<'a> = dyn FnMut(usize, Vec<PathPoint>) -> Result<(), ReachError> + 'a;
@@ -131,6 +169,7 @@ impl Planner<'_> {
         };
         let sets = p.backward().ok();
         let motion = along.motion;
+        let mut looked = LookedAt::new(grid);
         let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
         for k in 1..upto.min(grid.len() - 1) {
             let t0 = t;
@@ -149,7 +188,7 @@ impl Planner<'_> {
                 if v < SLOWEST_BRANCH {
                     continue;
                 }
-                let candidate = self.s_curve_stop(curves, grid, along.tight, (k - 1, sigma), (v * v, acc));
+                let candidate = self.s_curve_stop(curves, grid, along.tight, &mut looked, (k - 1, sigma), (v * v, acc));
                 if let Some(points) = self.first_passing(curves, candidate.into_iter(), samples, n, self.period) {
                     found(n, points)?;
                     last = at;
@@ -166,7 +205,7 @@ impl Planner<'_> {
             }
             // The candidates, quicker first.
             let mut candidates: Vec<(Grid, Motion)> = Vec::with_capacity(2);
-            candidates.extend(self.s_curve_stop(curves, grid, along.tight, (k, 0.0), state));
+            candidates.extend(self.s_curve_stop(curves, grid, along.tight, &mut looked, (k, 0.0), state));
             if let Some((stop, end, cut)) = sets.as_ref().and_then(|sets| p.brake(sets, k, state)) {
                 candidates.push((self.cut_grid(curves, grid.slice(k, end), cut), stop));
             }
@@ -240,7 +279,7 @@ impl Planner<'_> {
         } else {
             view.u_max()
         };
-        sampler::invert(&view, st.u, 0.0, sigma, st.u, u_end, self.caps.axes)
+        sampler::invert(&view, st.u, 0.0, sigma, st.u, u_end, self.caps.axes, None).0
     }
 
     /// The S-curve stop from the state `(a, b)` at `sigma0` into interval `k` of `grid` (see the
@@ -252,6 +291,7 @@ impl Planner<'_> {
         curves: &PathCurves,
         grid: &Grid,
         tight: &[f64],
+        looked: &mut LookedAt,
         (k, sigma0): (usize, f64),
         (a, b): (f64, f64),
     ) -> Option<(Grid, Motion)> {
@@ -261,7 +301,7 @@ impl Planner<'_> {
         // module's stop profile: jerk down, hold, jerk up to rest).
         let (mut reach, mut settled): (f64, Option<SCurveTable>) = (0.0, None);
         for _ in 0..4 {
-            let (accel, jerk) = self.limits_along(curves, grid, tight, k, s0 + reach, v0, b)?;
+            let (accel, jerk) = self.limits_along(curves, grid, tight, looked, k, s0 + reach, v0, b)?;
             let table = stop_from(v0, b, accel, jerk).table_from(b);
             if table.length() <= reach {
                 settled = Some(table);
@@ -338,8 +378,7 @@ impl Planner<'_> {
     }
 
     /// The tangential deceleration and jerk the axes allow from station `k` to arc length
-    /// `until` (its stations, collocation points and [`DENSER`] points more per interval, each
-    /// with its interval's tightening and [`STOP_MARGIN`]), less what the curvature takes at
+    /// `until` (the points [`LookedAt`] in each interval), less what the curvature takes at
     /// the highest speed on the way (from `v0`, accelerating at `a0`): |q'ᵢ|·A + |q''ᵢ|·v² ≤ Aᵢ
     /// and |q'ᵢ|·J + 3|q''ᵢ|·A·v + |q'''ᵢ|·v³ ≤ Jᵢ. `None` where nothing is left.
     #[allow(clippy::too_many_arguments)]
@@ -348,36 +387,22 @@ impl Planner<'_> {
         curves: &PathCurves,
         grid: &Grid,
         tight: &[f64],
+        looked: &mut LookedAt,
         k: usize,
         until: f64,
         v0: f64,
         a0: f64,
     ) -> Option<(f64, f64)> {
         let axes = self.caps.axes;
-        let mut locals: Vec<(Local, f64)> = Vec::new();
-        let mut j = k;
-        while j < grid.len() {
-            let f = tight[j.min(tight.len() - 1)] * (1.0 - STOP_MARGIN);
-            let (st, next) = (&grid.stations[j], &grid.stations[j + 1]);
-            locals.push((st.right, f));
-            locals.extend(grid.intervals[j].points.iter().map(|(_, l)| (*l, f)));
-            locals.push((next.left, f));
-            let view = curves.view(st.element);
-            let u_end = if next.element == st.element {
-                next.u
-            } else {
-                view.u_max()
-            };
-            for m in 1..=DENSER {
-                let u = st.u + (u_end - st.u) * m as f64 / (DENSER + 1) as f64;
-                let (_, q1, q2, q3) = arc_derivatives(&view, u, axes, false);
-                locals.push((Local { q1, q2, q3, cap: 0.0 }, f));
-            }
-            if next.s >= until {
-                break;
-            }
-            j += 1;
+        // The intervals up to the one `until` lies in.
+        let mut last = k;
+        while last + 1 < grid.len() && grid.stations[last + 1].s < until {
+            last += 1;
         }
+        for j in k..=last {
+            looked.interval(curves, grid, tight, axes, j);
+        }
+        let locals = || looked.intervals[k..=last].iter().flatten().flatten();
         // The highest speed on the way: a rising acceleration first falls to zero (at the
         // jerk found the round before; twice the speed before any).
         let (mut accel, mut jerk) = (f64::INFINITY, f64::INFINITY);
@@ -388,7 +413,7 @@ impl Planner<'_> {
                 (true, false) => 2.0 * v0,
             };
             let mut acc = f64::INFINITY;
-            for (l, f) in &locals {
+            for (l, f) in locals() {
                 for i in (0..axes).filter(|&i| l.q1[i].abs() > 1e-12) {
                     acc = acc.min((self.axis.acceleration[i] * f - l.q2[i].abs() * v * v) / l.q1[i].abs());
                 }
@@ -398,7 +423,7 @@ impl Planner<'_> {
             }
             let used = acc.max(a0.abs());
             let mut jk = f64::INFINITY;
-            for (l, f) in &locals {
+            for (l, f) in locals() {
                 for i in (0..axes).filter(|&i| l.q1[i].abs() > 1e-12) {
                     let room = self.axis.jerk[i] * f - 3.0 * l.q2[i].abs() * used * v - l.q3[i].abs() * v * v * v;
                     jk = jk.min(room / l.q1[i].abs());
