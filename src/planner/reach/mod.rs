@@ -23,6 +23,7 @@ pub mod grid;
 pub mod passes;
 pub mod pieces;
 pub mod polygon;
+mod rests;
 pub mod rows;
 pub mod sampler;
 pub mod stops;
@@ -35,6 +36,7 @@ use crate::planner::vpop::PathPoint;
 use crate::planner::{Limits, LimitsError, PathCurves};
 use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
 use passes::{Motion, PassError, Passes, Start};
+use rests::Resting;
 use rows::AxisLimits;
 use sampler::Check;
 use stops::{hand_out, Along, Branches, FindStops};
@@ -139,6 +141,13 @@ pub enum ReachError {
     Limits(LimitsError),
     Path(String),
     Plan(String),
+    /// A pass would stand still in the interval from `from` to `to` (element, parameter): the
+    /// planner may rest there ([`rests`]).
+    Stands {
+        from: (usize, f64),
+        to: (usize, f64),
+        why: String,
+    },
 }
 
 impl std::fmt::Display for ReachError {
@@ -146,7 +155,7 @@ impl std::fmt::Display for ReachError {
         match self {
             ReachError::Limits(e) => write!(f, "{e}"),
             ReachError::Path(e) => write!(f, "invalid path: {e}"),
-            ReachError::Plan(e) => write!(f, "reachability planner: {e}"),
+            ReachError::Plan(e) | ReachError::Stands { why: e, .. } => write!(f, "reachability planner: {e}"),
         }
     }
 }
@@ -204,22 +213,7 @@ pub fn run(
     let mut check = Check::new(&limits, axes);
     // The first point: at rest at the path start.
     let from_start = start.unwrap_or((0, curves.view(0).u_min()));
-    let first = {
-        let (element, u) = from_start;
-        let view = curves.view(element);
-        let p = view.point(u);
-        let mut tip = [0.0; TIP];
-        tip[..axes].copy_from_slice(&p[..axes]);
-        let mut q = [0.0; crate::planner::axial::MAX_AXES];
-        q[..axes].copy_from_slice(&p[..axes]);
-        PathPoint {
-            w: element as f64 + (u - view.u_min()) / (view.u_max() - view.u_min()),
-            element,
-            u,
-            q,
-            tip,
-        }
-    };
+    let first = rests::point_at(curves, from_start, axes);
     check.push(&first.tip);
     emit(Planned::Point(&first)).map_err(ReachError::Plan)?;
     // The time the first planned points leave.
@@ -249,22 +243,32 @@ pub fn run(
             None => Some(stretch),
         };
         if let Some(mut stretch) = whole {
-            read_on(curves, &mut stretch, f64::INFINITY);
-            let plan = planner.plan_stretch(curves, &stretch, last, &mut check)?;
-            stats.stations += plan.grid.stations.len();
-            stats.passes += plan.passes;
-            stats.repairs += plan.repairs;
-            let along = Along {
-                grid: &plan.grid,
-                lin: &plan.lin,
-                tight: &plan.tight,
-                start: Start::default(),
-                motion: &plan.motion,
-            };
-            let (n, period) = (plan.grid.len(), planner.period);
-            let stops = |found: &mut Branches<'_>| planner.branch_stops(curves, &along, n, period, &plan.points, found);
-            hand_out(&plan.points, &stops, &mut out)?;
-            last = plan.points.last().copied().or(last);
+            read_on(curves, &mut stretch, f64::INFINITY, &planner.rests.borrow());
+            match planner.plan_resting(curves, &mut stretch, last, &mut check)? {
+                Resting::Planned(plan) => {
+                    stats.stations += plan.grid.stations.len();
+                    stats.passes += plan.passes;
+                    stats.repairs += plan.repairs;
+                    let along = Along {
+                        grid: &plan.grid,
+                        lin: &plan.lin,
+                        tight: &plan.tight,
+                        start: Start::default(),
+                        motion: &plan.motion,
+                    };
+                    let (n, period) = (plan.grid.len(), planner.period);
+                    let stops =
+                        |found: &mut Branches<'_>| planner.branch_stops(curves, &along, n, period, &plan.points, found);
+                    hand_out(&plan.points, &stops, &mut out)?;
+                    last = plan.points.last().copied().or(last);
+                }
+                Resting::Stepped(points) => {
+                    for p in &points {
+                        out(Planned::Point(p)).map_err(ReachError::Plan)?;
+                    }
+                    last = points.last().copied().or(last);
+                }
+            }
             from = stretch.to;
         }
         if from.0 >= curves.len() - 1 && from.1 >= curves.view(from.0).u_max() {
@@ -305,8 +309,8 @@ fn begin_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch>
 }
 
 /// Reads `stretch` on by at least `more` mm (whole elements), or to its end: a tangent break
-/// inside an element or at a join, or the path's end.
-fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
+/// inside an element or at a join, one of the `rests`, or the path's end.
+fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64, rests: &rests::Rests) {
     if !stretch.open {
         return;
     }
@@ -337,6 +341,10 @@ fn read_on(curves: &mut PathCurves, stretch: &mut Stretch, more: f64) {
                 inside = true;
             }
         });
+        if let Some(r) = rests.after(e, u).filter(|&r| r < end) {
+            end = r;
+            inside = true;
+        }
         stretch.length += approximate_length(&view, u, end, axes);
         if inside || stops_after(curves, e, end) {
             return close(stretch, (e, end));
@@ -403,6 +411,8 @@ struct Planner<'o> {
     axis: AxisLimits,
     period: f64,
     options: &'o ReachOptions,
+    /// Where stretches end at rest besides the path's tangent breaks ([`rests`]).
+    rests: std::cell::RefCell<rests::Rests>,
 }
 
 impl<'o> Planner<'o> {
@@ -431,6 +441,7 @@ impl<'o> Planner<'o> {
             },
             period: limits.period,
             options,
+            rests: Default::default(),
         }
     }
 
@@ -663,13 +674,25 @@ impl<'o> Planner<'o> {
             PassError::Empty { station } => (station, "no state there can keep the limits and still stop"),
             PassError::Stalls { interval } => (interval, "the motion would stand still there"),
         };
-        let st = &grid.stations[(offset + k).min(grid.stations.len() - 1)];
-        ReachError::Plan(format!(
+        let last = grid.stations.len() - 1;
+        let st = &grid.stations[(offset + k).min(last)];
+        let why = format!(
             "{what} (element {}, u = {:.9}, curvature {:.3e} 1/mm): the path's geometry leaves no speed to plan with",
             st.element,
             st.u,
             st.right.curvature()
-        ))
+        );
+        match e {
+            PassError::Stalls { .. } => {
+                let next = &grid.stations[(offset + k + 1).min(last)];
+                ReachError::Stands {
+                    from: (st.element, st.u),
+                    to: (next.element, next.u),
+                    why,
+                }
+            }
+            PassError::Empty { .. } => ReachError::Plan(why),
+        }
     }
 
     /// Tightens the limits of the intervals (of `tight`, which `motion` runs over) whose

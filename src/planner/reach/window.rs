@@ -207,7 +207,7 @@ impl Planner<'_> {
             };
             let more = ahead - laid.stretch.length;
             if more > 0.0 {
-                read_on(curves, &mut laid.stretch, more);
+                read_on(curves, &mut laid.stretch, more, &self.rests.borrow());
             }
             let from = laid
                 .grid
@@ -299,7 +299,7 @@ impl Planner<'_> {
             // Shorter than a window, or no window planned before the first points: the
             // stretch is planned whole.
             Ok(None) => Ok(Err(laid.stretch)),
-            Err(ReachError::Plan(_)) if !emitted => Ok(Err(laid.stretch)),
+            Err(ReachError::Plan(_) | ReachError::Stands { .. }) if !emitted => Ok(Err(laid.stretch)),
             Err(e) => Err(e),
         }
     }
