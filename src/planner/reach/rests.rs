@@ -75,14 +75,18 @@ pub(super) fn point_at(curves: &PathCurves, (element, u): (usize, f64), axes: us
 impl Planner<'_> {
     /// `stretch` (closed, at rest at both ends, no longer than the chord tolerance) crossed in
     /// one period between samples at rest, where the finite differences continuing `check`
-    /// allow it (its feed too; the curve between lies within its length of the chord); the
-    /// samples, `check` advanced over them.
+    /// allow it (its feed too, the programmed one as the samples' check takes it; the curve
+    /// between lies within its length of the chord); the samples, `check` advanced over them.
     pub(super) fn one_step(&self, curves: &PathCurves, stretch: &Stretch, check: &mut Check) -> Option<Vec<PathPoint>> {
         let axes = self.caps.axes;
-        if stretch.open
-            || stretch.length > self.limits.chord_tolerance
-            || stretch.length / self.period > self.limits.feed
-        {
+        let mut feed = self.limits.feed;
+        if let (Some(f0), Some(f1)) = (
+            curves.programmed_feed(stretch.from.0),
+            curves.programmed_feed(stretch.to.0),
+        ) {
+            feed = feed.min(f0.max(f1));
+        }
+        if stretch.open || stretch.length > self.limits.chord_tolerance || stretch.length / self.period > feed {
             return None;
         }
         let (from, to) = (point_at(curves, stretch.from, axes), point_at(curves, stretch.to, axes));
