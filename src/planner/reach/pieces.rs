@@ -96,6 +96,25 @@ impl Piece {
         (sigma, speed, acceleration)
     }
 
+    /// The time at distance `sigma`, by bisection from `[0, longest]` (doubled while short of
+    /// it): the distance rises with time while the speed does not vanish. For the S-curve
+    /// phases ([`Piece::Jerk`]), which have no closed form for it.
+    pub fn time_to(&self, sigma: f64, longest: f64) -> f64 {
+        let (mut lo, mut hi) = (0.0, longest);
+        while self.at(hi).0 < sigma && hi < 1e6 {
+            hi *= 2.0;
+        }
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if self.at(mid).0 < sigma {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
     /// Time to cover `length` along the piece; `None` where the motion stops before.
     pub fn duration(&self, length: f64) -> Option<f64> {
         if length <= 0.0 {
@@ -168,22 +187,8 @@ impl Piece {
             }
             Piece::Quadratic { a, b, c } => (a + 2.0 * b * sigma + c * sigma * sigma).max(0.0),
             Piece::Jerk { .. } => {
-                // The time at σ by bisection (the distance rises with it while the speed does
-                // not vanish).
-                let (mut lo, mut hi) = (0.0, 1.0);
-                while self.at(hi).0 < sigma && hi < 1e6 {
-                    hi *= 2.0;
-                }
-                for _ in 0..80 {
-                    let mid = 0.5 * (lo + hi);
-                    if self.at(mid).0 < sigma {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                let speed = self.at(0.5 * (lo + hi)).1.max(0.0);
-                speed * speed
+                let (_, speed) = self.at(self.time_to(sigma, 1.0));
+                speed.max(0.0) * speed.max(0.0)
             }
         }
     }

@@ -4,7 +4,7 @@
 //! from rest, as at a tangent break. A stretch too short for the grid, a step of at most the
 //! chord tolerance, is crossed in one servo period where the finite differences allow it.
 
-use super::grid::{arc_derivatives, TIP};
+use super::grid::{arc_derivatives, Local, TIP};
 use super::sampler::Check;
 use super::*;
 
@@ -34,7 +34,8 @@ impl Rests {
 
     /// The first rest on element `e` after parameter `u`.
     pub(super) fn after(&self, e: usize, u: f64) -> Option<f64> {
-        self.0.iter().find(|r| r.0 == e && r.1 > u).map(|r| r.1)
+        let i = self.0.partition_point(|r| r.0 < e || (r.0 == e && r.1 <= u));
+        self.0.get(i).filter(|r| r.0 == e).map(|r| r.1)
     }
 }
 
@@ -46,8 +47,8 @@ pub(super) fn rest_in(curves: &PathCurves, from: (usize, f64), to: (usize, f64),
     let mut best = (f64::NEG_INFINITY, end);
     for i in 1..LOOKS {
         let u = from.1 + (end - from.1) * i as f64 / LOOKS as f64;
-        let (_, _, q2, _) = arc_derivatives(&view, u, axes, false);
-        let kappa = q2[..axes].iter().map(|x| x * x).sum::<f64>().sqrt();
+        let (_, q1, q2, q3) = arc_derivatives(&view, u, axes, false);
+        let kappa = Local { q1, q2, q3, cap: 0.0 }.curvature();
         if kappa.is_finite() && kappa > best.0 {
             best = (kappa, u);
         }
@@ -79,13 +80,7 @@ impl Planner<'_> {
     /// between lies within its length of the chord); the samples, `check` advanced over them.
     pub(super) fn one_step(&self, curves: &PathCurves, stretch: &Stretch, check: &mut Check) -> Option<Vec<PathPoint>> {
         let axes = self.caps.axes;
-        let mut feed = self.limits.feed;
-        if let (Some(f0), Some(f1)) = (
-            curves.programmed_feed(stretch.from.0),
-            curves.programmed_feed(stretch.to.0),
-        ) {
-            feed = feed.min(f0.max(f1));
-        }
+        let feed = sampler::step_feed(curves, &self.limits, stretch.from.0, stretch.to.0);
         if stretch.open || stretch.length > self.limits.chord_tolerance || stretch.length / self.period > feed {
             return None;
         }

@@ -71,6 +71,15 @@ impl Check {
     }
 }
 
+/// The feed a step from element `from` to element `to` may take: the limit, and the highest
+/// programmed feed of the two (as `verify` takes it).
+pub(super) fn step_feed(curves: &PathCurves, limits: &Limits, from: usize, to: usize) -> f64 {
+    match (curves.programmed_feed(from), curves.programmed_feed(to)) {
+        (Some(f0), Some(f1)) => limits.feed.min(f0.max(f1)),
+        _ => limits.feed,
+    }
+}
+
 /// Samples of one stretch, and where they ran over.
 pub struct Sampled {
     pub points: Vec<PathPoint>,
@@ -166,15 +175,10 @@ pub fn sample(
         let (a, b) = (view.u_min(), view.u_max());
         let mut ratio = check.push(&tip);
         if let Some(prev) = out.points.last().or(before.as_ref()) {
-            // The feed of the step (the limit, and the highest programmed feed of the elements
-            // it touches, as `verify` takes it) and its chord error (at the middle parameter of a
-            // step on one element: where a bulge of the curve is largest).
+            // The feed of the step and its chord error (at the middle parameter of a step on
+            // one element: where a bulge of the curve is largest).
             let step = (0..axes).map(|i| (tip[i] - prev.tip[i]).powi(2)).sum::<f64>().sqrt();
-            let mut feed = limits.feed;
-            if let (Some(f0), Some(f1)) = (curves.programmed_feed(prev.element), curves.programmed_feed(element)) {
-                feed = feed.min(f0.max(f1));
-            }
-            ratio = ratio.max(step / period / feed);
+            ratio = ratio.max(step / period / step_feed(curves, limits, prev.element, element));
             if prev.element == element {
                 let mut a = [0.0; nurbs_rtcore::MAX_DIM];
                 let mut b = [0.0; nurbs_rtcore::MAX_DIM];

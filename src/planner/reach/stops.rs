@@ -106,21 +106,6 @@ pub(super) fn hand_out(
     Ok(())
 }
 
-/// The time into a phase of constant `jerk` from `state`, `duration` long, at distance `d` from
-/// the phase's start (bisection: the distance rises with time while the feed is positive).
-fn time_into(state: &SCurveState, jerk: f64, d: f64, duration: f64) -> f64 {
-    let (mut lo, mut hi) = (0.0, duration);
-    for _ in 0..80 {
-        let mid = 0.5 * (lo + hi);
-        if state.advance(jerk, mid).s - state.s < d {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    0.5 * (lo + hi)
-}
-
 impl Planner<'_> {
     /// The stops of [`ReachOptions::stops_every`] branching off `along.motion` at its stations up
     /// to `upto`, about that often, handed to `found` as they are found: each with the number of
@@ -355,7 +340,12 @@ impl Planner<'_> {
             let (time, here) = if last {
                 (table.total_time(), SCurveState::default())
             } else {
-                let tau = time_into(&start, jerk, dist - start.s, table.profile.durations[phase]);
+                let phase_piece = Piece::Jerk {
+                    v: start.v,
+                    b: start.a,
+                    jerk,
+                };
+                let tau = phase_piece.time_to(dist - start.s, table.profile.durations[phase]);
                 (table.starts[phase] + tau, start.advance(jerk, tau))
             };
             let (vd, ad) = (here.v.max(0.0), here.a);
