@@ -4,7 +4,7 @@
 //! from rest, as at a tangent break. A stretch too short for the grid, a step of at most the
 //! chord tolerance, is crossed in one servo period where the finite differences allow it.
 
-use super::grid::{arc_derivatives, Local, TIP};
+use super::grid::{arc_derivatives, Local};
 use super::sampler::Check;
 use super::*;
 
@@ -58,19 +58,7 @@ pub(super) fn rest_in(curves: &PathCurves, from: (usize, f64), to: (usize, f64),
 
 /// The point at rest at `(element, u)`.
 pub(super) fn point_at(curves: &PathCurves, (element, u): (usize, f64), axes: usize) -> PathPoint {
-    let view = curves.view(element);
-    let p = view.point(u);
-    let mut tip = [0.0; TIP];
-    tip[..axes].copy_from_slice(&p[..axes]);
-    let mut q = [0.0; crate::planner::axial::MAX_AXES];
-    q[..axes].copy_from_slice(&p[..axes]);
-    PathPoint {
-        w: element as f64 + (u - view.u_min()) / (view.u_max() - view.u_min()),
-        element,
-        u,
-        q,
-        tip,
-    }
+    sampler::path_point(&curves.view(element), element, u, axes)
 }
 
 impl Planner<'_> {

@@ -167,12 +167,8 @@ pub fn sample(
             u
         };
         last = Some((interval, sigma, u));
-        let point = view.point(u);
-        let mut tip = [0.0; TIP];
-        tip[..axes].copy_from_slice(&point[..axes]);
-        let mut q = [0.0; MAX_AXES];
-        q[..axes].copy_from_slice(&point[..axes]);
-        let (a, b) = (view.u_min(), view.u_max());
+        let point = path_point(&view, element, u, axes);
+        let tip = point.tip;
         let mut ratio = check.push(&tip);
         if let Some(prev) = out.points.last().or(before.as_ref()) {
             // The feed of the step and its chord error (at the middle parameter of a step on
@@ -192,13 +188,7 @@ pub fn sample(
         if ratio > 1.0 + slack {
             out.over.push((t.min(total), ratio));
         }
-        out.points.push(PathPoint {
-            w: element as f64 + (u - a) / (b - a),
-            element,
-            u,
-            q,
-            tip,
-        });
+        out.points.push(point);
         if t >= total {
             out.next = t - total + period;
             break;
@@ -206,6 +196,23 @@ pub fn sample(
         n += 1;
     }
     out
+}
+
+/// The sample at `(element, u)` of `view` (that element's curve): its point, tool tip and
+/// place along the path.
+pub(super) fn path_point(view: &nurbs_rtcore::CurveView, element: usize, u: f64, axes: usize) -> PathPoint {
+    let p = view.point(u);
+    let mut tip = [0.0; TIP];
+    tip[..axes].copy_from_slice(&p[..axes]);
+    let mut q = [0.0; MAX_AXES];
+    q[..axes].copy_from_slice(&p[..axes]);
+    PathPoint {
+        w: element as f64 + (u - view.u_min()) / (view.u_max() - view.u_min()),
+        element,
+        u,
+        q,
+        tip,
+    }
 }
 
 /// The parameter in `[lo, hi]` at arc length `target` from the interval start, from the
