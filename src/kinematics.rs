@@ -1,116 +1,46 @@
-//! Inverse and forward kinematics of table-tilting 5-axis machines (VPOp paper section 3.3):
-//! the tool is fixed along the machine Z axis; the table tilts about X (A axis, XYZAC: Mikron
-//! UCP 710 type, LinuxCNC's `xyzac-trt-kins`) or about Y (B axis, XYZBC, `xyzbc-trt-kins`) and
-//! rotates about its own normal (C axis).
-//!
-//! Machine position of a workpiece point p: `m = R_tilt(T) R_z(C) (p - pivot) + pivot`, where
-//! `pivot` is the point (workpiece frame) where the tilt and C axes meet and `R_tilt` is `R_x`
-//! or `R_y` (right-handed, positive angles turn the table counter-clockwise seen from the
-//! positive axis). The tool axis t (workpiece frame, pointing from the tip to the holder) must
-//! map to +Z: `R_tilt(T) R_z(C) t = (0, 0, 1)`. With rho = |t_xy| that gives `T = atan2(rho,
-//! t_z)` and `C = atan2(t_x, t_y)` for a tilt about X, `C = atan2(t_y, -t_x)` about Y; or the
-//! second branch `-T`, `C + 180°`. Joint order x, y, z, tilt, c; rotary axes in degrees
-//! (LinuxCNC's convention).
+//! 5-axis tool paths on table-tilting machines (VPOp paper section 3.3): the joints of a tool
+//! tip and tool axis on the geometry of LinuxCNC's `xyzac-trt-kins` / `xyzbc-trt-kins`, on one
+//! of the two inverse-kinematics branches. The functions are `nurbs_rtcore::kinematics`, which
+//! the realtime module shares. Joint order x, y, z, tilt, c; rotary axes in degrees (LinuxCNC's
+//! convention).
 
-/// The axis the table tilts about.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Tilt {
-    /// About X: the A axis (XYZAC).
-    #[default]
-    X,
-    /// About Y: the B axis (XYZBC).
-    Y,
-}
+pub use nurbs_rtcore::kinematics::{Tilt, TrtGeometry};
 
-/// Machine geometry.
+/// A table-tilting machine and the inverse-kinematics branch a tool path is planned on.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct TableTilting {
-    pub tilt: Tilt,
-    /// Intersection of the tilt and C axes in the workpiece frame (mm).
-    pub pivot: [f64; 3],
+    pub geometry: TrtGeometry,
     /// Which of the two angle branches to use: `false` for a tilt angle >= 0, `true` for <= 0.
     pub negative_tilt: bool,
-}
-
-/// `R_tilt(t) R_z(c) p`.
-fn rot(tilt: Tilt, t: f64, c: f64, p: [f64; 3]) -> [f64; 3] {
-    let (sc, cc) = c.sin_cos();
-    let (st, ct) = t.sin_cos();
-    let (x1, y1, z1) = (cc * p[0] - sc * p[1], sc * p[0] + cc * p[1], p[2]);
-    match tilt {
-        Tilt::X => [x1, ct * y1 - st * z1, st * y1 + ct * z1],
-        Tilt::Y => [ct * x1 + st * z1, y1, -st * x1 + ct * z1],
-    }
-}
-
-/// `R_z(-c) R_tilt(-t) m`.
-fn rot_inv(tilt: Tilt, t: f64, c: f64, m: [f64; 3]) -> [f64; 3] {
-    let (sc, cc) = c.sin_cos();
-    let (st, ct) = t.sin_cos();
-    let (x1, y1, z1) = match tilt {
-        Tilt::X => (m[0], ct * m[1] + st * m[2], -st * m[1] + ct * m[2]),
-        Tilt::Y => (ct * m[0] - st * m[2], m[1], st * m[0] + ct * m[2]),
-    };
-    [cc * x1 + sc * y1, -sc * x1 + cc * y1, z1]
 }
 
 impl TableTilting {
     /// Names of the joints in order (the CSV columns and the limits' order).
     pub fn joint_names(&self) -> [&'static str; 5] {
-        match self.tilt {
+        match self.geometry.tilt {
             Tilt::X => ["x", "y", "z", "a", "c"],
             Tilt::Y => ["x", "y", "z", "b", "c"],
         }
     }
 
-    /// Rotary angles (tilt, c; radians) for tool axis `axis` (need not be unit), on the
-    /// configured branch, with C taken as the value `c_ref + 2 k pi` closest to `c_ref`
-    /// (continuity).
+    /// Rotary angles (tilt, c; degrees) for tool axis `axis` (need not be unit), on the
+    /// configured branch, with C taken as the value `c + 360° k` closest to `c_ref` (continuity).
     pub fn angles(&self, axis: [f64; 3], c_ref: Option<f64>) -> (f64, f64) {
-        let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-        let t = [axis[0] / n, axis[1] / n, axis[2] / n];
-        let rho = (t[0] * t[0] + t[1] * t[1]).sqrt();
-        let mut c = match self.tilt {
-            Tilt::X => t[0].atan2(t[1]),
-            Tilt::Y => t[1].atan2(-t[0]),
-        };
-        let mut tilt = rho.atan2(t[2]);
-        if self.negative_tilt {
-            tilt = -tilt;
-            c += std::f64::consts::PI;
-        }
-        if let Some(r) = c_ref {
-            let tau = std::f64::consts::TAU;
-            c += ((r - c) / tau).round() * tau;
-        }
-        (tilt, c)
+        self.geometry.angles(axis, self.negative_tilt, c_ref)
     }
 
     /// Joint positions x, y, z (mm), tilt, c (degrees) for a tool tip and tool axis.
-    pub fn inverse(&self, tip: [f64; 3], axis: [f64; 3], c_ref_deg: Option<f64>) -> [f64; 5] {
-        let (t, c) = self.angles(axis, c_ref_deg.map(f64::to_radians));
-        let rel = [tip[0] - self.pivot[0], tip[1] - self.pivot[1], tip[2] - self.pivot[2]];
-        let m = rot(self.tilt, t, c, rel);
-        [
-            m[0] + self.pivot[0],
-            m[1] + self.pivot[1],
-            m[2] + self.pivot[2],
-            t.to_degrees(),
-            c.to_degrees(),
-        ]
+    pub fn inverse(&self, tip: [f64; 3], axis: [f64; 3], c_ref: Option<f64>) -> [f64; 5] {
+        let (t, c) = self.angles(axis, c_ref);
+        self.geometry.joints([tip[0], tip[1], tip[2], t, c])
     }
 
     /// Tool tip and unit tool axis in the workpiece frame from joint positions.
     pub fn forward(&self, joints: &[f64]) -> ([f64; 3], [f64; 3]) {
-        let (t, c) = (joints[3].to_radians(), joints[4].to_radians());
-        let m = [
-            joints[0] - self.pivot[0],
-            joints[1] - self.pivot[1],
-            joints[2] - self.pivot[2],
-        ];
-        let p = rot_inv(self.tilt, t, c, m);
-        let tip = [p[0] + self.pivot[0], p[1] + self.pivot[1], p[2] + self.pivot[2]];
-        (tip, rot_inv(self.tilt, t, c, [0.0, 0.0, 1.0]))
+        let w = self
+            .geometry
+            .world([joints[0], joints[1], joints[2], joints[3], joints[4]]);
+        ([w[0], w[1], w[2]], self.geometry.tool_axis(joints[3], joints[4]))
     }
 }
 
@@ -125,8 +55,12 @@ mod tests {
         for tilt in [Tilt::X, Tilt::Y] {
             for negative_tilt in [false, true] {
                 let k = TableTilting {
-                    tilt,
-                    pivot: [3.0, -2.0, 10.0],
+                    geometry: TrtGeometry {
+                        tilt,
+                        rot_point: [3.0, -2.0, 10.0],
+                        offset: [1.0, 20.0, -10.0],
+                        tool_offset: 42.0,
+                    },
                     negative_tilt,
                 };
                 for (tip, axis) in [
@@ -156,7 +90,10 @@ mod tests {
         let ac = TableTilting::default().inverse([0.0; 3], axis, None);
         assert!((ac[3] - 45.0).abs() < 1e-12 && ac[4].abs() < 1e-12, "{ac:?}");
         let bc = TableTilting {
-            tilt: Tilt::Y,
+            geometry: TrtGeometry {
+                tilt: Tilt::Y,
+                ..TrtGeometry::default()
+            },
             ..TableTilting::default()
         }
         .inverse([0.0; 3], axis, None);
@@ -166,7 +103,10 @@ mod tests {
         );
         // Along x: XYZBC needs no C turn.
         let bx = TableTilting {
-            tilt: Tilt::Y,
+            geometry: TrtGeometry {
+                tilt: Tilt::Y,
+                ..TrtGeometry::default()
+            },
             ..TableTilting::default()
         }
         .inverse([0.0; 3], [1.0, 0.0, 1.0], None);

@@ -321,12 +321,16 @@ fn malformed_inputs_give_specific_errors() {
     fails("G19\n", 1, "only the XY plane");
     fails("G0 X0 Y0\nG5 X1 Y1 I0 J1 P0 Q1\n", 2, "G5/G5.1");
     fails("G0 X0 Y0\nG5.1 X1 Y1 I0 J1\n", 2, "G5/G5.1");
-    fails("G93\n", 1, "inverse-time");
+    fails(
+        "G0 X0 Y0\nG93 G2 X2 Y0 I1 J0 F10\n",
+        2,
+        "inverse time (G93) is not supported",
+    );
     fails("G95\n", 1, "feed per revolution");
     fails("G92 X0\n", 1, "G92");
     fails("G81 X0 Y0 Z-1 R1\n", 1, "canned cycles");
     fails("G4 P1\n", 1, "dwell");
-    fails("G0 X0 Y0\nG1 X1 A10 F60\n", 2, "axis A is not supported");
+    fails("G0 X0 Y0\nG1 X1 U10 F60\n", 2, "axis U is not supported");
     let e = fails("G0 X0 Y0\nG12.5\n", 2, "unknown G-code G12.5");
     assert_eq!(e.column, Some(1));
     fails("M100\n", 1, "M100 is not supported");
@@ -443,4 +447,128 @@ fn coordinates_beyond_any_machine_are_refused_up_front() {
     std::fs::write(&path, "G21 G90\nG0 X0 Y0\nF600\nG1 X10 Y0\nG1 X999999 Y5\nM2\n").unwrap();
     assert!(read_toolpath(&path).is_ok(), "a long but possible line is read");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The tool axis of rotary angles `a` (tilt about X, degrees) and `c`, and the angles back on
+/// the negative-tilt branch.
+fn tool_axis(tilt: nurbs_motion::kinematics::Tilt, a: f64, c: f64) -> [f64; 3] {
+    nurbs_motion::kinematics::TrtGeometry {
+        tilt,
+        ..Default::default()
+    }
+    .tool_axis(a, c)
+}
+
+/// `G1 X Y Z A C` (XYZAC, table-tilting): a 5-axis polyline whose vertices are the tool tip and
+/// the point `TOP_LENGTH` up the tool axis of the programmed angles; the angles come back from
+/// the tool axis on their branch; a move turning more than 0.5° is cut into equal pieces along
+/// which tip and angles are linear (as LinuxCNC interpolates them); its ends are the poses.
+#[test]
+fn five_axis_g1_has_the_tool_axis_of_its_angles() {
+    use nurbs_motion::kinematics::{TableTilting, Tilt, TrtGeometry};
+    let t = ok("G21 G90 G94\nG0 X0 Y0 Z5 A-30 C10\nG1 X10 Y0 Z5 A-30 C10 F600\nG1 X20 Y5 Z4 A-32 C20\nM2\n");
+    assert_eq!(t.elements.len(), 1);
+    let c = &t.elements[0].curve;
+    assert_eq!((c.dim(), c.tip_dim(), c.degree()), (6, 3, 1));
+    // One piece, then 2° of A and 10° of C in 24 pieces of 0.5° together.
+    assert_eq!(c.control_point_count(), 2 + 24);
+    assert_eq!(t.elements[0].feed, Some(10.0));
+    let machine = TableTilting {
+        geometry: TrtGeometry::default(),
+        negative_tilt: true,
+    };
+    for (k, (tip, a, cc)) in [
+        ([0.0, 0.0, 5.0], -30.0, 10.0),
+        ([10.0, 0.0, 5.0], -30.0, 10.0),
+        ([20.0, 5.0, 4.0], -32.0, 20.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let p = c.control_point([0, 1, 25][k]);
+        let axis = tool_axis(Tilt::X, a, cc);
+        assert!(close(&p[..3], &tip, 0.0), "{p:?}");
+        for i in 0..3 {
+            assert!((p[3 + i] - tip[i] - gcode::TOP_LENGTH * axis[i]).abs() < 1e-12, "{p:?}");
+        }
+        let top_dir: Vec<f64> = (0..3).map(|i| p[3 + i] - p[i]).collect();
+        let (ta, tc) = machine.angles([top_dir[0], top_dir[1], top_dir[2]], Some(cc));
+        assert!((ta - a).abs() < 1e-9 && (tc - cc).abs() < 1e-9, "{ta} {tc}");
+    }
+    // Along the turning move: the top point at every vertex is that of linearly interpolated
+    // angles, and between vertices the chord strays from it by at most 1e-4 mm.
+    let (a0, b0) = (([10.0, 0.0, 5.0], -30.0, 10.0), ([20.0, 5.0, 4.0], -32.0, 20.0));
+    let exact = |lambda: f64| -> [f64; 6] {
+        let tip: Vec<f64> = (0..3).map(|i| a0.0[i] + (b0.0[i] - a0.0[i]) * lambda).collect();
+        let axis = tool_axis(Tilt::X, a0.1 + (b0.1 - a0.1) * lambda, a0.2 + (b0.2 - a0.2) * lambda);
+        core::array::from_fn(|i| {
+            if i < 3 {
+                tip[i]
+            } else {
+                tip[i - 3] + gcode::TOP_LENGTH * axis[i - 3]
+            }
+        })
+    };
+    let mut worst: f64 = 0.0;
+    for k in 0..=4800 {
+        let lambda = k as f64 / 4800.0;
+        let e = exact(lambda);
+        let u_start = c.knots()[2];
+        let u = u_start + (c.u_max() - u_start) * lambda;
+        let p = pt(c, u);
+        for i in 0..6 {
+            worst = worst.max((p[i] - e[i]).abs());
+        }
+    }
+    assert!(
+        worst <= 1e-4 && worst > 1e-6,
+        "top chord off the interpolated pose by {worst}"
+    );
+    // XYZBC: B words tilt about Y.
+    let t = ok("G0 X0 Y0 Z0 B20 C-100\nG1 X1 F60\n");
+    let p = t.elements[0].curve.control_point(0).to_vec();
+    let axis = tool_axis(Tilt::Y, 20.0, -100.0);
+    assert!(
+        (0..3).all(|i| (p[3 + i] - gcode::TOP_LENGTH * axis[i]).abs() < 1e-12),
+        "{p:?}"
+    );
+}
+
+/// `G93` inverse time: each `G1` takes 1/F minutes, so its tool-tip feed is its length times
+/// F / 60 (per move, not modal: F on every `G1`); `G94` sets the feed to 0 again, as in
+/// LinuxCNC; arcs and rotary words keep within what the path can hold.
+#[test]
+fn inverse_time_and_five_axis_errors() {
+    let t = ok("G0 X0 Y0 Z0 A0 C0\nG93 G1 X3 Y4 F30\nG1 X3 Y10 F60\nM2\n");
+    let feeds: Vec<f64> = t.elements.iter().map(|e| e.feed.unwrap()).collect();
+    assert_eq!(feeds, vec![2.5, 6.0]);
+    // Inverse time on a 3-axis path too.
+    let t = ok("G0 X0 Y0\nG93 G1 X6 Y8 F120\n");
+    assert_eq!(t.elements[0].feed, Some(20.0));
+    fails(
+        "G0 X0 Y0\nG93 G1 X6 Y8 F120\nG1 X7\n",
+        3,
+        "F word missing with inverse time G1 move",
+    );
+    fails("G0 X0 Y0\nF600\nG94\nG1 X1\n", 4, "zero feed rate");
+    // An arc at constant angles carries its top curve; one that turns a rotary axis is refused.
+    let t = ok("G0 X0 Y0 Z0 A10 C0\nG1 X1 F60\nG2 X3 Y0 I1 J0\n");
+    assert_eq!(t.elements[1].curve.dim(), 6);
+    fails(
+        "G0 X0 Y0 Z0 A10 C0\nF60\nG2 X2 Y0 I1 J0 C5\n",
+        3,
+        "only G0 and G1 may turn a rotary axis",
+    );
+    fails(
+        "G0 X0 Y0 Z0 A10 C0\nF60\nG5.2 X1 Y1 P1 C4\n",
+        3,
+        "only G0 and G1 may turn a rotary axis",
+    );
+    // One tilt axis; both rotary axes known where a 5-axis path begins; Z too.
+    fails("G0 X0 Y0 Z0 A10 C0\nG0 B4\n", 2, "one tilt axis");
+    fails("G0 X0 Y0 Z0 C0\nG1 X1 F60\n", 2, "C is positioned but A is not");
+    fails("G0 X0 Y0 A0 C0\nG1 X1 F60\n", 2, "needs Z positioned");
+    // A rotary move where the path began as 3-axis, and a pure reorientation.
+    fails("G0 X0 Y0 Z0\nG1 X1 F60\nG1 X2 A5\n", 3, "a 3-axis path");
+    fails("G0 X0 Y0 Z0 A0 C0\nG1 X1 F60\nG1 C30\n", 3, "pure reorientation");
 }

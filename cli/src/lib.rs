@@ -1,4 +1,5 @@
-//! The `nurbs-plan` command line: `inspect` (geometry report), `plan`, `verify` and `presets`;
+//! The `nurbs-plan` command line: `inspect` (geometry report), `plan`, `verify`, `presets` and
+//! `kinematics`;
 //! and what `nurbs-planner` shares with it: the limit flags with `--ini` and `--limits`
 //! ([`LimitArgs`]), the planner choice ([`PlannerKind`]) and the toolpath as both prepare it
 //! ([`corners`]).
@@ -111,6 +112,17 @@ enum Command {
         #[command(flatten)]
         machine: MachineArgs,
     },
+    /// The joints of world poses (or with --forward the world poses of joints) on the 5-axis
+    /// machine the flags describe, by the functions the planner and the realtime module use:
+    /// to check a machine's geometry against its LinuxCNC kinematics module. One pose per line
+    /// on stdin, `x y z tilt c` (mm, degrees); one per line on stdout.
+    Kinematics {
+        /// Joints to world poses (default: world poses to joints).
+        #[arg(long)]
+        forward: bool,
+        #[command(flatten)]
+        machine: MachineArgs,
+    },
 }
 
 /// `plan --interp`: how the setpoints are interpolated.
@@ -152,6 +164,7 @@ pub fn run() -> ExitCode {
             Ok(())
         }
         Command::Inspect { toolpath, json } => inspect::run(&toolpath, json),
+        Command::Kinematics { forward, machine } => machine::run_kinematics(&machine, forward).map_err(Into::into),
         Command::Plan {
             toolpath,
             limits,

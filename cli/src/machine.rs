@@ -1,9 +1,10 @@
-//! `--machine`, `--pivot` and `--negative-tilt`: the kinematics a 5-axis toolpath (tool tip and top curve on
-//! every element) is planned and verified on. Built here, in one place, for `plan` and
+//! `--machine`, the geometry flags (`--rot-point`, `--kins-offset`, `--tool-offset`: the pins of
+//! LinuxCNC's `xyzac-trt-kins` / `xyzbc-trt-kins`) and `--negative-tilt`: the kinematics a
+//! 5-axis toolpath (tool tip and top curve on every element) is planned and verified on. Built here, in one place, for `plan` and
 //! `verify`, so that `verify` recovers the tool tip with the kinematics `plan` used.
 
 use nurbs_motion::geometry::Toolpath;
-use nurbs_motion::kinematics::{TableTilting, Tilt};
+use nurbs_motion::kinematics::{TableTilting, Tilt, TrtGeometry};
 
 /// Machine structures by name. Another structure is another variant here and another arm in
 /// [`MachineArgs::kinematics`].
@@ -18,11 +19,11 @@ pub enum MachineKind {
     Xyzbc,
 }
 
-/// `--pivot X,Y,Z` (mm).
+/// A point or offset `X,Y,Z` (mm).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pivot(pub [f64; 3]);
+pub struct Xyz(pub [f64; 3]);
 
-impl std::str::FromStr for Pivot {
+impl std::str::FromStr for Xyz {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
@@ -34,7 +35,7 @@ impl std::str::FromStr for Pivot {
         let xyz: [f64; 3] = values
             .try_into()
             .map_err(|v: Vec<f64>| format!("expected three numbers X,Y,Z (mm), got {}", v.len()))?;
-        Ok(Pivot(xyz))
+        Ok(Xyz(xyz))
     }
 }
 
@@ -45,10 +46,19 @@ pub struct MachineArgs {
     /// every element (--planner vpop); refused for 2-/3-axis paths.
     #[arg(long, value_enum, value_name = "NAME")]
     pub machine: Option<MachineKind>,
-    /// The point where the tilt (A or B) and C axes meet, in workpiece (program) coordinates,
-    /// mm (default 0,0,0: the program origin on the rotary centre). `verify` needs the same value.
+    /// A point on the C axis in the workpiece frame at zero angles, mm: the kinematics'
+    /// `x/y/z-rot-point` pins (default 0,0,0: the program origin on the rotary centre). With
+    /// zero offsets the tilt (A or B) axis passes through it too. `verify` needs the same value.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    pub pivot: Option<Pivot>,
+    pub rot_point: Option<Xyz>,
+    /// The tilt axis's offset from the rotation point, mm: the kinematics' `x/y/z-offset` pins
+    /// (XYZAC uses y and z, XYZBC x and z; default 0,0,0).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub kins_offset: Option<Xyz>,
+    /// The kinematics' `tool-offset` pin, mm (the loaded tool's length, `motion.tooloffset.z`;
+    /// LinuxCNC adds it to the z offset; default 0).
+    #[arg(long, value_name = "MM", allow_hyphen_values = true, value_parser = finite)]
+    pub tool_offset: Option<f64>,
     /// Use the second solution of the inverse kinematics: tilt angle (A or B) <= 0 and C turned
     /// by 180° (default: tilt >= 0). `verify` accepts either: the joints' forward kinematics
     /// are the same on both branches.
@@ -61,7 +71,9 @@ impl MachineArgs {
     pub fn given(&self) -> Option<String> {
         let flags: Vec<&str> = [
             (self.machine.is_some(), "--machine"),
-            (self.pivot.is_some(), "--pivot"),
+            (self.rot_point.is_some(), "--rot-point"),
+            (self.kins_offset.is_some(), "--kins-offset"),
+            (self.tool_offset.is_some(), "--tool-offset"),
             (self.negative_tilt, "--negative-tilt"),
         ]
         .into_iter()
@@ -73,11 +85,15 @@ impl MachineArgs {
     /// The machine the flags describe.
     pub fn kinematics(&self) -> TableTilting {
         TableTilting {
-            tilt: match self.machine.unwrap_or_default() {
-                MachineKind::Xyzac => Tilt::X,
-                MachineKind::Xyzbc => Tilt::Y,
+            geometry: TrtGeometry {
+                tilt: match self.machine.unwrap_or_default() {
+                    MachineKind::Xyzac => Tilt::X,
+                    MachineKind::Xyzbc => Tilt::Y,
+                },
+                rot_point: self.rot_point.map_or([0.0; 3], |p| p.0),
+                offset: self.kins_offset.map_or([0.0; 3], |p| p.0),
+                tool_offset: self.tool_offset.unwrap_or(0.0),
             },
-            pivot: self.pivot.map_or([0.0; 3], |p| p.0),
             negative_tilt: self.negative_tilt,
         }
     }
@@ -91,11 +107,18 @@ impl MachineArgs {
             .to_possible_value()
             .map(|v| v.get_name().to_owned());
         let k = self.kinematics();
-        serde_json::json!({ "machine": name, "pivot_mm": k.pivot, "negative_tilt": k.negative_tilt })
+        let g = k.geometry;
+        serde_json::json!({
+            "machine": name,
+            "rot_point_mm": g.rot_point,
+            "kins_offset_mm": g.offset,
+            "tool_offset_mm": g.tool_offset,
+            "negative_tilt": k.negative_tilt,
+        })
     }
 
     /// Fails with `reason` when a machine flag was given (where no kinematics is used, a
-    /// silently ignored pivot would hide a mistake).
+    /// silently ignored geometry would hide a mistake).
     pub fn refuse(&self, reason: &str) -> Result<(), String> {
         match self.given() {
             Some(flags) => Err(format!("{flags}: {reason}")),
@@ -116,6 +139,15 @@ impl MachineArgs {
     }
 }
 
+/// `--tool-offset`: a finite number.
+fn finite(s: &str) -> Result<f64, String> {
+    s.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|x| x.is_finite())
+        .ok_or_else(|| format!("expected a finite number (mm), got '{s}'"))
+}
+
 /// A tool tip and a top curve (tool axis), both 3-D, on every element.
 pub fn is_five_axis(toolpath: &Toolpath) -> bool {
     !toolpath.elements.is_empty()
@@ -123,4 +155,38 @@ pub fn is_five_axis(toolpath: &Toolpath) -> bool {
             .elements
             .iter()
             .all(|e| e.curve.dim() == 6 && e.curve.tip_dim() == 3)
+}
+
+/// `nurbs-plan kinematics`: poses from stdin through the machine's inverse (or forward)
+/// kinematics to stdout.
+pub fn run_kinematics(machine: &MachineArgs, forward: bool) -> Result<(), String> {
+    use std::io::{BufRead, Write};
+    let geometry = machine.kinematics().geometry;
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    for (n, line) in std::io::stdin().lock().lines().enumerate() {
+        let line = line.map_err(|e| format!("stdin: {e}"))?;
+        if line.trim().is_empty() {
+            continue;
+        }
+        let pose: [f64; 5] = line
+            .split_whitespace()
+            .map(|v| v.parse::<f64>().ok().filter(|x| x.is_finite()))
+            .collect::<Option<Vec<f64>>>()
+            .and_then(|v| v.try_into().ok())
+            .ok_or_else(|| {
+                format!(
+                    "stdin line {}: expected five finite numbers x y z tilt c, got '{line}'",
+                    n + 1
+                )
+            })?;
+        let result = if forward {
+            geometry.world(pose)
+        } else {
+            geometry.joints(pose)
+        };
+        let text: Vec<String> = result.iter().map(f64::to_string).collect();
+        writeln!(out, "{}", text.join(" ")).map_err(|e| format!("stdout: {e}"))?;
+    }
+    out.flush().map_err(|e| format!("stdout: {e}"))
 }

@@ -187,7 +187,7 @@ fn run_five_axis(
     }
     if fk_error > 1e-6 {
         violations.push(format!(
-            "tool tip columns are {fk_error:.3e} mm off the joints' tool tip (same --machine and --pivot as plan?)"
+            "tool tip columns are {fk_error:.3e} mm off the joints' tool tip (the same --machine and geometry flags as plan?)"
         ));
     }
     if axis_error > 1e-6 {

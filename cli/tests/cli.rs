@@ -554,34 +554,39 @@ fn csv_columns(path: &Path, names: &[&str]) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// `--pivot` moves the point where the A and C axes meet: the joints planned with it put the
-/// tool tip and the tool axis, by forward kinematics with that pivot, on the programmed curves;
-/// `verify` passes with the same pivot and fails with another one (or none).
+/// The geometry flags (LinuxCNC's `xyzac-trt-kins` pins: rotation point, tilt axis offset, tool
+/// offset) move the rotary axes: the joints planned with them put the tool tip and the tool
+/// axis, by forward kinematics on that geometry, on the programmed curves; `verify` passes with
+/// the same flags and fails with another geometry (or none).
 #[test]
-fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
-    use nurbs_motion::kinematics::TableTilting;
-    let dir = scratch_dir("nurbs-cli-pivot");
+fn five_axis_geometry_is_planned_and_verified_with_the_same_kinematics() {
+    use nurbs_motion::kinematics::{TableTilting, TrtGeometry};
+    let dir = scratch_dir("nurbs-cli-geometry");
     let program = example("open_pocket.json");
-    let pivot = [-15.0, 40.0, -60.0];
-    let csv = dir.join("pivot.csv");
-    let summary = dir.join("pivot.json");
-    let args = [
-        &TABLE1[..],
-        &["--planner", "vpop", "--machine", "xyzac", "--pivot", "-15,40,-60"],
-    ]
-    .concat();
+    let geometry = TrtGeometry {
+        rot_point: [-15.0, 40.0, -60.0],
+        offset: [0.0, 20.0, -10.0],
+        tool_offset: 30.0,
+        ..TrtGeometry::default()
+    };
+    let flags = ["--rot-point=-15,40,-60", "--kins-offset=0,20,-10", "--tool-offset=30"];
+    let csv = dir.join("geometry.csv");
+    let summary = dir.join("geometry.json");
+    let args = [&TABLE1[..], &["--planner", "vpop", "--machine", "xyzac"], &flags].concat();
     let s = plan_with_summary(&program, &args, &csv, &summary);
     assert_eq!(s["machine"], "xyzac");
-    assert_eq!(s["pivot_mm"], serde_json::json!(pivot));
+    assert_eq!(s["rot_point_mm"], serde_json::json!(geometry.rot_point));
+    assert_eq!(s["kins_offset_mm"], serde_json::json!(geometry.offset));
+    assert_eq!(s["tool_offset_mm"], serde_json::json!(geometry.tool_offset));
     // Every row: the joints' tool tip and tool axis on the programmed tip and top curves.
     let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
     let machine = TableTilting {
-        pivot,
+        geometry,
         ..TableTilting::default()
     };
     let rows = csv_columns(&csv, &["x", "y", "z", "a", "c", "element", "u"]);
     assert!(rows.len() > 100);
-    let (mut tip_error, mut axis_error, mut unpivoted): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    let (mut tip_error, mut axis_error, mut default_error): (f64, f64, f64) = (0.0, 0.0, 0.0);
     for r in &rows {
         let p = toolpath.elements[r[5] as usize].curve.point(r[6]);
         let d = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
@@ -591,26 +596,28 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
         for i in 0..3 {
             tip_error = tip_error.max((tip[i] - p[i]).abs());
             axis_error = axis_error.max((axis[i] - d[i] / n).abs());
-            unpivoted = unpivoted.max((tip0[i] - p[i]).abs());
+            default_error = default_error.max((tip0[i] - p[i]).abs());
         }
     }
     eprintln!(
-        "pivot {pivot:?}: tip {tip_error:.2e} mm, axis {axis_error:.2e}; without the pivot {unpivoted:.3} mm off"
+        "{geometry:?}: tip {tip_error:.2e} mm, axis {axis_error:.2e}; on the default geometry {default_error:.3} mm off"
     );
     assert!(tip_error < 1e-6, "{tip_error}");
     assert!(axis_error < 1e-9, "{axis_error}");
-    assert!(unpivoted > 1.0, "the pivot changed nothing: {unpivoted}");
-    let verify = |pivot: Option<&str>| {
+    assert!(default_error > 1.0, "the geometry changed nothing: {default_error}");
+    let verify = |flags: &[&str]| {
         let mut cmd = bin();
-        cmd.arg("verify").arg(&csv).arg(&program).args(TABLE1);
-        if let Some(p) = pivot {
-            cmd.arg(format!("--pivot={p}"));
-        }
+        cmd.arg("verify").arg(&csv).arg(&program).args(TABLE1).args(flags);
         cmd.output().unwrap()
     };
-    let ok = verify(Some("-15,40,-60"));
+    let ok = verify(&flags);
     assert!(ok.status.success(), "{}", String::from_utf8_lossy(&ok.stdout));
-    for other in [None, Some("-15,40,-59"), Some("0,0,0")] {
+    for other in [
+        &[][..],
+        &["--rot-point=-15,40,-60", "--kins-offset=0,20,-10"],
+        &["--rot-point=-15,40,-59", "--kins-offset=0,20,-10", "--tool-offset=30"],
+        &["--rot-point=-15,40,-60", "--kins-offset=0,21,-10", "--tool-offset=30"],
+    ] {
         let bad = verify(other);
         let text = String::from_utf8_lossy(&bad.stdout);
         assert!(!bad.status.success(), "{other:?}: {text}");
@@ -619,12 +626,53 @@ fn five_axis_pivot_is_planned_and_verified_with_the_same_kinematics() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `nurbs-plan kinematics`: world poses to joints and back on the geometry the flags give
+/// (tests/hal/test_machine_kins.sh checks the same command against LinuxCNC's own modules); a
+/// malformed line fails with its number.
+#[test]
+fn kinematics_command_turns_poses_into_joints_and_back() {
+    use std::io::Write;
+    let run = |args: &[&str], input: &str| {
+        let mut child = bin()
+            .arg("kinematics")
+            .args(args)
+            .stdin(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        child.stdin.take().unwrap().write_all(input.as_bytes()).unwrap();
+        child.wait_with_output().unwrap()
+    };
+    let flags = [
+        "--machine=xyzbc",
+        "--rot-point=1,2,3",
+        "--kins-offset=4,5,6",
+        "--tool-offset=7",
+    ];
+    let poses = "10 -20 5 30 45\n-3.5 0 12 -60 725\n";
+    let joints = run(&flags, poses);
+    assert!(joints.status.success(), "{}", String::from_utf8_lossy(&joints.stderr));
+    let joints = String::from_utf8(joints.stdout).unwrap();
+    assert_eq!(joints.lines().count(), 2, "{joints}");
+    let back = run(&[&flags[..], &["--forward"]].concat(), &joints);
+    let back = String::from_utf8(back.stdout).unwrap();
+    let numbers = |t: &str| -> Vec<f64> { t.split_whitespace().map(|v| v.parse().unwrap()).collect() };
+    for (a, b) in numbers(poses).iter().zip(numbers(&back)) {
+        assert!((a - b).abs() < 1e-12, "{poses} -> {joints} -> {back}");
+    }
+    assert_ne!(numbers(&joints)[..3], numbers(poses)[..3]);
+    let bad = run(&flags, "1 2 3 4 5\n1 2 x 4 5\n");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("stdin line 2"));
+}
+
 /// `--machine xyzbc --negative-tilt`: the joints are x, y, z, b, c with B <= 0, their forward
 /// kinematics put the tool tip and axis on the programmed curves, and `verify` passes with the
 /// same machine (either branch: the forward kinematics are the same) and fails with XYZAC.
 #[test]
 fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
-    use nurbs_motion::kinematics::{TableTilting, Tilt};
+    use nurbs_motion::kinematics::{TableTilting, Tilt, TrtGeometry};
     let dir = scratch_dir("nurbs-cli-xyzbc");
     let program = example("open_pocket.json");
     let with = |extra: &[&'static str]| [&TABLE1[..], extra].concat();
@@ -632,9 +680,11 @@ fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
     let csv = plan_cli(&program, "vpop", &with(&flags), &dir.join("bc.csv"));
     let toolpath = nurbs_motion::readers::read_toolpath(&program).unwrap();
     let machine = TableTilting {
-        tilt: Tilt::Y,
+        geometry: TrtGeometry {
+            tilt: Tilt::Y,
+            ..TrtGeometry::default()
+        },
         negative_tilt: true,
-        ..TableTilting::default()
     };
     let rows = csv_columns(&csv, &["x", "y", "z", "b", "c", "element", "u"]);
     assert!(rows.len() > 100);
@@ -665,7 +715,7 @@ fn xyzbc_machine_on_the_negative_branch_is_planned_and_verified() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// Bad `--machine` / `--pivot` values, and the flags where no kinematics is used, fail with a
+/// Bad `--machine` / geometry values, and the flags where no kinematics is used, fail with a
 /// message naming the flag.
 #[test]
 fn machine_options_refuse_bad_values_and_tool_tip_paths() {
@@ -683,18 +733,24 @@ fn machine_options_refuse_bad_values_and_tool_tip_paths() {
             .unwrap()
     };
     for (program, planner, extra, expected) in [
-        ("open_pocket.json", "vpop", &["--pivot", "1,2"][..], "three numbers"),
-        ("open_pocket.json", "vpop", &["--pivot", "1,2,3,4"], "three numbers"),
+        ("open_pocket.json", "vpop", &["--rot-point", "1,2"][..], "three numbers"),
         (
             "open_pocket.json",
             "vpop",
-            &["--pivot", "1,y,3"],
+            &["--kins-offset", "1,2,3,4"],
+            "three numbers",
+        ),
+        ("open_pocket.json", "vpop", &["--tool-offset", "inf"], "a finite number"),
+        (
+            "open_pocket.json",
+            "vpop",
+            &["--rot-point", "1,y,3"],
             "three finite numbers",
         ),
         (
             "open_pocket.json",
             "vpop",
-            &["--pivot", "nan,0,0"],
+            &["--kins-offset", "nan,0,0"],
             "three finite numbers",
         ),
         (
@@ -703,20 +759,35 @@ fn machine_options_refuse_bad_values_and_tool_tip_paths() {
             &["--machine", "hexapod"],
             "possible values: xyzac, xyzbc",
         ),
-        ("trident.json", "vpop", &["--pivot", "1,2,3"], "2-axis tool-tip path"),
+        (
+            "trident.json",
+            "vpop",
+            &["--rot-point", "1,2,3"],
+            "2-axis tool-tip path",
+        ),
         (
             "trident.json",
             "erwinski",
             &["--machine", "xyzac"],
             "2-axis tool-tip path",
         ),
-        ("open_pocket.json", "erwinski", &["--pivot", "1,2,3"], "--planner vpop"),
+        (
+            "open_pocket.json",
+            "erwinski",
+            &["--tool-offset", "1"],
+            "--planner vpop",
+        ),
     ] {
         let out = plan(program, planner, extra);
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!out.status.success(), "{program} {planner} {extra:?} passed");
         assert!(err.contains(expected), "{program} {planner} {extra:?}: {err}");
-        assert!(err.contains("--pivot") || err.contains("--machine"), "{err}");
+        assert!(
+            ["--rot-point", "--kins-offset", "--tool-offset", "--machine"]
+                .iter()
+                .any(|flag| err.contains(flag)),
+            "{err}"
+        );
     }
     // verify: tool-tip setpoints (the Erwinski planner on the same path) have no kinematics
     // to check.
@@ -737,12 +808,15 @@ fn machine_options_refuse_bad_values_and_tool_tip_paths() {
         .arg(&csv)
         .arg(example("open_pocket.json"))
         .args(tip_limits)
-        .args(["--pivot", "1,2,3"])
+        .args(["--rot-point", "1,2,3"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
-    assert!(err.contains("--pivot") && err.contains("tool-tip setpoints"), "{err}");
+    assert!(
+        err.contains("--rot-point") && err.contains("tool-tip setpoints"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -1111,4 +1185,50 @@ fn a_streamed_dense_program_rests_only_at_its_end() {
     assert_eq!(s["streamed"], true);
     assert_eq!(s["stops_made"], 0, "the streamed plan came to rest on the way");
     assert_verifies(&csv, &program, &limits);
+}
+
+/// A 5-axis G-code program (`G93` inverse time, A and C turning, C past 180°, as LinuxCNC's
+/// `impeller-7bl-xyzac.ngc` writes them): planned by VPOp in joint space on the negative-tilt
+/// branch and verified (joint limits, tip and axis by forward kinematics, within the
+/// tolerance of the programmed polyline, no faster than each move's inverse time allows); the
+/// joints start and end at the program's first and last pose, angles included.
+#[test]
+fn five_axis_gcode_program_is_planned_in_joint_space() {
+    let dir = scratch_dir("nurbs-cli-5axis-gcode");
+    let program = dir.join("xyzac.ngc");
+    let mut text = String::from("G21 G90 G94\nG0 X20 Y0 Z5 A-20 C-30\nG93\n");
+    let poses: Vec<[f64; 5]> = (0..=40)
+        .map(|k| {
+            let t = k as f64 / 40.0;
+            let angle = 2.0 * std::f64::consts::PI * t;
+            [
+                20.0 * angle.cos(),
+                20.0 * angle.sin(),
+                5.0 - 3.0 * t,
+                -20.0 - 20.0 * t,
+                -30.0 + 240.0 * t,
+            ]
+        })
+        .collect();
+    for p in &poses[1..] {
+        text += &format!(
+            "G1 X{:.4} Y{:.4} Z{:.4} A{:.4} C{:.4} F600\n",
+            p[0], p[1], p[2], p[3], p[4]
+        );
+    }
+    text += "M2\n";
+    std::fs::write(&program, text).unwrap();
+    let flags = [&TABLE1[..], &["--machine", "xyzac", "--negative-tilt"]].concat();
+    let csv = plan_and_verify_cli(&program, "vpop", &flags, &dir.join("xyzac.csv"));
+    let rows = csv_columns(&csv, &["x", "y", "z", "a", "c"]);
+    let (first, last) = (&rows[0], &rows[rows.len() - 1]);
+    // The rotary joints are the program's angles (C from its start within ±180°, then
+    // continuous); the linear joints follow from them and the tip.
+    for (row, [a, c]) in [(first, [-20.0, -30.0]), (last, [-40.0, 210.0])] {
+        assert!(
+            (row[3] - a).abs() < 1e-9 && (row[4] - c).abs() < 1e-9,
+            "{row:?} vs A{a} C{c}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -18,6 +18,7 @@
 pub mod block_stop;
 pub mod handover;
 pub mod interpolator;
+pub mod kinematics;
 pub mod math;
 pub mod nurbs;
 pub mod records;

@@ -58,21 +58,40 @@
 //!   is known at the start of the first feed move that moves (positioned by `G0` or `G1`
 //!   before it); every element then carries Z (arcs and NURBS at the Z where they start).
 //!   Otherwise it is 2-D (X Y), and a later feed move with a `Z` word is an error.
+//! * **5-axis programs** for table-tilting machines (LinuxCNC's `xyzac-trt-kins` /
+//!   `xyzbc-trt-kins`, whose world coordinates are the tool tip in the workpiece frame and the
+//!   rotary angles): `A` (tilt about X) or `B` (about Y) and `C` words, in degrees whatever the
+//!   length units, absolute or incremental like X Y Z; one tilt letter per program. The path is
+//!   5-axis if the tilt and C are both known where the feed motion begins (Z must be known then
+//!   too); every element then carries a top curve, the point [`TOP_LENGTH`] up the tool axis of
+//!   the angles (`nurbs_rtcore::kinematics::TrtGeometry::tool_axis`). A `G1` interpolates tip
+//!   and angles linearly, as LinuxCNC does: a move that turns by more than 0.5° (the two angles
+//!   together) becomes equal polyline pieces whose top chords stay within 1e-4 mm of that
+//!   interpolation. `G2`/`G3` and `G5.2` keep the angles (their top curve is the tip curve moved
+//!   up the axis); a rotary word on them is an error, as is a move that only turns the tool
+//!   about a standing tip (the feed is planned along the tip's path), one that turns an axis on
+//!   a path that began 3-axis, and `A` and `B` in one program. Which inverse-kinematics branch
+//!   and C winding the machine takes is the planner's (`--machine`, `--negative-tilt`): the
+//!   program's angles are recovered from the tool axis.
+//! * **`G93` inverse time**: each `G1` needs its own `F` and takes 1/F minutes, so its feed
+//!   (mm/s) is its tool-tip length times F / 60; `G2`/`G3`/`G5.2` in `G93` are errors. As in
+//!   LinuxCNC (`convert_feed_mode`), `G94` sets the feed to 0 until the next `F`.
 //! * **Streaming.** [`GcodeStream`] reads one line at a time and hands out each element once
 //!   no later line can change it; a run of `G1` moves is cut into polyline elements of at most
 //!   1,024 points. [`parse`] collects it. An error ends the stream after the elements before
 //!   its line.
 //! * **Accepted modal codes that do not change the tool-tip path:** `G17`, `G40`, `G43 H…`,
 //!   `G49`, `G54`–`G59.3` (only before the first move: a change afterwards would move the path),
-//!   `G61`, `G61.1`, `G64` (with `P`/`Q`), `G80`, `G90`/`G91`, `G90.1`/`G91.1`, `G94`, `G96`,
+//!   `G61`, `G61.1`, `G64` (with `P`/`Q`), `G80`, `G90`/`G91`, `G90.1`/`G91.1`, `G96`,
 //!   `G97`, `G98`, `G99`, `M0`, `M1`, `M3`–`M9`, `S`, `T`. Everything that would change the path
 //!   or timing in a way we do not model — cutter compensation `G41`/`G42`, `G5`/`G5.1`, other
-//!   planes, `G93`/`G95`, `G4`, `G10`, `G28`, `G30`, `G52`, `G53`, `G92…`, canned cycles, probing,
-//!   threading, axes A B C U V W, parameters `#`, expressions `[…]`, O-words and block delete —
+//!   planes, `G95`, `G4`, `G10`, `G28`, `G30`, `G52`, `G53`, `G92…`, canned cycles, probing,
+//!   threading, axes U V W, parameters `#`, expressions `[…]`, O-words and block delete —
 //!   is an error naming the line and column. An unknown G- or M-code is an error.
 
 use super::ReadError;
 use crate::geometry::{ElementKind, Nurbs, PathElement, Toolpath};
+use nurbs_rtcore::kinematics::{Tilt, TrtGeometry};
 use std::collections::VecDeque;
 use std::f64::consts::{FRAC_PI_2, SQRT_2, TAU};
 use std::sync::Arc;
@@ -99,8 +118,21 @@ struct Word {
     col: usize,
 }
 
-/// A 3-D point whose coordinates may be unknown.
-type Pos = [Option<f64>; 3];
+/// A pose whose coordinates may be unknown: X, Y, Z (mm), then the tilt (A or B) and C
+/// (degrees) of a 5-axis program.
+type Pos = [Option<f64>; 5];
+
+/// Axis names of [`Pos`]'s entries (the tilt's as "A" for messages before one is known).
+const POS_NAMES: [&str; 5] = ["X", "Y", "Z", "A", "C"];
+
+/// A 5-axis program's top point: this far up the tool axis from the tip (mm).
+pub const TOP_LENGTH: f64 = 10.0;
+
+/// Largest rotary change (degrees, the tilt's and C's together) of one polyline piece of a
+/// 5-axis `G1`: a move that turns more is cut into equal pieces, the tip and the angles interpolated linearly as LinuxCNC
+/// does; the top point's chord then strays from that interpolation by at most
+/// `TOP_LENGTH (1 - cos(Δ/2))`, 1e-4 mm at 0.5°.
+const MAX_ROTARY_STEP: f64 = 0.5;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Motion {
@@ -124,13 +156,16 @@ enum Move {
         line: usize,
         from: Pos,
         to: Pos,
+        /// mm/s; in inverse time (`G93`) the line's F (1/min) instead.
         feed: f64,
+        inverse_time: bool,
         z_word: bool,
     },
     Arc {
         line: usize,
+        /// The pose where it starts (its Z and, constant along it, the rotary angles).
+        from: Pos,
         arc: ArcGeom,
-        z: Option<f64>,
         feed: f64,
         z_word: bool,
     },
@@ -139,7 +174,8 @@ enum Move {
         order: usize,
         points: Vec<[f64; 2]>,
         weights: Vec<f64>,
-        z: Option<f64>,
+        /// The pose where the block starts (its Z, the rotary angles).
+        from: Pos,
         feed: f64,
     },
 }
@@ -158,7 +194,8 @@ struct NurbsBlock {
     line: usize,
     order: usize,
     start: [f64; 2],
-    z: Option<f64>,
+    /// The pose where it opens.
+    from: Pos,
     points: Vec<[f64; 2]>,
     weights: Vec<f64>,
 }
@@ -173,6 +210,10 @@ struct Interp {
     motion: Option<Motion>,
     /// Feed in mm/s (0 until an F word).
     feed: f64,
+    /// `G93`: the F word of each feed move is its inverse time (1/min), not modal.
+    inverse_time: bool,
+    /// The tilt axis's letter (`A` or `B`) once a program uses one.
+    tilt_letter: Option<char>,
     pos: Pos,
     coord_system: i32,
     nurbs: Option<NurbsBlock>,
@@ -364,7 +405,6 @@ fn unsupported_g(code: i32) -> Option<&'static str> {
         382..=385 => "probing moves are not supported",
         730 | 740 | 810..=890 => "canned cycles are not supported",
         171 | 180 | 181 | 190 | 191 => "only the XY plane (G17) is supported",
-        930 => "inverse-time feed G93 is not supported (use G94)",
         950 => "feed per revolution G95 is not supported (use G94)",
         410 | 411 | 420 | 421 => "cutter radius compensation (G41/G42) changes the path and is not supported",
         431 | 432 => "dynamic/added tool length offsets (G43.1/G43.2) are not supported",
@@ -428,12 +468,15 @@ impl Interp {
                     }
                     b.m.push((code * 10, w.col));
                 }
-                'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                'U' | 'V' | 'W' => {
                     return Err(err(
                         file,
                         lineno,
                         w.col,
-                        format!("axis {} is not supported: toolpaths are X Y Z only", w.letter),
+                        format!(
+                        "axis {} is not supported: toolpaths are X Y Z, with A or B and C on table-tilting machines",
+                        w.letter
+                    ),
                     ))
                 }
                 'E' => return Err(err(file, lineno, w.col, "E word is not supported")),
@@ -481,18 +524,76 @@ impl Interp {
                 col,
                 format!(
                     "the current {} position is unknown here: position the tool with G0 (in G90) first",
-                    ["X", "Y", "Z"][axis]
+                    self.axis_name(axis)
                 ),
             )
         })
     }
 
-    /// End point of a move (`find_ends`), in mm; unknown stays unknown for axes not programmed.
+    /// The name of [`Pos`] entry `axis`.
+    fn axis_name(&self, axis: usize) -> String {
+        match (axis, self.tilt_letter) {
+            (3, Some(letter)) => letter.to_string(),
+            _ => POS_NAMES[axis].to_string(),
+        }
+    }
+
+    /// The rotary words of a line: its tilt letter (`A` or `B`) must be the program's (the first
+    /// one it uses), as a table-tilting machine has one.
+    fn rotary_axes(&mut self, lineno: usize, b: &Block) -> Result<(), ReadError> {
+        for letter in ['A', 'B'] {
+            if let Some((_, col)) = b.get(letter) {
+                match self.tilt_letter {
+                    Some(t) if t != letter => {
+                        return Err(err(
+                            &self.file,
+                            lineno,
+                            col,
+                            format!("{letter} word in a program that tilts about {t}: a table-tilting machine has one tilt axis (XYZAC or XYZBC)"),
+                        ))
+                    }
+                    _ => self.tilt_letter = Some(letter),
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The line's first rotary word, if any.
+    fn rotary_word(b: &Block) -> Option<(char, usize)> {
+        ['A', 'B', 'C'].into_iter().find_map(|l| b.get(l).map(|w| (l, w.1)))
+    }
+
+    /// Arcs and NURBS blocks turn no rotary axis and run in units per minute (`G94`).
+    fn refuse_rotary_or_inverse_time(&self, lineno: usize, col: usize, b: &Block, name: &str) -> Result<(), ReadError> {
+        if let Some((letter, c)) = Self::rotary_word(b) {
+            return Err(err(
+                &self.file,
+                lineno,
+                c,
+                format!("{letter} word on {name}: only G0 and G1 may turn a rotary axis"),
+            ));
+        }
+        if self.inverse_time {
+            return Err(err(
+                &self.file,
+                lineno,
+                col,
+                format!("{name} in inverse time (G93) is not supported: only G1 (use G94)"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// End point of a move (`find_ends`), in mm and degrees; unknown stays unknown for axes not
+    /// programmed.
     fn find_end(&self, lineno: usize, b: &Block) -> Result<Pos, ReadError> {
         let mut end = self.pos;
-        for (axis, letter) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+        let tilt = self.tilt_letter.unwrap_or('A');
+        for (axis, letter) in ['X', 'Y', 'Z', tilt, 'C'].into_iter().enumerate() {
             if let Some((v, col)) = b.get(letter) {
-                let v = v * self.scale;
+                // Rotary axes are in degrees whatever the length units.
+                let v = if axis < 3 { v * self.scale } else { v };
                 end[axis] = Some(if self.absolute {
                     v
                 } else {
@@ -515,6 +616,7 @@ impl Interp {
             }
         }
 
+        self.rotary_axes(lineno, &b)?;
         // Order of execution (LinuxCNC manual, "Order of Execution"; execute_block).
         self.modal_settings(lineno, &b)?;
         // Motion (enhance_block).
@@ -613,11 +715,21 @@ impl Interp {
     fn modal_settings(&mut self, lineno: usize, b: &Block) -> Result<(), ReadError> {
         let file_name = Arc::clone(&self.file);
         let file: &str = &file_name;
+        // The feed mode before F (`convert_feed_mode`): G94 also sets the feed to 0.
+        if b.has_g(930) {
+            self.inverse_time = true;
+        }
+        if b.has_g(940) {
+            self.inverse_time = false;
+            self.feed = 0.0;
+        }
         if let Some((f, col)) = b.get('F') {
             if f < 0.0 {
                 return Err(err(file, lineno, col, "negative F word found"));
             }
-            self.feed = f * self.scale / 60.0;
+            if !self.inverse_time {
+                self.feed = f * self.scale / 60.0;
+            }
         }
         if let Some((s, col)) = b.get('S') {
             if s < 0.0 {
@@ -671,7 +783,9 @@ impl Interp {
     fn motion_of(&self, lineno: usize, b: &Block) -> Result<(Option<(i32, usize)>, Option<(char, usize)>), ReadError> {
         let file: &str = &self.file;
         let motion_code = b.g.iter().find(|g| g_group(g.0) == Some(1)).copied();
-        let axis_word = ['X', 'Y', 'Z'].iter().find_map(|&l| b.get(l).map(|w| (l, w.1)));
+        let axis_word = ['X', 'Y', 'Z', 'A', 'B', 'C']
+            .iter()
+            .find_map(|&l| b.get(l).map(|w| (l, w.1)));
         let motion: Option<(i32, usize)> = match motion_code {
             Some(m) => Some(m),
             None => match axis_word {
@@ -716,7 +830,19 @@ impl Interp {
         self.motion = Some(m);
         let to = self.find_end(lineno, b)?;
         if m == Motion::Line {
-            if self.feed == 0.0 {
+            let feed = if self.inverse_time {
+                let f = b
+                    .get('F')
+                    .map(|f| f.0)
+                    .ok_or_else(|| err(file, lineno, code_col, "F word missing with inverse time G1 move"))?;
+                if f == 0.0 {
+                    return Err(err(file, lineno, code_col, "cannot do G1 with zero feed rate"));
+                }
+                f
+            } else {
+                self.feed
+            };
+            if feed == 0.0 {
                 return Err(err(file, lineno, code_col, "cannot do G1 with zero feed rate"));
             }
             if to != self.pos {
@@ -729,7 +855,8 @@ impl Interp {
                 line: lineno,
                 from: self.pos,
                 to,
-                feed: self.feed,
+                feed,
+                inverse_time: self.inverse_time,
                 z_word: b.has('Z'),
             });
         } else {
@@ -786,7 +913,7 @@ impl Interp {
             order: block.order,
             points: block.points,
             weights: block.weights,
-            z: block.z,
+            from: block.from,
             feed: self.feed,
         });
         self.motion = None;
@@ -795,6 +922,7 @@ impl Interp {
 
     /// One line of a G5.2 block (`Interp::convert_nurbs`).
     fn nurbs_point(&mut self, lineno: usize, col: usize, b: &Block) -> Result<(), ReadError> {
+        self.refuse_rotary_or_inverse_time(lineno, col, b, "G5.2")?;
         let file_name = Arc::clone(&self.file);
         let file: &str = &file_name;
         let (x, y) = (b.get('X'), b.get('Y'));
@@ -841,7 +969,7 @@ impl Interp {
                 line: lineno,
                 order: 3,
                 start: [x0, y0],
-                z: self.pos[2],
+                from: self.pos,
                 points: vec![[x0, y0]],
                 weights: vec![w0],
             });
@@ -917,6 +1045,7 @@ impl Interp {
         if r.is_some() && !b.has('X') && !b.has('Y') {
             return Err(err(file, lineno, col, "X and Y words missing for arc in XY plane"));
         }
+        self.refuse_rotary_or_inverse_time(lineno, col, b, name)?;
         if self.feed == 0.0 {
             return Err(err(file, lineno, col, "cannot make arc with zero feed rate"));
         }
@@ -988,8 +1117,8 @@ impl Interp {
         }
         self.moves.push(Move::Arc {
             line: lineno,
+            from: self.pos,
             arc: geom.0,
-            z: self.pos[2],
             feed: self.feed,
             z_word: b.has('Z'),
         });
@@ -1082,22 +1211,29 @@ pub(crate) fn arc_nurbs(arc: &ArcGeom, z: Option<f64>) -> Result<Nurbs, nurbs_rt
     Nurbs::new(2, knots, &points, Some(weights))
 }
 
-/// A degree-1 NURBS through `points`, parameterised by cumulative chord length (mm).
+/// A degree-1 NURBS through `points`, parameterised by cumulative chord length of the tool tip
+/// (mm): 2-D or 3-D points, or 5-axis points of six coordinates (tip, then top point).
 /// Consecutive duplicate points must have been removed.
 pub(crate) fn polyline_nurbs(points: &[Vec<f64>]) -> Result<Nurbs, nurbs_rtcore::GeometryError> {
+    let dim = points.first().map_or(0, Vec::len);
+    let tip_dim = if dim == 6 { 3 } else { dim };
     let mut knots = vec![0.0, 0.0];
     let mut s = 0.0;
     for w in points.windows(2) {
-        s += w[0]
+        s += w[0][..tip_dim]
             .iter()
-            .zip(&w[1])
+            .zip(&w[1][..tip_dim])
             .map(|(a, b)| (a - b) * (a - b))
             .sum::<f64>()
             .sqrt();
         knots.push(s);
     }
     knots.push(s);
-    Nurbs::new(1, knots, points, None)
+    if tip_dim == dim {
+        return Nurbs::new(1, knots, points, None);
+    }
+    let flat: Vec<f64> = points.iter().flatten().copied().collect();
+    Nurbs::from_flat(1, dim, tip_dim, knots, flat, vec![1.0; points.len()])
 }
 
 /// LinuxCNC's `knot_vector_creator(n, k)` for `n + 1` control points and order `k`.
@@ -1162,7 +1298,9 @@ impl<L: Iterator<Item = std::io::Result<String>>> GcodeStream<L> {
                 ij_absolute: false,
                 motion: None,
                 feed: 0.0,
-                pos: [None; 3],
+                inverse_time: false,
+                tilt_letter: None,
+                pos: [None; 5],
                 coord_system: 540,
                 nurbs: None,
                 moves: Vec::new(),
@@ -1170,6 +1308,7 @@ impl<L: Iterator<Item = std::io::Result<String>>> GcodeStream<L> {
             builder: Builder {
                 file,
                 three_d: None,
+                five_axis: None,
                 poly: None,
                 pending_rapid: None,
                 any: false,
@@ -1207,7 +1346,7 @@ impl<L: Iterator<Item = std::io::Result<String>>> GcodeStream<L> {
         let words = tokenize(&file, lineno, &raw)?;
         let stop = self.interp.line(lineno, &words)?;
         for m in self.interp.moves.drain(..) {
-            self.builder.push(m, &mut self.out)?;
+            self.builder.push(m, self.interp.tilt_letter, &mut self.out)?;
         }
         if stop {
             if let Some(block) = &self.interp.nurbs {
@@ -1282,6 +1421,9 @@ struct Builder {
     /// Whether the path is 3-D: decided by the first feed move that moves, by whether the Z
     /// position is known where it starts.
     three_d: Option<bool>,
+    /// Whether the path is 5-axis, and its tilt: decided by the first feed move that moves, by
+    /// whether the tilt and C are known where it starts.
+    five_axis: Option<Option<Tilt>>,
     /// The polyline under construction: (first line, feed, points).
     poly: Option<(usize, f64, Vec<Vec<f64>>)>,
     /// A rapid that moved the tool after a feed move (an error if another feed move follows).
@@ -1350,22 +1492,96 @@ impl Builder {
         Ok(())
     }
 
-    /// An arc or NURBS block starting at Z `z` is taken: the polyline before it goes out; its
-    /// Z, on a 3-D path.
+    /// An arc or NURBS block starting at pose `from` is taken: the polyline before it goes out;
+    /// its Z, on a 3-D path, and its constant tilt and C, on a 5-axis one.
+    #[allow(clippy::type_complexity)]
     fn begin_curve(
         &mut self,
         line: usize,
-        z: Option<f64>,
+        from: &Pos,
         z_word: bool,
+        tilt_letter: Option<char>,
         out: &mut VecDeque<PathElement>,
-    ) -> Result<Option<f64>, ReadError> {
-        let three_d = self.dimension(line, z, z_word)?;
+    ) -> Result<(Option<f64>, Option<(Tilt, [f64; 2])>), ReadError> {
+        let three_d = self.dimension(line, from[2], z_word)?;
+        let five_axis = self.five_axis(line, from, three_d, tilt_letter)?;
         self.feed_move()?;
         self.flush(out)?;
-        three_d.then(|| self.z_of(line, z)).transpose()
+        let z = three_d.then(|| self.z_of(line, from[2])).transpose()?;
+        let angles = five_axis.map(|tilt| (tilt, [from[3].expect("5-axis"), from[4].expect("5-axis")]));
+        Ok((z, angles))
     }
 
-    fn push(&mut self, m: Move, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
+    /// `curve` (the tool tip) with, on a 5-axis path, its top curve: the same curve moved
+    /// [`TOP_LENGTH`] up the tool axis of the constant angles.
+    fn with_top(&self, line: usize, curve: Nurbs, angles: Option<(Tilt, [f64; 2])>) -> Result<Nurbs, ReadError> {
+        let Some((tilt, [t, c])) = angles else {
+            return Ok(curve);
+        };
+        let axis = TrtGeometry {
+            tilt,
+            ..TrtGeometry::default()
+        }
+        .tool_axis(t, c);
+        let top: Vec<Vec<f64>> = (0..curve.control_point_count())
+            .map(|i| {
+                let p = curve.control_point(i);
+                (0..3).map(|k| p[k] + TOP_LENGTH * axis[k]).collect()
+            })
+            .collect();
+        let top = Nurbs::new(
+            curve.degree(),
+            curve.knots().to_vec(),
+            &top,
+            Some(curve.weights().to_vec()),
+        )
+        .map_err(self.geometry(line))?;
+        curve.with_top_curve(&top).map_err(self.geometry(line))
+    }
+
+    /// Decides at the first feed move whether the path is 5-axis: the tilt and C known where it
+    /// starts (then Z must be known too). `None`: a 3-axis path.
+    fn five_axis(
+        &mut self,
+        line: usize,
+        from: &Pos,
+        three_d: bool,
+        tilt_letter: Option<char>,
+    ) -> Result<Option<Tilt>, ReadError> {
+        if let Some(decided) = self.five_axis {
+            return Ok(decided);
+        }
+        let tilt = match tilt_letter {
+            Some('B') => Tilt::Y,
+            _ => Tilt::X,
+        };
+        let letter = tilt_letter.unwrap_or('A');
+        let decided = match (from[3].is_some(), from[4].is_some()) {
+            (false, false) => None,
+            (true, true) if three_d => Some(tilt),
+            (true, true) => {
+                return Err(ReadError::at(
+                    &self.file,
+                    line,
+                    None,
+                    "a 5-axis program (the tilt and C positioned) needs Z positioned before its first feed move too",
+                ))
+            }
+            (known_tilt, _) => {
+                let (known, unknown) = if known_tilt { (letter, 'C') } else { ('C', letter) };
+                return Err(ReadError::at(
+                    &self.file,
+                    line,
+                    None,
+                    format!("{known} is positioned but {unknown} is not where the feed motion begins: position both rotary axes with G0 first"),
+                ));
+            }
+        };
+        self.five_axis = Some(decided);
+        Ok(decided)
+    }
+
+    fn push(&mut self, m: Move, tilt_letter: Option<char>, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
         match m {
             Move::Rapid { line, col, from, to } => {
                 if from != to && self.any && self.pending_rapid.is_none() {
@@ -1377,46 +1593,84 @@ impl Builder {
                 from,
                 to,
                 feed,
+                inverse_time,
                 z_word,
             } => {
                 let moves_xy = from[0] != to[0] || from[1] != to[1];
                 let moves_z = from[2] != to[2];
-                if self.three_d.is_none() && !(moves_xy || moves_z) {
+                let turns = from[3] != to[3] || from[4] != to[4];
+                if self.three_d.is_none() && !(moves_xy || moves_z || turns) {
                     return Ok(());
                 }
                 let three_d = self.dimension(line, from[2], z_word)?;
+                let five_axis = self.five_axis(line, &from, three_d, tilt_letter)?;
+                if turns && five_axis.is_none() {
+                    return Err(ReadError::at(
+                        &self.file,
+                        line,
+                        None,
+                        "this move turns a rotary axis, but the tilt and C were not both known where the feed motion began (a 3-axis path): position them with G0 before the first feed move",
+                    ));
+                }
                 if !(moves_xy || three_d && moves_z) {
+                    if turns {
+                        return Err(ReadError::at(
+                            &self.file,
+                            line,
+                            None,
+                            "this move turns the tool about a standing tip (a pure reorientation): not supported, the feed is planned along the tool tip's path",
+                        ));
+                    }
                     return Ok(());
                 }
                 self.feed_move()?;
-                let point = |p: &Pos| -> Result<Vec<f64>, ReadError> {
-                    let (x, y) = (p[0].expect("checked"), p[1].expect("checked"));
-                    Ok(if three_d {
-                        vec![x, y, self.z_of(line, p[2])?]
-                    } else {
-                        vec![x, y]
-                    })
+                let points = match five_axis {
+                    None => {
+                        let point = |p: &Pos| -> Result<Vec<f64>, ReadError> {
+                            let (x, y) = (p[0].expect("checked"), p[1].expect("checked"));
+                            Ok(if three_d {
+                                vec![x, y, self.z_of(line, p[2])?]
+                            } else {
+                                vec![x, y]
+                            })
+                        };
+                        vec![point(&from)?, point(&to)?]
+                    }
+                    Some(tilt) => five_axis_points(tilt, &from, &to),
                 };
-                let (a, b) = (point(&from)?, point(&to)?);
+                let feed = if inverse_time {
+                    // The move takes 1/F minutes: its tip feed.
+                    let (start, end) = (&points[0], &points[points.len() - 1]);
+                    let tip = start.len().min(3);
+                    let length = (0..tip).map(|i| (end[i] - start[i]).powi(2)).sum::<f64>().sqrt();
+                    length * feed / 60.0
+                } else {
+                    feed
+                };
                 match &mut self.poly {
-                    Some((_, f, pts)) if *f == feed && pts.last() == Some(&a) && pts.len() < POLYLINE_POINTS => {
-                        pts.push(b)
+                    Some((_, f, pts))
+                        if *f == feed
+                            && pts.last() == points.first()
+                            && pts.len() + points.len() <= POLYLINE_POINTS + 1 =>
+                    {
+                        pts.extend(points.into_iter().skip(1))
                     }
                     _ => {
                         self.flush(out)?;
-                        self.poly = Some((line, feed, vec![a, b]));
+                        self.poly = Some((line, feed, points));
                     }
                 }
             }
             Move::Arc {
                 line,
+                from,
                 arc,
-                z,
                 feed,
                 z_word,
             } => {
-                let z = self.begin_curve(line, z, z_word, out)?;
+                let (z, angles) = self.begin_curve(line, &from, z_word, tilt_letter, out)?;
                 let curve = arc_nurbs(&arc, z).map_err(self.geometry(line))?;
+                let curve = self.with_top(line, curve, angles)?;
                 out.push_back(PathElement {
                     kind: ElementKind::Arc,
                     curve,
@@ -1429,10 +1683,10 @@ impl Builder {
                 order,
                 points,
                 weights,
-                z,
+                from,
                 feed,
             } => {
-                let z = self.begin_curve(line, z, false, out)?;
+                let (z, angles) = self.begin_curve(line, &from, false, tilt_letter, out)?;
                 let pts: Vec<Vec<f64>> = points
                     .iter()
                     .map(|p| match z {
@@ -1442,6 +1696,7 @@ impl Builder {
                     .collect();
                 let knots = linuxcnc_knot_vector(pts.len(), order);
                 let curve = Nurbs::new(order - 1, knots, &pts, Some(weights)).map_err(self.geometry(line))?;
+                let curve = self.with_top(line, curve, angles)?;
                 out.push_back(PathElement {
                     kind: ElementKind::Nurbs,
                     curve,
@@ -1464,6 +1719,42 @@ impl Builder {
         }
         Ok(())
     }
+}
+
+/// The polyline points of a 5-axis `G1` from `from` to `to` (known poses): the tool tip, then
+/// the top point [`TOP_LENGTH`] up the tool axis of the move's angles, at the ends and where
+/// the angles have turned by [`MAX_ROTARY_STEP`] more (tip and angles linear in between, as
+/// LinuxCNC interpolates them). The ends are the poses' points exactly, so that consecutive
+/// moves join.
+fn five_axis_points(tilt: Tilt, from: &Pos, to: &Pos) -> Vec<Vec<f64>> {
+    let value = |p: &Pos, i: usize| p[i].expect("a 5-axis pose is known");
+    let (a, b): ([f64; 5], [f64; 5]) = (
+        core::array::from_fn(|i| value(from, i)),
+        core::array::from_fn(|i| value(to, i)),
+    );
+    // The tool axis turns by at most the sum of the two angles' turns.
+    let turn = (b[3] - a[3]).abs() + (b[4] - a[4]).abs();
+    let pieces = ((turn / MAX_ROTARY_STEP).ceil() as usize).max(1);
+    let geometry = TrtGeometry {
+        tilt,
+        ..TrtGeometry::default()
+    };
+    (0..=pieces)
+        .map(|k| {
+            let pose: [f64; 5] = match k {
+                0 => a,
+                k if k == pieces => b,
+                k => {
+                    let t = k as f64 / pieces as f64;
+                    core::array::from_fn(|i| a[i] + (b[i] - a[i]) * t)
+                }
+            };
+            let axis = geometry.tool_axis(pose[3], pose[4]);
+            let mut point = pose[..3].to_vec();
+            point.extend((0..3).map(|i| pose[i] + TOP_LENGTH * axis[i]));
+            point
+        })
+        .collect()
 }
 
 /// Words that need a code on the line to use them (LinuxCNC's check_other_codes).

@@ -35,6 +35,7 @@ pub struct JointPath {
     /// Upper estimate of the tool-tip curvature over cells of `w` (range maximum table).
     kappa: CurvatureTable,
     tip: usize,
+    /// The machine and its C angle (degrees) at `C_TABLE` samples per element.
     kinematics: Option<(TableTilting, Vec<f64>)>,
     /// The last answers of [`Self::next_stop`] (asked again and again for nearby states): the
     /// next stop after `w` (asked at rest or not) and after every `w` between it and that stop.
@@ -213,10 +214,11 @@ impl JointPath {
             return Err("5-axis planning needs tool tip and top curves in 3-D on every element".into());
         }
         let mut path = Self::tip(toolpath);
-        // Continuous C: unwrap along a fine grid; evaluation takes the branch nearest the grid.
+        // Continuous C: unwrap along a fine grid, from the value nearest 0 at the start (as a
+        // program whose C starts within ±180° has it); evaluation takes the branch nearest the grid.
         let n = toolpath.elements.len();
         let mut table = Vec::with_capacity(n * C_TABLE + 1);
-        let mut prev: Option<f64> = None;
+        let mut prev: Option<f64> = Some(0.0);
         for k in 0..=n * C_TABLE {
             let w = k as f64 / C_TABLE as f64;
             let (_, axis) = path.tip_and_axis(w);
@@ -422,7 +424,7 @@ impl JointPath {
             Some((m, table)) => {
                 let axis = [p[3] - p[0], p[4] - p[1], p[5] - p[2]];
                 let k = ((w * C_TABLE as f64).round() as usize).min(table.len() - 1);
-                let j = m.inverse(tip, axis, Some(table[k].to_degrees()));
+                let j = m.inverse(tip, axis, Some(table[k]));
                 q[..5].copy_from_slice(&j);
             }
         }
