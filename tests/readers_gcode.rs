@@ -539,7 +539,7 @@ fn five_axis_g1_has_the_tool_axis_of_its_angles() {
 /// LinuxCNC; arcs and rotary words keep within what the path can hold.
 #[test]
 fn inverse_time_and_five_axis_errors() {
-    let t = ok("G0 X0 Y0 Z0 A0 C0\nG93 G1 X3 Y4 F30\nG1 X3 Y10 F60\nM2\n");
+    let t = ok("G0 X0 Y0 Z0 A1 C0\nG93 G1 X3 Y4 F30\nG1 X3 Y10 F60\nM2\n");
     let feeds: Vec<f64> = t.elements.iter().map(|e| e.feed.unwrap()).collect();
     assert_eq!(feeds, vec![2.5, 6.0]);
     // Inverse time on a 3-axis path too.
@@ -570,5 +570,13 @@ fn inverse_time_and_five_axis_errors() {
     fails("G0 X0 Y0 A0 C0\nG1 X1 F60\n", 2, "needs Z positioned");
     // A rotary move where the path began as 3-axis, and a pure reorientation.
     fails("G0 X0 Y0 Z0\nG1 X1 F60\nG1 X2 A5\n", 3, "a 3-axis path");
-    fails("G0 X0 Y0 Z0 A0 C0\nG1 X1 F60\nG1 C30\n", 3, "pure reorientation");
+    fails("G0 X0 Y0 Z0 A5 C0\nG1 X1 F60\nG1 C30\n", 3, "pure reorientation");
+    // The singularity: the tilt at 0, or changing sign, on a feed move.
+    fails(
+        "G0 X0 Y0 Z0 A0 C0\nG1 X1 F60\n",
+        2,
+        "A is 0 on this move, or changes sign (A0 to A0)",
+    );
+    fails("G0 X0 Y0 Z0 A5 C0\nG1 X1 F60\nG1 X2 A-5\n", 3, "(A5 to A-5)");
+    fails("G0 X0 Y0 Z0 B0 C0\nF60\nG2 X2 Y0 I1 J0\n", 3, "B is 0");
 }

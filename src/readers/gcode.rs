@@ -70,7 +70,8 @@
 //!   interpolation. `G2`/`G3` and `G5.2` keep the angles (their top curve is the tip curve moved
 //!   up the axis); a rotary word on them is an error, as is a move that only turns the tool
 //!   about a standing tip (the feed is planned along the tip's path), one that turns an axis on
-//!   a path that began 3-axis, and `A` and `B` in one program. Which inverse-kinematics branch
+//!   a path that began 3-axis, a feed move where the tilt is 0 or changes sign (the singularity:
+//!   the tool along the table's normal does not decide C), and `A` and `B` in one program. Which inverse-kinematics branch
 //!   and C winding the machine takes is the planner's (`--machine`, `--negative-tilt`): the
 //!   program's angles are recovered from the tool axis.
 //! * **`G93` inverse time**: each `G1` needs its own `F` and takes 1/F minutes, so its feed
@@ -1508,6 +1509,9 @@ impl Builder {
         self.feed_move()?;
         self.flush(out)?;
         let z = three_d.then(|| self.z_of(line, from[2])).transpose()?;
+        if five_axis.is_some() {
+            self.off_the_singularity(line, from[3], from[3], tilt_letter)?;
+        }
         let angles = five_axis.map(|tilt| (tilt, [from[3].expect("5-axis"), from[4].expect("5-axis")]));
         Ok((z, angles))
     }
@@ -1581,6 +1585,28 @@ impl Builder {
         Ok(decided)
     }
 
+    /// A 5-axis feed move from tilt `from` to `to` keeps off 0: there the tool stands along
+    /// the table's normal and its axis does not decide C, which the planner recovers from it.
+    fn off_the_singularity(
+        &self,
+        line: usize,
+        from: Option<f64>,
+        to: Option<f64>,
+        tilt_letter: Option<char>,
+    ) -> Result<(), ReadError> {
+        let (a, b) = (from.unwrap_or(0.0), to.unwrap_or(0.0));
+        if a * b > 0.0 {
+            return Ok(());
+        }
+        let letter = tilt_letter.unwrap_or('A');
+        Err(ReadError::at(
+            &self.file,
+            line,
+            None,
+            format!("{letter} is 0 on this move, or changes sign ({letter}{a} to {letter}{b}): the tool along the table's normal does not decide C (the singularity), not supported on a 5-axis path"),
+        ))
+    }
+
     fn push(&mut self, m: Move, tilt_letter: Option<char>, out: &mut VecDeque<PathElement>) -> Result<(), ReadError> {
         match m {
             Move::Rapid { line, col, from, to } => {
@@ -1636,7 +1662,10 @@ impl Builder {
                         };
                         vec![point(&from)?, point(&to)?]
                     }
-                    Some(tilt) => five_axis_points(tilt, &from, &to),
+                    Some(tilt) => {
+                        self.off_the_singularity(line, from[3], to[3], tilt_letter)?;
+                        five_axis_points(tilt, &from, &to)
+                    }
                 };
                 let feed = if inverse_time {
                     // The move takes 1/F minutes: its tip feed.
