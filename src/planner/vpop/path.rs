@@ -791,12 +791,13 @@ const KAPPA_CELLS: usize = 2048;
 /// Curvature samples per cell.
 const KAPPA_SAMPLES: usize = 4;
 
-/// Upper estimate of the curvature over cells of `w`: per element, a range-maximum table over
-/// its cells, built when a query reaches the element, and only the last [`KAPPA_TABLES_KEPT`]
-/// kept (a rebuilt table has the same values). The queries follow the motion, so few elements
-/// are in use at a time: building all 2,000 elements of a 1,000-line G1 program up front took a
-/// second before the first stop check of `nurbs-planner`, and holding them all 330 MB for a VPOp
-/// plan of it.
+/// Upper estimate of the curvature over cells of `w`: per element, the maximum of each of its
+/// cells, built when a query reaches the element, and the last [`KAPPA_TABLES_KEPT`] kept (a
+/// rebuilt table has the same values). The queries
+/// follow the motion and its back-tracking: building all 2,000 elements of a 1,000-line G1
+/// program up front took a second before the first stop check of `nurbs-planner`, and with 64
+/// tables kept the back-tracking over a 5-axis program's short moves built each one some 150
+/// times (a 1,000-move impeller stretch: 470 s of planning).
 struct CurvatureTable {
     tip: usize,
     /// Built tables with their element (counted in a longer path whose element `first` is this
@@ -812,13 +813,20 @@ pub struct CurvatureTables {
     built: VecDeque<(usize, ElementCurvature)>,
 }
 
-/// Element curvature tables kept at a time (some 180 kB each for a cubic element).
-const KAPPA_TABLES_KEPT: usize = 64;
+/// Element curvature tables kept at a time (16 kB each for a cubic element): enough for the
+/// back-tracking over a dense program's short elements to find them again.
+const KAPPA_TABLES_KEPT: usize = 1024;
 
-/// `levels[k][c]`: largest curvature over cells `c .. c + 2^k` of one element.
+/// The largest curvature of each cell of one element, and of each block of
+/// [`KAPPA_BLOCK`] cells.
 struct ElementCurvature {
-    levels: Vec<Vec<f64>>,
+    cells: Vec<f64>,
+    blocks: Vec<f64>,
 }
+
+/// Cells per block of an [`ElementCurvature`]: a query looks at fewer than two blocks' cells
+/// and the blocks between.
+const KAPPA_BLOCK: usize = 64;
 
 impl ElementCurvature {
     fn new(c: &PowerCurve, tip: usize) -> Self {
@@ -838,7 +846,7 @@ impl ElementCurvature {
             curvature_of(&c.eval(u, 2), tip)
         };
         let mut first = sample(0, 0);
-        let base: Vec<f64> = (0..cells)
+        let cells: Vec<f64> = (0..cells)
             .map(|k| {
                 let mut m = first;
                 for j in 1..KAPPA_SAMPLES {
@@ -849,23 +857,20 @@ impl ElementCurvature {
                 m.max(last)
             })
             .collect();
-        let mut levels = vec![base];
-        let mut width = 1;
-        while 2 * width <= levels[0].len() {
-            let prev = levels.last().unwrap_or(&levels[0]);
-            let next: Vec<f64> = (0..prev.len() - width).map(|i| prev[i].max(prev[i + width])).collect();
-            levels.push(next);
-            width *= 2;
-        }
-        ElementCurvature { levels }
+        let largest = |cells: &[f64]| cells.iter().fold(cells[0], |m, &c| m.max(c));
+        let blocks = cells.chunks(KAPPA_BLOCK).map(largest).collect();
+        ElementCurvature { cells, blocks }
     }
 
-    /// Largest curvature over cells `a ..= b`.
+    /// Largest curvature over cells `a ..= b`: the cells at both ends, the blocks between.
     fn max(&self, a: usize, b: usize) -> f64 {
-        let len = b - a + 1;
-        let k = (usize::BITS - 1 - len.leading_zeros()) as usize;
-        let lvl = &self.levels[k];
-        lvl[a].max(lvl[b + 1 - (1 << k)])
+        let largest = |cells: &[f64]| cells.iter().fold(cells[0], |m, &c| m.max(c));
+        let (first, last) = (a / KAPPA_BLOCK + 1, b / KAPPA_BLOCK);
+        if first >= last {
+            return largest(&self.cells[a..=b]);
+        }
+        let ends = largest(&self.cells[a..first * KAPPA_BLOCK]).max(largest(&self.cells[last * KAPPA_BLOCK..=b]));
+        ends.max(largest(&self.blocks[first..last]))
     }
 }
 
@@ -901,6 +906,7 @@ impl CurvatureTable {
     fn element_max(&self, curves: &Window<Element>, e: usize, a: usize, b: usize) -> f64 {
         let mut built = self.built.borrow_mut();
         let key = self.first + e;
+        // The latest first: most queries are on the element the motion is on.
         if let Some((_, table)) = built.iter().rev().find(|(i, _)| *i == key) {
             return table.max(a, b);
         }
