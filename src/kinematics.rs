@@ -1,7 +1,7 @@
 //! 5-axis tool paths on table-tilting machines (VPOp paper section 3.3): the joints of a tool
 //! tip and tool axis on the geometry of LinuxCNC's `xyzac-trt-kins` / `xyzbc-trt-kins`, on one
-//! of the two inverse-kinematics branches. The functions are `nurbs_rtcore::kinematics`, which
-//! the realtime module shares. Joint order x, y, z, tilt, c; rotary axes in degrees (LinuxCNC's
+//! of the two inverse-kinematics branches. The functions are `nurbs_rtcore::kinematics` (`no_std`,
+//! for the realtime module to share). Joint order x, y, z, tilt, c; rotary axes in degrees (LinuxCNC's
 //! convention).
 
 pub use nurbs_rtcore::kinematics::{Tilt, TrtGeometry};

@@ -1,7 +1,8 @@
 //! `--machine`, the geometry flags (`--rot-point`, `--kins-offset`, `--tool-offset`: the pins of
 //! LinuxCNC's `xyzac-trt-kins` / `xyzbc-trt-kins`) and `--negative-tilt`: the kinematics a
-//! 5-axis toolpath (tool tip and top curve on every element) is planned and verified on. Built here, in one place, for `plan` and
-//! `verify`, so that `verify` recovers the tool tip with the kinematics `plan` used.
+//! 5-axis toolpath (tool tip and top curve on every element) is planned and verified on. Built
+//! here, in one place, for `plan` and `verify`, so that `verify` recovers the tool tip with the
+//! kinematics `plan` used.
 
 use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::kinematics::{TableTilting, Tilt, TrtGeometry};
@@ -161,6 +162,9 @@ pub fn is_five_axis(toolpath: &Toolpath) -> bool {
 /// kinematics to stdout.
 pub fn run_kinematics(machine: &MachineArgs, forward: bool) -> Result<(), String> {
     use std::io::{BufRead, Write};
+    if machine.negative_tilt {
+        return Err("--negative-tilt: a world pose names its angles, so no branch is chosen here".into());
+    }
     let geometry = machine.kinematics().geometry;
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());

@@ -628,7 +628,7 @@ fn five_axis_geometry_is_planned_and_verified_with_the_same_kinematics() {
 
 /// `nurbs-plan kinematics`: world poses to joints and back on the geometry the flags give
 /// (tests/hal/test_machine_kins.sh checks the same command against LinuxCNC's own modules); a
-/// malformed line fails with its number.
+/// malformed line fails with its number, and a branch flag (poses name their angles) is refused.
 #[test]
 fn kinematics_command_turns_poses_into_joints_and_back() {
     use std::io::Write;
@@ -665,6 +665,9 @@ fn kinematics_command_turns_poses_into_joints_and_back() {
     let bad = run(&flags, "1 2 3 4 5\n1 2 x 4 5\n");
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("stdin line 2"));
+    let branch = run(&[&flags[..], &["--negative-tilt"]].concat(), poses);
+    assert!(!branch.status.success());
+    assert!(String::from_utf8_lossy(&branch.stderr).contains("--negative-tilt"));
 }
 
 /// `--machine xyzbc --negative-tilt`: the joints are x, y, z, b, c with B <= 0, their forward

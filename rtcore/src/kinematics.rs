@@ -1,6 +1,6 @@
 //! Kinematics of table-rotary-tilting 5-axis machines with LinuxCNC 2.9's geometry
-//! (`xyzac-trt-kins`, `xyzbc-trt-kins`), shared by the planner and the realtime module so that
-//! both turn the same world pose into the same joints.
+//! (`xyzac-trt-kins`, `xyzbc-trt-kins`): the planner's, here in `no_std` so that the realtime
+//! module can turn the same world pose into the same joints once it drives 5 joints.
 //!
 //! The tool stays along the machine's Z; the table tilts about X (A, XYZAC) or Y (B, XYZBC) and
 //! rotates about its own normal (C). A world pose is LinuxCNC's: the controlled point in the
@@ -19,8 +19,9 @@
 //! The rotary angles of a tool axis t (workpiece frame, from the tip towards the holder) turn it
 //! onto the machine's +Z: `R_tilt(T) R_z(C) t = (0, 0, 1)`. With rho = |t_xy|, `T = atan2(rho,
 //! t_z)` and `C = atan2(t_x, t_y)` for a tilt about X, `C = atan2(t_y, -t_x)` about Y; or the
-//! second branch `-T`, `C + 180°`. The functions are the same as LinuxCNC's `trtfuncs.c` (checked against the
-//! loaded module by `tests/hal/test_machine_kins.sh`), written in this vector form.
+//! second branch `-T`, `C + 180°`. The functions are the same as LinuxCNC's `trtfuncs.c`
+//! (checked against the loaded module by `tests/hal/test_machine_kins.sh`), written in this
+//! vector form.
 
 use core::f64::consts::PI;
 
@@ -50,18 +51,10 @@ pub struct TrtGeometry {
 
 const TO_RAD: f64 = PI / 180.0;
 
-/// `R_tilt(t) R_z(c) p` (radians).
-pub fn rotate(tilt: Tilt, t: f64, c: f64, p: [f64; 3]) -> [f64; 3] {
+/// `R_z(c) p` (radians).
+fn rotate_c(c: f64, p: [f64; 3]) -> [f64; 3] {
     let (sc, cc) = (libm::sin(c), libm::cos(c));
-    let q = [cc * p[0] - sc * p[1], sc * p[0] + cc * p[1], p[2]];
-    rotate_tilt(tilt, t, q)
-}
-
-/// `R_z(-c) R_tilt(-t) m` (radians): the inverse of [`rotate`].
-pub fn rotate_back(tilt: Tilt, t: f64, c: f64, m: [f64; 3]) -> [f64; 3] {
-    let q = rotate_tilt(tilt, -t, m);
-    let (sc, cc) = (libm::sin(c), libm::cos(c));
-    [cc * q[0] + sc * q[1], -sc * q[0] + cc * q[1], q[2]]
+    [cc * p[0] - sc * p[1], sc * p[0] + cc * p[1], p[2]]
 }
 
 /// `R_tilt(t) p` (radians).
@@ -88,11 +81,8 @@ impl TrtGeometry {
     /// mm; tilt, c degrees).
     pub fn joints(&self, world: [f64; 5]) -> [f64; 5] {
         let (r, d) = (self.rot_point, self.tilt_offset());
-        let c = world[4] * TO_RAD;
-        let (sc, cc) = (libm::sin(c), libm::cos(c));
-        let (x, y) = (world[0] - r[0], world[1] - r[1]);
-        let q = [cc * x - sc * y - d[0], sc * x + cc * y - d[1], world[2] - r[2] - d[2]];
-        let m = rotate_tilt(self.tilt, world[3] * TO_RAD, q);
+        let q = rotate_c(world[4] * TO_RAD, [world[0] - r[0], world[1] - r[1], world[2] - r[2]]);
+        let m = rotate_tilt(self.tilt, world[3] * TO_RAD, [q[0] - d[0], q[1] - d[1], q[2] - d[2]]);
         [
             m[0] + r[0] + d[0],
             m[1] + r[1] + d[1],
@@ -111,16 +101,8 @@ impl TrtGeometry {
             joints[2] - r[2] - d[2],
         ];
         let q = rotate_tilt(self.tilt, -joints[3] * TO_RAD, m);
-        let (x, y) = (q[0] + d[0], q[1] + d[1]);
-        let c = joints[4] * TO_RAD;
-        let (sc, cc) = (libm::sin(c), libm::cos(c));
-        [
-            cc * x + sc * y + r[0],
-            -sc * x + cc * y + r[1],
-            q[2] + d[2] + r[2],
-            joints[3],
-            joints[4],
-        ]
+        let p = rotate_c(-joints[4] * TO_RAD, [q[0] + d[0], q[1] + d[1], q[2] + d[2]]);
+        [p[0] + r[0], p[1] + r[1], p[2] + r[2], joints[3], joints[4]]
     }
 
     /// Rotary angles (tilt, c; degrees) that put tool axis `axis` (need not be unit) along the
@@ -148,7 +130,10 @@ impl TrtGeometry {
     /// The tool axis (unit, from the tip towards the holder) in the workpiece frame at rotary
     /// joints `tilt_deg`, `c_deg`: the machine's +Z turned back by the table.
     pub fn tool_axis(&self, tilt_deg: f64, c_deg: f64) -> [f64; 3] {
-        rotate_back(self.tilt, tilt_deg * TO_RAD, c_deg * TO_RAD, [0.0, 0.0, 1.0])
+        rotate_c(
+            -c_deg * TO_RAD,
+            rotate_tilt(self.tilt, -tilt_deg * TO_RAD, [0.0, 0.0, 1.0]),
+        )
     }
 }
 
@@ -228,7 +213,7 @@ mod tests {
         for k in machines() {
             let (t, c) = (27.0, -140.0);
             let axis = k.tool_axis(t, c);
-            let m = rotate(k.tilt, t * TO_RAD, c * TO_RAD, axis);
+            let m = rotate_tilt(k.tilt, t * TO_RAD, rotate_c(c * TO_RAD, axis));
             assert!(
                 m[0].abs() < 1e-15 && m[1].abs() < 1e-15 && (m[2] - 1.0).abs() < 1e-15,
                 "{m:?}"
