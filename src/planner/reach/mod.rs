@@ -20,6 +20,7 @@
 //! and Beudaert et al. 2012.
 
 pub mod grid;
+mod inverse;
 pub mod passes;
 pub mod pieces;
 pub mod polygon;
@@ -585,10 +586,12 @@ impl<'o> Planner<'o> {
         // Sample, check, tighten where over, plan again.
         let mut tight = vec![1.0 - o.margin; grid.len()];
         let mut repairs = 0;
+        let inverses = inverse::Inverses::default();
         loop {
             let mut trial = check.clone();
             let sampled = sampler::sample(
                 curves,
+                &inverses,
                 &grid,
                 &motion,
                 &self.limits,

@@ -1,9 +1,10 @@
 //! The plan sampled at the servo period: each period's arc length from the pieces in closed
-//! form, the curve parameter there by Newton's method on the arc length (from the period
-//! before, exact to rounding), and the finite-difference check of every sample against the
+//! form, the curve parameter there from its interval's fit ([`Inverses`]; by Newton's method on
+//! the arc length where the interval has none), and the finite-difference check of every sample against the
 //! limits, which says where a plan ran over so that the planner can tighten it there.
 
 use super::grid::{piece_length, Grid, TIP};
+use super::inverse::{Fit, Inverses};
 use super::passes::Motion;
 use crate::planner::axial::MAX_AXES;
 use crate::planner::vpop::PathPoint;
@@ -102,10 +103,11 @@ pub struct Span {
 
 /// Samples `motion` over `grid` at the servo period from `span.first` on, and checks each with
 /// `check`, and its feed and chord error against `limits`. A ratio counts as over above
-/// `1 + slack`.
+/// `1 + slack`. The intervals' fits are kept in `inverses`.
 #[allow(clippy::too_many_arguments)]
 pub fn sample(
     curves: &PathCurves,
+    inverses: &Inverses,
     grid: &Grid,
     motion: &Motion,
     limits: &Limits,
@@ -128,6 +130,8 @@ pub fn sample(
     let mut last: Option<(usize, f64, f64)> = None;
     // The arc length's slope found by the last inversion: the next one's first guess.
     let mut slope: Option<f64> = None;
+    // The fit of the interval sampled last.
+    let mut fitted: Option<(usize, Option<Fit>)> = None;
     let mut n = 0u64;
     loop {
         let t = span.first + n as f64 * period;
@@ -155,6 +159,15 @@ pub fn sample(
             u_end
         } else if sigma <= 0.0 {
             st.u
+        } else if let Some(fit) = match &fitted {
+            Some((i, fit)) if *i == interval => fit.clone(),
+            _ => {
+                let fit = inverses.fit(&view, element, (st.u, u_end), length, axes);
+                fitted = Some((interval, fit.clone()));
+                fit
+            }
+        } {
+            fit.at(sigma)
         } else {
             let (mut u0, mut s0, mut hint) = (st.u, 0.0, None);
             if let Some((i, s, u)) = last {

@@ -14,6 +14,7 @@
 //! where the quicker runs over); the plan itself is unchanged.
 
 use super::grid::{arc_derivatives, Interval, Local};
+use super::inverse::Inverses;
 use super::pieces::Piece;
 use super::*;
 use nurbs_rtcore::scurve::{stop_from, SCurveState, SCurveTable, PHASES};
@@ -155,6 +156,7 @@ impl Planner<'_> {
         let sets = p.backward().ok();
         let motion = along.motion;
         let mut looked = LookedAt::new(grid);
+        let inverses = Inverses::default();
         let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
         for k in 1..upto.min(grid.len() - 1) {
             let t0 = t;
@@ -174,7 +176,9 @@ impl Planner<'_> {
                     continue;
                 }
                 let candidate = self.s_curve_stop(curves, grid, along.tight, &mut looked, (k - 1, sigma), (v * v, acc));
-                if let Some(points) = self.first_passing(curves, candidate.into_iter(), samples, n, self.period) {
+                if let Some(points) =
+                    self.first_passing(curves, &inverses, candidate.into_iter(), samples, n, self.period)
+                {
                     found(n, points)?;
                     last = at;
                 }
@@ -196,7 +200,7 @@ impl Planner<'_> {
             }
             candidates.sort_by(|x, y| x.1.time().total_cmp(&y.1.time()));
             let next = first + n as f64 * self.period - t;
-            if let Some(points) = self.first_passing(curves, candidates.into_iter(), samples, n, next) {
+            if let Some(points) = self.first_passing(curves, &inverses, candidates.into_iter(), samples, n, next) {
                 found(n, points)?;
                 last = t;
             }
@@ -210,6 +214,7 @@ impl Planner<'_> {
     fn first_passing(
         &self,
         curves: &PathCurves,
+        inverses: &Inverses,
         candidates: impl Iterator<Item = (Grid, Motion)>,
         samples: &[PathPoint],
         n: usize,
@@ -226,6 +231,7 @@ impl Planner<'_> {
             };
             let sampled = sampler::sample(
                 curves,
+                inverses,
                 &sub,
                 &stop,
                 &self.limits,

@@ -696,6 +696,7 @@ impl Planner<'_> {
         let mut trial = check.clone();
         let sampled = sampler::sample(
             curves,
+            &inverse::Inverses::default(),
             grid,
             motion,
             &self.limits,
