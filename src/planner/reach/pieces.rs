@@ -96,23 +96,40 @@ impl Piece {
         (sigma, speed, acceleration)
     }
 
-    /// The time at distance `sigma`, by bisection from `[0, longest]` (doubled while short of
-    /// it): the distance rises with time while the speed does not vanish. For the S-curve
+    /// The time at distance `sigma`, by Newton's method inside `[0, longest]` (doubled while
+    /// short of it), safeguarded by bisection: the distance rises with time while the speed
+    /// does not vanish. For the S-curve
     /// phases ([`Piece::Jerk`]), which have no closed form for it.
     pub fn time_to(&self, sigma: f64, longest: f64) -> f64 {
         let (mut lo, mut hi) = (0.0, longest);
         while self.at(hi).0 < sigma && hi < 1e6 {
             hi *= 2.0;
         }
-        for _ in 0..80 {
-            let mid = 0.5 * (lo + hi);
-            if self.at(mid).0 < sigma {
-                lo = mid;
-            } else {
-                hi = mid;
+        // Newton's method on σ(τ), kept inside the bracket by bisection.
+        let mut t = 0.5 * (lo + hi);
+        for _ in 0..100 {
+            let (s, v) = self.at(t);
+            let err = s - sigma;
+            if err == 0.0 {
+                return t;
             }
+            if err > 0.0 {
+                hi = t;
+            } else {
+                lo = t;
+            }
+            let newton = t - err / v;
+            let next = if v > 0.0 && newton > lo && newton < hi {
+                newton
+            } else {
+                0.5 * (lo + hi)
+            };
+            if (next - t).abs() <= 1e-16 * hi || hi - lo <= 1e-16 * hi {
+                return next;
+            }
+            t = next;
         }
-        0.5 * (lo + hi)
+        t
     }
 
     /// Time to cover `length` along the piece; `None` where the motion stops before.
