@@ -38,7 +38,7 @@ fi
 
 action=${MACHINE_ACTION:-}
 # The plans the machine must run (demo.ngc runs toolpaths 1 and 2), offline, with the INI.
-toolpaths=("$work/examples/trident.json" "$work/examples/open_pocket.json")
+toolpaths=("$work/examples/trident.json" "$work/examples/open_pocket_tip.json")
 plans=()
 for k in 0 1; do
     nurbs-plan plan "${toolpaths[$k]}" --ini "$config/nurbs-sim.ini" --stream --out "$work/offline-$k.csv" >/dev/null

@@ -224,11 +224,11 @@ fn run(args: &Args) -> Result<&'static str, String> {
             let shared = open_path(args)?;
             let first = shared.open()?;
             let tip = first.tip_dim();
-            let five_axis = first.get(0).is_some_and(|e| e.curve.dim() > tip);
-            if five_axis && args.planner == PlannerKind::Reach {
-                // (Its blocks would refuse it at the first point; before touching HAL, here.)
+            // A 5-axis path is one from its first element on (the readers refuse rotary moves
+            // on a path that began as 3-axis).
+            if let Some(element) = first.get(0) {
                 feed::check_tip_path(&Toolpath {
-                    elements: vec![first.element(0).clone()],
+                    elements: vec![element.clone()],
                 })?;
             }
             (PathSource::Stream(shared), tip)

@@ -44,8 +44,8 @@ pub fn fractions(max_fraction: f64) -> Vec<f64> {
     (0..30).map(|k| max_fraction * 0.85f64.powi(k)).collect()
 }
 
-/// Refuses toolpaths the module cannot run as VPOp plans: it drives the tool tip only, so a
-/// path with a tool-axis (top) curve would need the machine's joint kinematics in the module.
+/// Refuses 5-axis toolpaths (a tool-axis curve beside the tip's): the module drives the tool
+/// tip's joints only, and running the tip alone would leave the rotary axes standing.
 pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
     if toolpath.elements.iter().any(|e| e.curve.dim() > e.curve.tip_dim()) {
         return Err(TIP_ONLY.into());
@@ -53,10 +53,10 @@ pub fn check_tip_path(toolpath: &Toolpath) -> Result<(), String> {
     Ok(())
 }
 
-/// Why a 5-axis path is refused as path blocks.
+/// Why a 5-axis path is refused on the machine.
 const TIP_ONLY: &str = "this is a 5-axis toolpath (tool tip and tool axis): the realtime module drives the \
-     tool tip only, so plans of one position per period of 5-axis paths (joint positions of the machine) \
-     cannot run through it; plan 2-/3-axis tool-tip paths";
+     tool tip's joints only, so it would run the tip with the rotary axes standing still; 5-axis paths are \
+     planned offline only (`nurbs-plan plan --planner vpop --machine ...`), here plan 2-/3-axis tool-tip paths";
 
 /// Arc length of path points in the module's measure: per element from its curve start
 /// (Gauss-Legendre, the measure of the stop points), except on the element of the anchor (a
