@@ -175,27 +175,15 @@ cat >"$work/run.py" <<PY
 """Machine on, home, AUTO, run the program to its end with the sampler on, report, switch off."""
 import json, sys, time
 import hal, linuxcnc
-c, s, e = linuxcnc.command(), linuxcnc.stat(), linuxcnc.error_channel()
+sys.path.insert(0, "$here/../tests/hal/machine")
+from session import Session
 ui = hal.component("nurbs-tp5-ui")  # HAL's Python API sets pins only from a component of its own
 ui.ready()
 result = {"errors": [], "messages": [], "last_line": 0}
-def drain():
-    while (m := e.poll()):
-        (result["errors"] if m[0] in (linuxcnc.NML_ERROR, linuxcnc.OPERATOR_ERROR) else result["messages"]).append(m[1])
-def wait(cond, timeout, what):
-    end = time.time() + timeout
-    while time.time() < end:
-        s.poll()
-        drain()
-        result["last_line"] = max(result["last_line"], s.current_line, s.motion_line)
-        if cond():
-            return True
-        time.sleep(0.01)
-    result["errors"].append(f"run.py: timed out waiting for {what} (task state {s.task_state}, "
-                            f"exec {s.exec_state}, interp {s.interp_state}, mode {s.task_mode})")
-    return False
+session = Session(result, "run.py")
+c, s, wait = session.c, session.s, session.wait
 def finish():
-    drain()
+    session.drain()
     hal.set_p("sampler.0.enable", "0")
     wait(lambda: hal.get_value("sampler.0.curr-depth") == 0, 60, "halsampler to empty the FIFO")
     time.sleep(0.5)
@@ -203,17 +191,9 @@ def finish():
     s.poll()
     result["end"] = [s.position[i] for i in (0, 1, 2, 3 if s.axis_mask & 8 else 4, 5)]
     json.dump(result, open("$work/result.json", "w"), indent=1)
-    c.state(linuxcnc.STATE_OFF)
-    c.wait_complete()
+    session.switch_off()
     sys.exit(0)
-c.state(linuxcnc.STATE_ESTOP_RESET)
-c.state(linuxcnc.STATE_ON)
-if not wait(lambda: s.task_state == linuxcnc.STATE_ON, 10, "machine on"):
-    finish()
-c.mode(linuxcnc.MODE_MANUAL)
-c.wait_complete()
-c.home(-1)
-if not wait(lambda: s.joints == 5 and all(s.homed[:5]), 30, "homing"):
+if not session.on_and_homed() or s.joints != 5:
     finish()
 c.mode(linuxcnc.MODE_AUTO)
 c.wait_complete()

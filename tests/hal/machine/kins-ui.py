@@ -12,38 +12,22 @@ import time
 import hal
 import linuxcnc
 
-c, s, e = linuxcnc.command(), linuxcnc.stat(), linuxcnc.error_channel()
+from session import Session
+
 ui = hal.component("nurbs-kins-ui")
 ui.ready()
 kins = os.environ["NURBS_KINS_MODULE"]
 tilt = os.environ["NURBS_KINS_TILT"]  # "a" or "b"
 result = {"errors": [], "poses": []}
-
-
-def drain():
-    while (m := e.poll()):
-        if m[0] in (linuxcnc.NML_ERROR, linuxcnc.OPERATOR_ERROR):
-            result["errors"].append(m[1])
-
-
-def wait(cond, timeout, what):
-    end = time.time() + timeout
-    while time.time() < end:
-        s.poll()
-        drain()
-        if cond():
-            return True
-        time.sleep(0.01)
-    result["errors"].append(f"kins-ui: timed out waiting for {what}")
-    return False
+session = Session(result, "kins-ui")
+c, s, wait = session.c, session.s, session.wait
 
 
 def finish():
-    drain()
+    session.drain()
     with open(os.environ["NURBS_TEST_RESULT"], "w") as f:
         json.dump(result, f, indent=1)
-    c.state(linuxcnc.STATE_OFF)
-    c.wait_complete()
+    session.switch_off()
     sys.exit(0)
 
 
@@ -52,14 +36,10 @@ def world(position):
     return [position[0], position[1], position[2], position[3 if tilt == "a" else 4], position[5]]
 
 
-c.state(linuxcnc.STATE_ESTOP_RESET)
-c.state(linuxcnc.STATE_ON)
-if not wait(lambda: s.task_state == linuxcnc.STATE_ON, 10, "machine on"):
+if not session.on_and_homed():
     finish()
-c.mode(linuxcnc.MODE_MANUAL)
-c.wait_complete()
-c.home(-1)
-if not wait(lambda: s.joints == 5 and all(s.homed[:5]), 30, "homing"):
+if s.joints != 5:
+    result["errors"].append(f"kins-ui: {s.joints} joints, not the 5 of {kins}")
     finish()
 result["geometry"] = {pin: hal.get_value(f"{kins}.{pin}") for pin in
                       ("x-rot-point", "y-rot-point", "z-rot-point", "x-offset", "y-offset", "z-offset",

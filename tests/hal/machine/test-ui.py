@@ -19,30 +19,14 @@ import time
 import hal
 import linuxcnc
 
-c, s, e = linuxcnc.command(), linuxcnc.stat(), linuxcnc.error_channel()
+from session import Session
+
 # HAL's Python API reads and sets pins only from a component of its own.
 ui = hal.component("nurbs-test-ui")
 ui.ready()
 result = {"errors": [], "messages": []}
-
-
-def drain():
-    while (m := e.poll()):
-        kind, text = m
-        (result["errors"] if kind in (linuxcnc.NML_ERROR, linuxcnc.OPERATOR_ERROR) else result["messages"]).append(text)
-
-
-def wait(cond, timeout, what):
-    end = time.time() + timeout
-    while time.time() < end:
-        s.poll()
-        drain()
-        if cond():
-            return True
-        time.sleep(0.01)
-    result["errors"].append(f"test-ui: timed out waiting for {what} (task state {s.task_state}, "
-                            f"exec {s.exec_state}, interp {s.interp_state}, mode {s.task_mode})")
-    return False
+session = Session(result, "test-ui")
+c, s, drain, wait = session.c, session.s, session.drain, session.wait
 
 
 def finish():
@@ -59,19 +43,11 @@ def finish():
     result["task_state"] = s.task_state
     with open(os.environ["NURBS_TEST_RESULT"], "w") as f:
         json.dump(result, f, indent=1)
-    c.state(linuxcnc.STATE_OFF)
-    c.wait_complete()
+    session.switch_off()
     sys.exit(0)
 
 
-c.state(linuxcnc.STATE_ESTOP_RESET)
-c.state(linuxcnc.STATE_ON)
-if not wait(lambda: s.task_state == linuxcnc.STATE_ON, 10, "machine on"):
-    finish()
-c.mode(linuxcnc.MODE_MANUAL)
-c.wait_complete()
-c.home(-1)
-if not wait(lambda: s.joints > 0 and all(s.homed[: s.joints]), 30, "homing"):
+if not session.on_and_homed():
     finish()
 c.mode(linuxcnc.MODE_AUTO)
 c.wait_complete()
