@@ -20,7 +20,8 @@
 //! its own reading the file as it plans: one tool-tip position per servo period (2-/3-axis
 //! paths), sent as path blocks, which the module outputs exactly, in groups that end where the
 //! module's stop from the block end was checked within the limits. `--planner vpop` plans with
-//! VPOp the same way but whole, before the motion.
+//! VPOp the same way but whole, before the motion. Every planner refuses a 5-axis toolpath
+//! before touching HAL: the module drives the tool tip's joints only.
 //! The limit flags and `--ini` are `nurbs-plan`'s (`nurbs_cli::LimitArgs`): with
 //! `--ini`, `[EMCMOT]SERVO_PERIOD` (ns) gives the period and `[AXIS_X|Y|Z]MAX_VELOCITY`,
 //! `MAX_ACCELERATION`, `MAX_JERK`, `[NURBS]FEED`, `CHORD_TOLERANCE` give the limits; flags given
