@@ -1,7 +1,8 @@
 //! The plan sampled at the servo period: each period's arc length from the pieces in closed
 //! form, the curve parameter there from its interval's fit ([`Inverses`]; by Newton's method on
-//! the arc length where the interval has none), and the finite-difference check of every sample against the
-//! limits, which says where a plan ran over so that the planner can tighten it there.
+//! the arc length where the interval has none), and the finite-difference check of every
+//! sample against the limits, which says where a plan ran over so that the planner can tighten
+//! it there.
 
 use super::grid::{piece_length, Grid, TIP};
 use super::inverse::{Fit, Inverses};
