@@ -793,11 +793,11 @@ const KAPPA_SAMPLES: usize = 4;
 
 /// Upper estimate of the curvature over cells of `w`: per element, the maximum of each of its
 /// cells, built when a query reaches the element, and the last [`KAPPA_TABLES_KEPT`] kept (a
-/// rebuilt table has the same values). The queries
-/// follow the motion and its back-tracking: building all 2,000 elements of a 1,000-line G1
-/// program up front took a second before the first stop check of `nurbs-planner`, and with 64
-/// tables kept the back-tracking over a 5-axis program's short moves built each one some 150
-/// times (a 1,000-move impeller stretch: 470 s of planning).
+/// rebuilt table has the same values). The queries follow the motion and its back-tracking:
+/// building all 2,000 elements of a 1,000-line G1 program up front took a second before the
+/// first stop check of `nurbs-planner`, and with 64 tables kept the back-tracking over a 5-axis
+/// program's short moves built each one some 150 times (a 1,000-move impeller stretch: 470 s of
+/// planning).
 struct CurvatureTable {
     tip: usize,
     /// Built tables with their element (counted in a longer path whose element `first` is this
@@ -822,6 +822,11 @@ const KAPPA_TABLES_KEPT: usize = 1024;
 struct ElementCurvature {
     cells: Vec<f64>,
     blocks: Vec<f64>,
+}
+
+/// The largest of some (at least one) curvatures.
+fn largest(values: &[f64]) -> f64 {
+    values.iter().fold(values[0], |m, &c| m.max(c))
 }
 
 /// Cells per block of an [`ElementCurvature`]: a query looks at fewer than two blocks' cells
@@ -857,14 +862,12 @@ impl ElementCurvature {
                 m.max(last)
             })
             .collect();
-        let largest = |cells: &[f64]| cells.iter().fold(cells[0], |m, &c| m.max(c));
         let blocks = cells.chunks(KAPPA_BLOCK).map(largest).collect();
         ElementCurvature { cells, blocks }
     }
 
     /// Largest curvature over cells `a ..= b`: the cells at both ends, the blocks between.
     fn max(&self, a: usize, b: usize) -> f64 {
-        let largest = |cells: &[f64]| cells.iter().fold(cells[0], |m, &c| m.max(c));
         let (first, last) = (a / KAPPA_BLOCK + 1, b / KAPPA_BLOCK);
         if first >= last {
             return largest(&self.cells[a..=b]);
