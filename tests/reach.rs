@@ -10,9 +10,10 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::reach::{
-    plan_tip, run, window::WindowOptions, Planned, ReachError, ReachOptions, ReachPlan,
+    plan_tip, run, window::WindowOptions, Begin, Planned, ReachError, ReachOptions, ReachPlan,
 };
 use nurbs_motion::planner::verify::{verify, Report, Row};
+use nurbs_motion::planner::vpop::PathPoint;
 use nurbs_motion::planner::{Limits, PathCurves};
 
 fn rows(plan: &ReachPlan, tip: usize) -> Vec<Row> {
@@ -167,10 +168,10 @@ fn offered_stops_come_to_rest_within_the_limits() {
                 };
                 let mut curves = PathCurves::new(&tp);
                 let (mut points, mut stops) = (Vec::new(), Vec::new());
-                let (used, _, _) = run(&mut curves, &limits, &options, None, &mut |p| {
+                let (used, _, _) = run(&mut curves, &limits, &options, &Begin::Rest(None), &mut |p| {
                     match p {
                         Planned::Point(p) => points.push(*p),
-                        Planned::Stop(s) => stops.push((points.len(), s.to_vec())),
+                        Planned::Stop(s, _) => stops.push((points.len(), s.to_vec())),
                     }
                     Ok(())
                 })
@@ -273,7 +274,7 @@ fn windows_read_a_long_stretch_as_they_go() {
     });
     let mut curves = PathCurves::streamed(Box::new(source)).unwrap();
     let (mut points, mut read_at_first) = (Vec::new(), None);
-    let (used, stats, _) = run(&mut curves, &limits, &windowed(), None, &mut |p| {
+    let (used, stats, _) = run(&mut curves, &limits, &windowed(), &Begin::Rest(None), &mut |p| {
         if points.len() == 1 {
             read_at_first = Some(read.load(std::sync::atomic::Ordering::Relaxed));
         }
@@ -412,4 +413,157 @@ fn random_curves_with(options: &ReachOptions, cases: u64, least: usize) {
     if only.is_none() && cases == default {
         assert!(planned >= least, "{refused} of {cases} refused");
     }
+}
+
+/// A plan at another feed override continues the motion from the branches the plan offers its
+/// stops at (what the machine joins on an override change): on the butterfly, the trident and
+/// the fan's tool tip at Table III's F250 (where the feed binds) and lab set 1, from eight
+/// branches spread over each plan, at 50 %, 10 % and 150 %, each continued from that very
+/// branch. The old plan's points up to the branch and the new plan after it pass the
+/// verifier's finite differences as one motion (and the verifier whole, where the override is
+/// no higher than the programmed feed); the new plan reaches the path's end; no sample runs
+/// faster than the higher of the two feeds, and none faster than the new one past where the
+/// plan says it holds (`ReachStats::slowed_within`). The time to the first points (what an
+/// override waits for on the machine) is printed.
+#[test]
+fn a_plan_at_another_feed_override_continues_the_motion() {
+    let mut waits = Vec::new();
+    for curve in ["butterfly.json", "trident.json", "fan.json"] {
+        let tp = example(curve);
+        let tip = tp.tip_dim();
+        for set in ["table3-f250", "lab1"] {
+            let limits = preset(set, &tp);
+            let options = ReachOptions {
+                stops_every: Some(0.002),
+                ..windowed()
+            };
+            let mut curves = PathCurves::new(&tp);
+            let (mut points, mut branches) = (Vec::new(), Vec::new());
+            let (used, _, _) = run(&mut curves, &limits, &options, &Begin::Rest(None), &mut |p| {
+                match p {
+                    Planned::Point(p) => points.push(*p),
+                    Planned::Stop(_, b) => branches.push((points.len(), b.clone())),
+                }
+                Ok(())
+            })
+            .unwrap_or_else(|e| panic!("{curve} {set}: {e}"));
+            let last = tp.elements.len() - 1;
+            let end_u = tp.elements[last].curve.view().u_max();
+            let speed = |p: &PathPoint, q: &PathPoint| {
+                (0..tip).map(|i| (q.tip[i] - p.tip[i]).powi(2)).sum::<f64>().sqrt() / used.period
+            };
+            let picks = 8;
+            for pick in 0..picks {
+                let (n, branch) = &branches[(pick * branches.len()) / picks];
+                let n = *n;
+                assert_eq!(branch.before[2].u, points[n - 1].u);
+                for k in [0.5, 0.1, 1.5] {
+                    let at = format!("{curve} {set} branch after {n} of {}, override {k}", points.len());
+                    let options = ReachOptions {
+                        feed_override: k,
+                        ..options
+                    };
+                    let begin = Begin::Moving {
+                        branch: Box::new(branch.clone()),
+                        feed_override: 1.0,
+                    };
+                    let mut after = Vec::new();
+                    let mut curves = PathCurves::new(&tp);
+                    let (_, stats, _) = run(&mut curves, &limits, &options, &begin, &mut |p| {
+                        if let Planned::Point(p) = p {
+                            after.push(*p);
+                        }
+                        Ok(())
+                    })
+                    .unwrap_or_else(|e| panic!("{at}: {e}"));
+                    waits.push(stats.first_points_time);
+                    assert_eq!(
+                        after.last().map(|p| (p.element, p.u)),
+                        Some((last, end_u)),
+                        "{at}: the path's end"
+                    );
+                    // One motion by finite differences.
+                    let mut fd = FiniteDifferences::new(tip, used.period);
+                    for p in points[..n].iter().chain(&after) {
+                        fd.push(&p.tip[..tip], &used);
+                    }
+                    fd.finish(&used);
+                    let ratio = fd.worst_ratio(&used);
+                    assert!(ratio <= 1.0 + 1e-6, "{at}: ratio {ratio}");
+                    if k <= 1.0 {
+                        let joined = ReachPlan {
+                            motion_time: (n + after.len() - 1) as f64 * used.period,
+                            points: points[..n].iter().chain(&after).copied().collect(),
+                            limits: used.clone(),
+                            plan_time: 0.0,
+                            stats,
+                        };
+                        let report = check_with(&tp, &joined, &used);
+                        assert!(report.violations.is_empty(), "{at}: {:?}", report.violations);
+                    }
+                    let fastest = after.windows(2).map(|w| speed(&w[0], &w[1])).fold(0.0, f64::max);
+                    assert!(fastest <= used.feed * k.max(1.0) * (1.0 + 1e-6), "{at}: {fastest} mm/s");
+                    // Arc length from the branch (it lies `next` before the first sample after
+                    // it); a step faster than the new feed starts before the plan says it holds.
+                    let (new_feed, slowed) = (used.feed * k, stats.slowed_within);
+                    let mut arc = -branch.speed * (used.period - branch.next);
+                    let mut braked = 0;
+                    let mut prev = &points[n - 1];
+                    for (j, p) in after.iter().enumerate() {
+                        let v = speed(prev, p);
+                        if v > new_feed * (1.0 + 1e-6) {
+                            assert!(arc <= slowed, "{at}: {v} mm/s from {arc} mm on, past {slowed} mm");
+                            braked = j + 1;
+                        }
+                        arc += v * used.period;
+                        prev = p;
+                    }
+                    if pick == picks / 2 {
+                        eprintln!(
+                            "{at}: first points after {:.1} ms, at the new feed after {:.1} ms",
+                            stats.first_points_time * 1e3,
+                            braked as f64 * used.period * 1e3
+                        );
+                    }
+                }
+            }
+        }
+    }
+    waits.sort_by(f64::total_cmp);
+    eprintln!(
+        "{} re-plans: first points after median {:.1} ms, worst {:.1} ms",
+        waits.len(),
+        waits[waits.len() / 2] * 1e3,
+        waits[waits.len() - 1] * 1e3
+    );
+}
+
+/// A path held at a low feed for long in windows (the butterfly at 25 mm/s, Table III's
+/// acceleration and jerk): every window's plan stays at the feed cap on a plateau, and the
+/// frozen rows reach past it (a window that froze them only to the plateau's start was too
+/// short to stop in, and the motion ran its last stop and refused the plan).
+#[test]
+fn windows_on_a_long_plateau_at_a_low_feed() {
+    let tp = example("butterfly.json");
+    let mut limits = preset("table3-f250", &tp);
+    limits.feed = 25.0;
+    let mut curves = PathCurves::new(&tp);
+    let mut points = Vec::new();
+    let (used, stats, _) = run(&mut curves, &limits, &windowed(), &Begin::Rest(None), &mut |p| {
+        if let Planned::Point(p) = p {
+            points.push(*p);
+        }
+        Ok(())
+    })
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert!(stats.windows > 10, "{} windows", stats.windows);
+    let plan = ReachPlan {
+        motion_time: (points.len() - 1) as f64 * used.period,
+        points,
+        limits: used.clone(),
+        plan_time: 0.0,
+        stats,
+    };
+    let report = check_with(&tp, &plan, &used);
+    assert!(report.violations.is_empty(), "{:?}", report.violations);
 }

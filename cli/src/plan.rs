@@ -563,7 +563,7 @@ fn run_vpop(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// is planned; every setpoint is written once its stretch (rest to rest) passed the
 /// finite-difference check.
 fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use nurbs_motion::planner::reach::{run, window::WindowOptions, Planned, ReachOptions};
+    use nurbs_motion::planner::reach::{run, window::WindowOptions, Begin, Planned, ReachOptions};
     let mut stream = open(args.toolpath, args.round_corners, args.limits)?;
     let program = stream.program()?;
     let mut curves = PathCurves::streamed(stream.take_elements())?;
@@ -575,9 +575,9 @@ fn run_reach(args: PlanArgs) -> Result<(), Box<dyn std::error::Error>> {
         window: args.stream.then(WindowOptions::default),
         ..ReachOptions::default()
     };
-    let planned = run(&mut curves, &limits, &options, None, &mut |p| match p {
+    let planned = run(&mut curves, &limits, &options, &Begin::Rest(None), &mut |p| match p {
         Planned::Point(p) => writer.emit(p),
-        Planned::Stop(_) => Ok(()),
+        Planned::Stop(..) => Ok(()),
     });
     writer.write_error()?;
     let (limits, stats, plan_time) = planned?;

@@ -776,10 +776,10 @@ fn reach_blocks(
         ..ReachOptions::default()
     };
     let (mut count, mut waiting) = (0usize, 0usize);
-    let (_, stats, plan_time) = reach::run(&mut curves, limits, &options, start, &mut |p| {
+    let (_, stats, plan_time) = reach::run(&mut curves, limits, &options, &reach::Begin::Rest(start), &mut |p| {
         let p = match p {
             Planned::Point(p) => p,
-            Planned::Stop(stop) => {
+            Planned::Stop(stop, _) => {
                 builder.offer_stop(stop);
                 return Ok(());
             }

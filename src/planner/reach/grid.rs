@@ -70,13 +70,29 @@ pub struct Caps {
     pub chord_tolerance: f64,
     pub period: f64,
     pub axes: usize,
+    /// The feed override: the feeds (the planner's and each element's) times this factor.
+    pub feed_override: f64,
+    /// A lower override that takes over from an arc length on (a plan that continues a faster
+    /// motion: the old feeds hold until it can have braked to the new ones).
+    pub slow_down: Option<SlowDown>,
+}
+
+/// A feed override that holds from arc length `from` of the stretch on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SlowDown {
+    pub from: f64,
+    pub feed_override: f64,
 }
 
 impl Caps {
-    /// The cap on ṡ² where the path has derivatives `q1`, `q2`, with the element's own
-    /// programmed feed if it has one.
-    pub fn at(&self, q1: &Axes, q2: &Axes, programmed: Option<f64>) -> f64 {
-        let mut v = programmed.map_or(self.feed, |f| f.min(self.feed));
+    /// The cap on ṡ² at arc length `s` of the stretch, where the path has derivatives `q1`,
+    /// `q2`, with the element's own programmed feed if it has one.
+    pub fn at(&self, s: f64, q1: &Axes, q2: &Axes, programmed: Option<f64>) -> f64 {
+        let feed_override = match self.slow_down {
+            Some(slow) if s >= slow.from => slow.feed_override,
+            _ => self.feed_override,
+        };
+        let mut v = programmed.map_or(self.feed, |f| f.min(self.feed)) * feed_override;
         for i in 0..self.axes {
             if q1[i].abs() > 1e-12 {
                 v = v.min(self.velocity[i] / q1[i].abs());
@@ -167,6 +183,8 @@ pub struct Stretch {
     pub to: (usize, f64),
     /// The motion is at rest at the start / must come to rest at the end.
     pub rest_at_start: bool,
+    /// The speed at the start where it is not at rest (a plan that continues a motion).
+    pub start_speed: f64,
     pub rest_at_end: bool,
     /// Approximate length (mm): where the grid grows denser towards a rest at the end.
     pub length: f64,
@@ -247,17 +265,17 @@ impl Grid {
                 }
             }
             breaks.push(u_to);
-            let local = |u: f64, left: bool| {
+            let local = |u: f64, left: bool, s: f64| {
                 let (_, q1, q2, q3) = arc_derivatives(&view, u, n, left);
                 Local {
                     q1,
                     q2,
                     q3,
-                    cap: caps.at(&q1, &q2, feed),
+                    cap: caps.at(s, &q1, &q2, feed),
                 }
             };
             // The station at the element start (joins keep the previous element's left side).
-            let right = local(u_from, false);
+            let right = local(u_from, false, s);
             match grid.stations.last_mut() {
                 Some(last) => last.right = right,
                 None => grid.stations.push(Station {
@@ -314,7 +332,7 @@ impl Grid {
                     let um = u + f * (next - u);
                     theta += piece_length(&view, prev, um, n);
                     prev = um;
-                    *p = (theta, local(um, false));
+                    *p = (theta, local(um, false, s + theta));
                 }
                 let length = theta + piece_length(&view, prev, next, n);
                 if length <= 1e-12 * (1.0 + s) {
@@ -323,7 +341,7 @@ impl Grid {
                     if let Some(last) = grid.stations.last_mut() {
                         last.u = next;
                         last.element = e;
-                        last.right = local(next, false);
+                        last.right = local(next, false, s);
                     }
                     u = next;
                     continue;
@@ -334,8 +352,8 @@ impl Grid {
                     element: e,
                     u: next,
                     s,
-                    left: local(next, true),
-                    right: local(next, false),
+                    left: local(next, true, s),
+                    right: local(next, false, s),
                 });
                 u = next;
                 if s >= until && u < u_to {

@@ -35,7 +35,8 @@ use std::time::Instant;
 use crate::geometry::Toolpath;
 use crate::planner::vpop::PathPoint;
 use crate::planner::{Limits, LimitsError, PathCurves};
-use grid::{Caps, Grid, GridOptions, Local, Stretch, COLLOCATION, TIP};
+use grid::{Caps, Grid, GridOptions, Local, SlowDown, Stretch, COLLOCATION, TIP};
+use nurbs_rtcore::scurve::stop_from;
 use passes::{Motion, PassError, Passes, Start};
 use rests::Resting;
 use rows::AxisLimits;
@@ -77,6 +78,9 @@ pub struct ReachOptions {
     /// the controllable sets allow from the state at a station, sampled from the next period
     /// ([`Planned::Stop`]); none where `None`.
     pub stops_every: Option<f64>,
+    /// The feed override: the programmed feeds (the planner's and each element's) times this
+    /// factor; the axis limits stay the limits (1: as programmed).
+    pub feed_override: f64,
 }
 
 impl Default for ReachOptions {
@@ -95,17 +99,104 @@ impl Default for ReachOptions {
             repairs: 8,
             window: None,
             stops_every: None,
+            feed_override: 1.0,
         }
     }
 }
 
 /// What the planner hands out, in path order: the plan's next point, or a stop branching off
-/// after the last point handed out (its positions from the next period on, to rest).
+/// after the last point handed out (its positions from the next period on, to rest), with the
+/// place and state it branches off at.
 #[derive(Clone, Copy, Debug)]
 pub enum Planned<'p> {
     Point(&'p PathPoint),
-    Stop(&'p [PathPoint]),
+    Stop(&'p [PathPoint], &'p Branch),
 }
+
+/// Where a stop branches off the plan: a place and the motion's state there, from which a plan
+/// at another feed override may continue the motion instead ([`Begin::Moving`]).
+#[derive(Clone, Debug)]
+pub struct Branch {
+    /// Element and curve parameter.
+    pub element: usize,
+    pub u: f64,
+    /// Path speed ṡ (mm/s) and tangential acceleration s̈ (mm/s²).
+    pub speed: f64,
+    pub acceleration: f64,
+    /// Time from the branch to the first sample after it (0 < next ≤ period).
+    pub next: f64,
+    /// The plan's last three samples at or before the branch, oldest first: where the finite
+    /// differences of what follows begin.
+    pub before: [PathPoint; 3],
+    /// The rows the motion was planned on there (branches at the stations of a plan in
+    /// windows).
+    pub fork: Option<Forked>,
+}
+
+/// What a plan continuing from a branch takes over ([`Begin::Moving`]): the rows the motion
+/// there was planned on, from the window's start to its frozen end, and the motion to rest it
+/// was committed with. That motion passes through every branch's state within those rows, so
+/// a plan on the same rows holds the state in its first set (a plan on rows of its own, its
+/// stations elsewhere, can miss a state the old plan reached on the edge of its sets).
+#[derive(Debug)]
+pub struct Fork {
+    stretch: Stretch,
+    grid: Grid,
+    lin: Linearisation,
+    tight: Vec<f64>,
+    motion: Motion,
+}
+
+/// A branch's place in a [`Fork`]: its station there, and the quickest stop its sets allow
+/// from it (states per station to rest): the continuation under the fork's rows that holds the
+/// branch's state in the new plan's first set while those rows stay as they were.
+#[derive(Clone)]
+pub struct Forked {
+    fork: std::sync::Arc<Fork>,
+    station: usize,
+    stop: Vec<(f64, f64)>,
+}
+
+impl Forked {
+    /// Arc length of the station where the stop rests (in the fork's stretch).
+    fn stop_end(&self) -> f64 {
+        self.fork.grid.stations[self.station + self.stop.len() - 1].s
+    }
+}
+
+impl std::fmt::Debug for Forked {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "station {} of {}, its stop {} stations",
+            self.station,
+            self.fork.grid.stations.len(),
+            self.stop.len()
+        )
+    }
+}
+
+/// Where a plan begins.
+#[derive(Clone, Debug)]
+pub enum Begin {
+    /// At rest at the path start, or at `(element, curve parameter)`.
+    Rest(Option<(usize, f64)>),
+    /// Continuing a motion at one of its branches (a plan at another feed override), planned
+    /// in windows ([`ReachOptions::window`], the default windows where `None`).
+    Moving {
+        branch: Box<Branch>,
+        /// The feed override of the plan continued. Where the new one
+        /// ([`ReachOptions::feed_override`]) is lower, the old feeds hold until a ramp from the
+        /// branch's speed down to the new feed at a share of the smallest axis acceleration
+        /// and jerk could have reached it ([`BRAKE_SHARES`], tried in turn).
+        feed_override: f64,
+    },
+}
+
+/// Shares of the smallest axis acceleration and jerk with which a plan continuing a motion
+/// faster than its new feed brakes to it at the latest ([`Begin::Moving`]), gentlest last:
+/// where the path bends the axes need part of their limits for the bend.
+pub const BRAKE_SHARES: [f64; 3] = [0.7, 0.35, 0.15];
 
 /// A plan's handing out: [`Planned`] to `emit`, which may refuse (the planning then ends).
 pub type Emit<'e> = dyn FnMut(Planned<'_>) -> Result<(), String> + 'e;
@@ -134,6 +225,9 @@ pub struct ReachStats {
     /// Windows planned, and windows that ran the last one's stop and started again from rest.
     pub windows: usize,
     pub restarts: usize,
+    /// A plan continuing a faster motion ([`Begin::Moving`] at a lower feed override): the
+    /// arc length from its start from which its feed override holds (0 elsewhere).
+    pub slowed_within: f64,
 }
 
 /// Why no plan.
@@ -172,7 +266,7 @@ pub fn plan_tip(
 ) -> Result<ReachPlan, ReachError> {
     let mut curves = PathCurves::new(toolpath);
     let mut points = Vec::new();
-    let (limits, stats, plan_time) = run(&mut curves, limits, options, start, &mut |p| {
+    let (limits, stats, plan_time) = run(&mut curves, limits, options, &Begin::Rest(start), &mut |p| {
         if let Planned::Point(p) = p {
             points.push(*p);
         }
@@ -188,18 +282,67 @@ pub fn plan_tip(
     })
 }
 
-/// Plans `curves` stretch by stretch (rest to rest between tangent breaks), from its start or
-/// from rest at `start` (element, curve parameter), handing every point (and the stops of
-/// [`ReachOptions::stops_every`]) to `emit` once its stretch passed the check. The limits as
-/// used, the figures and the planning time.
+/// Plans `curves` stretch by stretch (rest to rest between tangent breaks), from `begin`,
+/// handing every point (and the stops of [`ReachOptions::stops_every`]) to `emit` once its
+/// stretch passed the check. The limits as used, the figures and the planning time.
 pub fn run(
     curves: &mut PathCurves,
     limits: &Limits,
     options: &ReachOptions,
+    begin: &Begin,
+    emit: &mut Emit<'_>,
+) -> Result<(Limits, ReachStats, f64), ReachError> {
+    let (branch, before) = match begin {
+        Begin::Rest(start) => return run_from(curves, limits, options, *start, None, emit),
+        Begin::Moving { branch, feed_override } => (branch, *feed_override),
+    };
+    let after = options.feed_override;
+    if ![before, after].iter().all(|k| k.is_finite() && *k > 0.0) {
+        return Err(ReachError::Plan(format!(
+            "feed override {after} is not a positive factor"
+        )));
+    }
+    // Each brake share in turn, while nothing has been handed out (a share the path leaves no
+    // room for fails in the first window).
+    let shares: &[f64] = if after < before { &BRAKE_SHARES } else { &[1.0] };
+    let mut failed = None;
+    for &share in shares {
+        let mut emitted = false;
+        let mut counted = |p: Planned<'_>| {
+            emitted = true;
+            emit(p)
+        };
+        let moving = Moving {
+            branch: (**branch).clone(),
+            feed_override: before,
+            brake_share: share,
+        };
+        match run_from(curves, limits, options, None, Some(&moving), &mut counted) {
+            Err(e) if !emitted => failed = Some(e),
+            done => return done,
+        }
+    }
+    Err(failed.unwrap_or_else(|| ReachError::Plan("no brake share".into())))
+}
+
+/// A motion a plan continues ([`Begin::Moving`]) with one brake share.
+struct Moving {
+    branch: Branch,
+    feed_override: f64,
+    brake_share: f64,
+}
+
+/// [`run`] from rest at the path start or at `start`, or continuing `moving`.
+fn run_from(
+    curves: &mut PathCurves,
+    limits: &Limits,
+    options: &ReachOptions,
     start: Option<(usize, f64)>,
+    moving: Option<&Moving>,
     emit: &mut Emit<'_>,
 ) -> Result<(Limits, ReachStats, f64), ReachError> {
     let started = Instant::now();
+    let start = moving.map_or(start, |m| Some((m.branch.element, m.branch.u)));
     let first_element = start.map_or(0, |s| s.0);
     if !curves.load(first_element) {
         return Err(ReachError::Path(match start {
@@ -209,14 +352,57 @@ pub fn run(
     }
     let axes = curves.tip_dim();
     let limits = limits.for_axes(axes).map_err(ReachError::Limits)?;
-    let planner = Planner::new(&limits, axes, options);
+    let mut planner = Planner::new(&limits, axes, options);
     let mut stats = ReachStats::default();
     let mut check = Check::new(&limits, axes);
-    // The first point: at rest at the path start.
     let from_start = start.unwrap_or((0, curves.view(0).u_min()));
-    let first = rests::point_at(curves, from_start, axes);
-    check.push(&first.tip);
-    emit(Planned::Point(&first)).map_err(ReachError::Plan)?;
+    let mut last = match moving {
+        None => {
+            // The first point: at rest at the path start.
+            let first = rests::point_at(curves, from_start, axes);
+            check.push(&first.tip);
+            emit(Planned::Point(&first)).map_err(ReachError::Plan)?;
+            Some(first)
+        }
+        Some(m) => {
+            // The old feeds hold until the motion can have braked to the new ones.
+            let (before, after) = (m.feed_override, options.feed_override);
+            planner.caps.feed_override = before.max(after);
+            if after < before {
+                let programmed = curves
+                    .programmed_feed(m.branch.element)
+                    .map_or(limits.feed, |f| f.min(limits.feed));
+                let (accel, jerk) = planner.least_limits();
+                let share = m.brake_share;
+                // From the branch's arc length in the stretch it continues (its fork's), and no
+                // sooner than its stop rests: the rows there stay the fork's.
+                let s0 = m
+                    .branch
+                    .fork
+                    .as_ref()
+                    .map_or(0.0, |f| f.fork.grid.stations[f.station].s);
+                let length = slow_down_length(
+                    m.branch.speed,
+                    m.branch.acceleration,
+                    programmed * after,
+                    share * accel,
+                    share * jerk,
+                );
+                let stop_end = m.branch.fork.as_ref().map_or(0.0, Forked::stop_end);
+                let from = (s0 + length).max(stop_end);
+                planner.caps.slow_down = Some(SlowDown {
+                    from,
+                    feed_override: after,
+                });
+                stats.slowed_within = from - s0;
+            }
+            check.feed_override = before.max(after);
+            for p in &m.branch.before {
+                check.push(&p.tip);
+            }
+            Some(m.branch.before[2])
+        }
+    };
     // The time the first planned points leave.
     let mut first_points: Option<f64> = None;
     let mut out = |p: Planned<'_>| {
@@ -224,25 +410,50 @@ pub fn run(
         emit(p)
     };
     let mut from = from_start;
-    let mut last = Some(first);
-    while let Some(stretch) = begin_stretch(curves, from) {
+    let mut continuing = moving;
+    while let Some(mut stretch) = begin_stretch(curves, from) {
         stats.stretches += 1;
-        let whole = match &options.window {
-            Some(w) => match planner.plan_stretch_windowed(curves, stretch, last, &mut check, w, &mut out)? {
-                Ok(run) => {
-                    stats.stations += run.stations;
-                    stats.passes += run.passes;
-                    stats.repairs += run.repairs;
-                    stats.windows += run.windows;
-                    stats.restarts += run.restarts;
-                    last = run.last;
-                    from = run.to;
-                    None
+        let window = match continuing {
+            Some(m) => {
+                stretch.start_speed = m.branch.speed;
+                Some(options.window.unwrap_or_default())
+            }
+            None => options.window,
+        };
+        let continued = continuing.map(|m| window::Continued {
+            state: (m.branch.speed.powi(2), m.branch.acceleration),
+            next: m.branch.next,
+            fork: m.branch.fork.as_ref(),
+        });
+        let whole = match &window {
+            Some(w) => {
+                match planner.plan_stretch_windowed(curves, stretch, last, &mut check, w, continued, &mut out)? {
+                    Ok(run) => {
+                        stats.stations += run.stations;
+                        stats.passes += run.passes;
+                        stats.repairs += run.repairs;
+                        stats.windows += run.windows;
+                        stats.restarts += run.restarts;
+                        last = run.last;
+                        from = run.to;
+                        None
+                    }
+                    Err(_) if continuing.is_some() => {
+                        return Err(ReachError::Plan(
+                            "the motion continued has no plan from its branch".into(),
+                        ))
+                    }
+                    Err(stretch) => Some(stretch),
                 }
-                Err(stretch) => Some(stretch),
-            },
+            }
             None => Some(stretch),
         };
+        if continuing.take().is_some() {
+            // Past the first stretch (it ends at rest) the new feeds hold everywhere.
+            planner.caps.feed_override = options.feed_override;
+            planner.caps.slow_down = None;
+            check.feed_override = options.feed_override;
+        }
         if let Some(mut stretch) = whole {
             read_on(curves, &mut stretch, f64::INFINITY, &planner.rests.borrow());
             match planner.plan_resting(curves, &mut stretch, last, &mut check)? {
@@ -256,6 +467,7 @@ pub fn run(
                         tight: &plan.tight,
                         start: Start::default(),
                         motion: &plan.motion,
+                        stretch: Some(&stretch),
                     };
                     let (n, period) = (plan.grid.len(), planner.period);
                     let stops =
@@ -285,6 +497,17 @@ pub fn run(
     Ok((limits, stats, started.elapsed().as_secs_f64()))
 }
 
+/// Distance a ramp from speed `v0` and tangential acceleration `a0` down to speed `v1` takes
+/// with deceleration `accel` and jerk `jerk` (the S-curve stop from `v0 - v1`, shifted by
+/// `v1`); 0 where `v0` is no faster.
+fn slow_down_length(v0: f64, a0: f64, v1: f64, accel: f64, jerk: f64) -> f64 {
+    if v0 <= v1 {
+        return 0.0;
+    }
+    let table = stop_from(v0 - v1, a0, accel, jerk).table_from(a0);
+    table.length() + v1 * table.total_time()
+}
+
 /// A stretch from `from` (a rest: the path start or the last stretch's end) with nothing read
 /// yet. `None` at the path end.
 fn begin_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch> {
@@ -303,6 +526,7 @@ fn begin_stretch(curves: &mut PathCurves, from: (usize, f64)) -> Option<Stretch>
         from: (e, u),
         to: (e, u),
         rest_at_start: true,
+        start_speed: 0.0,
         rest_at_end: false,
         length: 0.0,
         open: true,
@@ -405,6 +629,11 @@ fn approximate_length(view: &nurbs_rtcore::CurveView, a: f64, b: f64, axes: usiz
         .sum()
 }
 
+/// A motion continued ([`Begin::Moving`]) is first linearised this far above the speed the
+/// curvature's change alone allows (the old plan, re-linearised at itself, may run well above
+/// it, and its state must lie in the first pass's sets).
+const CONTINUED_GUESS: f64 = 1.6;
+
 /// What every stretch is planned with.
 struct Planner<'o> {
     limits: Limits,
@@ -434,6 +663,8 @@ impl<'o> Planner<'o> {
                 chord_tolerance: limits.chord_tolerance * (1.0 - 1e-3),
                 period: limits.period,
                 axes,
+                feed_override: options.feed_override,
+                slow_down: None,
             },
             axis: AxisLimits {
                 acceleration,
@@ -486,7 +717,17 @@ impl<'o> Planner<'o> {
     /// what the caps and the curvature allow, and a ramp from the start (and to the end, once
     /// read).
     fn first_guess(&self, stretch: &Stretch, s: f64, here: &Local) -> f64 {
-        let v = self.speed_bound(here).min(self.ramp(s));
+        let lead = self.ramp_length(stretch.start_speed);
+        // A motion continued is guessed no slower than a straight-line braking from its speed.
+        let braking = (stretch.start_speed.powi(2) - 2.0 * self.least_limits().0 * s)
+            .max(0.0)
+            .sqrt();
+        let bound = if stretch.start_speed > 0.0 {
+            CONTINUED_GUESS * self.speed_bound(here)
+        } else {
+            self.speed_bound(here)
+        };
+        let v = bound.min(self.ramp(lead + s)).max(braking);
         if stretch.open {
             v
         } else {

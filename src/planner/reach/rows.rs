@@ -86,6 +86,9 @@ pub struct Point<'a> {
     pub jerk_cap: bool,
 }
 
+/// The highest floor as a share of the cap (see [`point_rows`]).
+const FLOOR_OF_CAP: f64 = 0.75;
+
 /// Appends the rows of `p` (limits `lim`, cap times `cap_factor`) to `out`.
 pub fn point_rows(out: &mut Vec<Row>, p: &Point, lim: &AxisLimits, cap_factor: f64, period: f64) {
     let th = p.theta;
@@ -109,7 +112,11 @@ pub fn point_rows(out: &mut Vec<Row>, p: &Point, lim: &AxisLimits, cap_factor: f
             }
         }
         out.push(at(1.0, 0.0, 0.0, cap));
-        out.push(at(-1.0, 0.0, 0.0, -p.floor));
+        // A floor is a share of a linearisation at a plan under these caps (at most 0.3 of
+        // 2.5 times it); one from rows planned under higher caps (a plan at a lower feed
+        // override continuing them, `Begin::Moving`) is held to that share of these.
+        let floor = p.floor.min(FLOOR_OF_CAP * g.cap * cap_factor);
+        out.push(at(-1.0, 0.0, 0.0, -floor));
         for i in 0..lim.axes {
             let (q1, q2) = (g.q1[i], g.q2[i]);
             if q1 == 0.0 && q2 == 0.0 {

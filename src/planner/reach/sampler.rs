@@ -24,6 +24,9 @@ pub struct Check {
     jerk: [f64; TIP],
     /// Largest ratio of a difference to its limit seen.
     pub worst: f64,
+    /// The feed override the samples' feed is checked at (the sampler's feed check: the
+    /// programmed feeds times it).
+    pub feed_override: f64,
 }
 
 impl Check {
@@ -37,6 +40,7 @@ impl Check {
             acceleration: [f64::INFINITY; TIP],
             jerk: [f64::INFINITY; TIP],
             worst: 0.0,
+            feed_override: 1.0,
         };
         for i in 0..axes {
             c.velocity[i] = limits.velocity[i];
@@ -188,7 +192,8 @@ pub fn sample(
             // The feed of the step and its chord error (at the middle parameter of a step on
             // one element: where a bulge of the curve is largest).
             let step = (0..axes).map(|i| (tip[i] - prev.tip[i]).powi(2)).sum::<f64>().sqrt();
-            ratio = ratio.max(step / period / step_feed(curves, limits, prev.element, element));
+            let feed = check.feed_override * step_feed(curves, limits, prev.element, element);
+            ratio = ratio.max(step / period / feed);
             if prev.element == element {
                 let mut a = [0.0; nurbs_rtcore::MAX_DIM];
                 let mut b = [0.0; nurbs_rtcore::MAX_DIM];

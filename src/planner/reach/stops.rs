@@ -71,8 +71,9 @@ impl LookedAt {
 }
 
 /// Where the stops branching off a motion's samples go as they are found, in path order: each
-/// after the motion's first `n` samples, its samples from the next period to rest.
-pub(super) type Branches<'a> = dyn FnMut(usize, Vec<PathPoint>) -> Result<(), ReachError> + 'a;
+/// after the motion's first `n` samples, its samples from the next period to rest, and where
+/// it branches off.
+pub(super) type Branches<'a> = dyn FnMut(usize, Vec<PathPoint>, Branch) -> Result<(), ReachError> + 'a;
 
 /// What finds the stops branching off a motion's samples, handing each to the sink it is given.
 pub(super) type FindStops<'a> = dyn Fn(&[PathPoint], &mut Branches<'_>) -> Result<(), ReachError> + 'a;
@@ -84,6 +85,30 @@ pub(super) struct Along<'a> {
     pub tight: &'a [f64],
     pub start: Start<'a>,
     pub motion: &'a Motion,
+    /// The stretch a plan in windows lays: its stations' branches take the rows over
+    /// ([`Fork`]).
+    pub stretch: Option<&'a Stretch>,
+}
+
+/// The branch at `(element, u)` with speed and acceleration `state`, `next` before the sample
+/// after the first `n` of `samples`.
+fn branch(
+    (element, u): (usize, f64),
+    (speed, acceleration): (f64, f64),
+    next: f64,
+    samples: &[PathPoint],
+    n: usize,
+    fork: Option<Forked>,
+) -> Branch {
+    Branch {
+        element,
+        u,
+        speed,
+        acceleration,
+        next,
+        before: [samples[n - 3], samples[n - 2], samples[n - 1]],
+        fork,
+    }
 }
 
 /// Hands `points` to `emit`, each stop `stops` finds after the points before it, as it finds
@@ -94,12 +119,12 @@ pub(super) fn hand_out(
     emit: &mut Emit<'_>,
 ) -> Result<(), ReachError> {
     let mut sent = 0;
-    stops(&mut |n, stop| {
+    stops(&mut |n, stop, branch| {
         for p in &points[sent..n] {
             emit(Planned::Point(p)).map_err(ReachError::Plan)?;
         }
         sent = n;
-        emit(Planned::Stop(&stop)).map_err(ReachError::Plan)
+        emit(Planned::Stop(&stop, &branch)).map_err(ReachError::Plan)
     })?;
     for p in &points[sent..] {
         emit(Planned::Point(p)).map_err(ReachError::Plan)?;
@@ -157,6 +182,8 @@ impl Planner<'_> {
         let motion = along.motion;
         let mut looked = LookedAt::new(grid);
         let inverses = Inverses::default();
+        // The rows the branches at stations take over, once one is found.
+        let fork = std::cell::OnceCell::new();
         let (mut t, mut last) = (0.0, f64::NEG_INFINITY);
         for k in 1..upto.min(grid.len() - 1) {
             let t0 = t;
@@ -164,14 +191,14 @@ impl Planner<'_> {
             // Where the stations lie further apart than the stops should (the grid was laid
             // from a faster pass), S-curve stops from samples inside the interval before.
             while last.is_finite() && t - last > 2.0 * every {
-                let at = (last + every).max(first);
-                let n = ((at - first) / self.period).floor() as usize + 1;
-                let at = first + (n - 1) as f64 * self.period;
+                let at_time = (last + every).max(first);
+                let n = ((at_time - first) / self.period).floor() as usize + 1;
+                let at_time = first + (n - 1) as f64 * self.period;
                 last += every;
-                if at <= t0 || n < 3 || n > samples.len() {
+                if at_time <= t0 || n < 3 || n > samples.len() {
                     continue;
                 }
-                let (sigma, v, acc) = motion.pieces[k - 1].state_at(at - t0);
+                let (sigma, v, acc) = motion.pieces[k - 1].state_at(at_time - t0);
                 if v < SLOWEST_BRANCH {
                     continue;
                 }
@@ -179,8 +206,10 @@ impl Planner<'_> {
                 if let Some(points) =
                     self.first_passing(curves, &inverses, candidate.into_iter(), samples, n, self.period)
                 {
-                    found(n, points)?;
-                    last = at;
+                    // The branch is the n-th sample itself.
+                    let at = (grid.stations[k - 1].element, self.u_at(curves, grid, k - 1, sigma));
+                    found(n, points, branch(at, (v, acc), self.period, samples, n, None))?;
+                    last = at_time;
                 }
             }
             if t - last < every || t < first {
@@ -195,13 +224,35 @@ impl Planner<'_> {
             // The candidates, quicker first.
             let mut candidates: Vec<(Grid, Motion)> = Vec::with_capacity(2);
             candidates.extend(self.s_curve_stop(curves, grid, along.tight, &mut looked, (k, 0.0), state));
+            let mut brake_states = None;
             if let Some((stop, end, cut)) = sets.as_ref().and_then(|sets| p.brake(sets, k, state)) {
+                brake_states = Some(stop.a.iter().copied().zip(stop.b.iter().copied()).collect::<Vec<_>>());
                 candidates.push((self.cut_grid(curves, grid.slice(k, end), cut), stop));
             }
             candidates.sort_by(|x, y| x.1.time().total_cmp(&y.1.time()));
             let next = first + n as f64 * self.period - t;
             if let Some(points) = self.first_passing(curves, &inverses, candidates.into_iter(), samples, n, next) {
-                found(n, points)?;
+                let at = (grid.stations[k].element, grid.stations[k].u);
+                let forked = along.stretch.zip(brake_states).map(|(stretch, stop)| Forked {
+                    stop,
+                    fork: fork
+                        .get_or_init(|| {
+                            std::sync::Arc::new(Fork {
+                                stretch: *stretch,
+                                grid: grid.clone(),
+                                lin: along.lin.clone(),
+                                tight: along.tight.to_vec(),
+                                motion: motion.clone(),
+                            })
+                        })
+                        .clone(),
+                    station: k,
+                });
+                found(
+                    n,
+                    points,
+                    branch(at, (state.0.sqrt(), state.1), next, samples, n, forked),
+                )?;
                 last = t;
             }
         }

@@ -126,6 +126,16 @@ impl Motion {
     }
 }
 
+/// A motion a windowed stretch continues ([`Begin::Moving`]).
+#[derive(Clone, Copy)]
+pub(super) struct Continued<'a> {
+    /// (a, b) at the stretch's start, and the time from there to the first sample.
+    pub state: (f64, f64),
+    pub next: f64,
+    /// The rows it was planned on; none: the stretch is laid afresh from the branch.
+    pub fork: Option<&'a Forked>,
+}
+
 /// A value at arc length s where the path is `here` (a speed, a linearisation point).
 type AlongPath<'a> = dyn Fn(f64, &Local) -> f64 + 'a;
 
@@ -226,6 +236,15 @@ impl Planner<'_> {
                 &self.options.grid,
                 speed.unwrap_or(&guess),
             );
+            if part.stations.is_empty() {
+                // Nothing left to lay before the end read so far (a fork's stations may reach
+                // it).
+                if laid.stretch.open {
+                    continue;
+                }
+                laid.complete = true;
+                return;
+            }
             let lin = Linearisation::from_a(&part, lin_a.unwrap_or(&guess_a));
             let old = laid.grid.stations.len();
             if old == 0 {
@@ -234,22 +253,88 @@ impl Planner<'_> {
                 laid.lin.append(lin);
             }
             laid.grid.append(part);
+            self.cap_across_slow_down(curves, &mut laid.grid);
             laid.tight.resize(laid.grid.len(), 1.0 - self.options.margin);
             // The ramp envelope from the station before on (its far side may be new).
-            laid.expected.truncate(old.saturating_sub(1));
-            for k in laid.expected.len()..laid.grid.stations.len() {
-                let st = &laid.grid.stations[k];
-                let mut d = self.ramp_length(guess(st.s, &st.right));
-                if k > 0 {
-                    let before = self.ramp_length(laid.expected[k - 1]) + st.s - laid.grid.stations[k - 1].s;
-                    d = d.min(before);
-                }
-                laid.expected.push(self.ramp(d));
-            }
+            self.expect(laid, old.saturating_sub(1));
             laid.complete = reached && !laid.stretch.open;
             if laid.complete || !reached {
                 return;
             }
+        }
+    }
+
+    /// The speeds expected at the stations of `laid` from `from` on: the first guess, and below
+    /// it what a jerk-limited ramp allows after every earlier station.
+    fn expect(&self, laid: &mut Laid, from: usize) {
+        laid.expected.truncate(from);
+        for k in laid.expected.len()..laid.grid.stations.len() {
+            let st = &laid.grid.stations[k];
+            let mut d = self.ramp_length(self.first_guess(&laid.stretch, st.s, &st.right));
+            if k > 0 {
+                let before = self.ramp_length(laid.expected[k - 1]) + st.s - laid.grid.stations[k - 1].s;
+                d = d.min(before);
+            }
+            laid.expected.push(self.ramp(d));
+        }
+    }
+
+    /// The stations of `fork` from its station `k` on, as a stretch's first, with the caps of
+    /// this planner (its feed override) and the fork's motion's speeds expected at least.
+    fn laid_from(&self, curves: &PathCurves, fork: &Fork, k: usize) -> Laid {
+        let mut grid = fork.grid.slice(k, fork.grid.len());
+        let caps = &self.caps;
+        let feed = |e: usize| curves.programmed_feed(e);
+        for j in 0..grid.stations.len() {
+            let left_element = if j > 0 {
+                grid.stations[j - 1].element
+            } else {
+                grid.stations[j].element
+            };
+            let st = &mut grid.stations[j];
+            st.left.cap = caps.at(st.s, &st.left.q1, &st.left.q2, feed(left_element));
+            st.right.cap = caps.at(st.s, &st.right.q1, &st.right.q2, feed(st.element));
+            if j < grid.intervals.len() {
+                let (s, element) = (st.s, st.element);
+                for (theta, local) in &mut grid.intervals[j].points {
+                    local.cap = caps.at(s + *theta, &local.q1, &local.q2, feed(element));
+                }
+            }
+        }
+        self.cap_across_slow_down(curves, &mut grid);
+        let mut laid = Laid {
+            stretch: fork.stretch,
+            grid,
+            lin: fork.lin.slice(k, fork.grid.len()),
+            tight: fork.tight[k..].to_vec(),
+            expected: Vec::new(),
+            complete: false,
+        };
+        self.expect(&mut laid, 0);
+        for (x, a) in laid.expected.iter_mut().zip(&fork.motion.a[k..]) {
+            *x = x.max(a.sqrt());
+        }
+        laid
+    }
+
+    /// The interval of `grid` across the arc length where a lower feed override takes over
+    /// ([`Caps::slow_down`]) takes its caps from its start on: the cap rows hold at points, and
+    /// between the last one before and the first one after, the plan could run over the new
+    /// feed.
+    fn cap_across_slow_down(&self, curves: &PathCurves, grid: &mut Grid) {
+        let Some(slow) = self.caps.slow_down else {
+            return;
+        };
+        let j = grid.stations.partition_point(|st| st.s < slow.from);
+        if j == 0 || j >= grid.stations.len() {
+            return;
+        }
+        let (k, at) = (j - 1, slow.from);
+        let feed = curves.programmed_feed(grid.stations[k].element);
+        let st = &mut grid.stations[k];
+        st.right.cap = self.caps.at(at, &st.right.q1, &st.right.q2, feed);
+        for (_, local) in &mut grid.intervals[k].points {
+            local.cap = self.caps.at(at, &local.q1, &local.q2, feed);
         }
     }
 
@@ -264,7 +349,10 @@ impl Planner<'_> {
 
     /// Plans `stretch` (read as far as it goes) window by window, handing out each window's
     /// points once they passed the check; the stretch read to its end, unplanned, where it is
-    /// shorter than a window.
+    /// shorter than a window. From rest, or continuing a motion `moving` (then in windows
+    /// however short, and never handed back unplanned: a plan from rest would not continue the
+    /// motion; on its fork's stretch and rows where it has one).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn plan_stretch_windowed(
         &self,
         curves: &mut PathCurves,
@@ -272,18 +360,22 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         window: &WindowOptions,
+        moving: Option<Continued<'_>>,
         emit: &mut Emit<'_>,
     ) -> Result<Result<WindowRun, Stretch>, ReachError> {
-        let mut laid = Laid {
-            stretch,
-            grid: Grid::default(),
-            lin: Linearisation {
-                stations: Vec::new(),
-                points: Vec::new(),
+        let mut laid = match moving.and_then(|m| m.fork) {
+            Some(forked) => self.laid_from(curves, &forked.fork, forked.station),
+            None => Laid {
+                stretch,
+                grid: Grid::default(),
+                lin: Linearisation {
+                    stations: Vec::new(),
+                    points: Vec::new(),
+                },
+                tight: Vec::new(),
+                expected: Vec::new(),
+                complete: false,
             },
-            tight: Vec::new(),
-            expected: Vec::new(),
-            complete: false,
         };
         let mut emitted = false;
         let mut counted = |p: Planned<'_>| {
@@ -291,11 +383,12 @@ impl Planner<'_> {
             emit(p)
         };
         let mut trial = check.clone();
-        match self.windows(curves, &mut laid, before, &mut trial, window, &mut counted) {
+        match self.windows(curves, &mut laid, before, &mut trial, window, moving, &mut counted) {
             Ok(Some(run)) => {
                 *check = trial;
                 Ok(Ok(run))
             }
+            Err(e) if moving.is_some() => Err(e),
             // Shorter than a window, or no window planned before the first points: the
             // stretch is planned whole.
             Ok(None) => Ok(Err(laid.stretch)),
@@ -305,7 +398,8 @@ impl Planner<'_> {
     }
 
     /// [`Planner::plan_stretch_windowed`] on `laid`; `None` where the stretch is shorter than
-    /// a window.
+    /// a window (and starts at rest).
+    #[allow(clippy::too_many_arguments)]
     fn windows(
         &self,
         curves: &mut PathCurves,
@@ -313,6 +407,7 @@ impl Planner<'_> {
         before: Option<PathPoint>,
         check: &mut Check,
         window: &WindowOptions,
+        moving: Option<Continued<'_>>,
         emit: &mut Emit<'_>,
     ) -> Result<Option<WindowRun>, ReachError> {
         let gap_at = |v: f64| window.margin * self.stop_distance(v);
@@ -324,10 +419,20 @@ impl Planner<'_> {
         // the time from there to the next sample, and the last window's stop: its first
         // station and its motion to rest at `frozen`.
         let mut m = 0;
-        let mut state: Option<(f64, f64)> = None;
-        let mut frozen = 0;
-        let mut first_sample = self.period;
-        let mut last_stop: Option<(usize, Motion)> = None;
+        let mut state: Option<(f64, f64)> = moving.map(|m| m.state);
+        let mut first_sample = moving.map_or(self.period, |m| m.next);
+        // A fork's rows are frozen as far as its stop, the continuation of the state.
+        let (mut frozen, mut last_stop) = match moving.and_then(|m| m.fork) {
+            Some(forked) => {
+                let stop = Motion {
+                    a: forked.stop.iter().map(|s| s.0).collect(),
+                    b: forked.stop.iter().map(|s| s.1).collect(),
+                    ..Motion::default()
+                };
+                (forked.stop.len() - 1, Some((0, stop)))
+            }
+            None => (0, None),
+        };
         loop {
             // The window reaches (commit + 2) margins past `m`, each from the highest speed
             // expected on it; stations are laid as far as that.
@@ -354,7 +459,7 @@ impl Planner<'_> {
                 let end = laid.grid.stations.last().map_or(0.0, |st| st.s);
                 self.lay(curves, laid, end + gap_at(v).max(1.0), None, None);
             };
-            if run.windows == 0 && laid.complete && laid.grid.length() < (commit + 2.0) * gap {
+            if run.windows == 0 && moving.is_none() && laid.complete && laid.grid.length() < (commit + 2.0) * gap {
                 // Shorter than a window: planned whole.
                 return Ok(None);
             }
@@ -411,6 +516,7 @@ impl Planner<'_> {
                             tight: &laid.tight[m..e],
                             start,
                             motion: &motion,
+                            stretch: Some(&laid.stretch),
                         };
                         let stops = |samples: &[PathPoint], found: &mut Branches<'_>| {
                             self.branch_stops(curves, &along, sub.len(), first_sample, samples, found)
@@ -441,9 +547,11 @@ impl Planner<'_> {
                 }
                 // Freeze the rows to `f`, commit to `m2`: the motion from the state at `m` to rest
                 // at `f`. The rows past the window plan's last speed maximum are linearised at its
-                // artificial stop: `f` lies before it.
+                // artificial stop: `f` lies before it. A plateau (a plan held at its cap) ends at
+                // that maximum: frozen only to its start, a window at a low feed was too short to
+                // stop in.
                 let mut decel = motion.a.len() - 1;
-                while decel > 0 && motion.a[decel - 1] >= motion.a[decel] {
+                while decel > 0 && (motion.a[decel - 1] > motion.a[decel] || motion.a[decel] <= 0.0) {
                     decel -= 1;
                 }
                 let grid = &laid.grid;
@@ -478,6 +586,7 @@ impl Planner<'_> {
                         tight: &reserved,
                         start,
                         motion: &stop,
+                        stretch: Some(&laid.stretch),
                     };
                     let stops = |samples: &[PathPoint], found: &mut Branches<'_>| {
                         self.branch_stops(curves, &along, m2, first_sample, samples, found)
@@ -519,6 +628,11 @@ impl Planner<'_> {
                     last_stop = Some((0, stop));
                     (m, frozen) = (m2, f - m);
                     curves.release_before(laid.grid.stations[0].element);
+                }
+                None if moving.is_some() && run.windows == 1 => {
+                    return Err(ReachError::Plan(
+                        "the motion continued lies outside the new plan's first set".into(),
+                    ))
                 }
                 None => {
                     m = self.restart(
