@@ -10,7 +10,7 @@ use nurbs_motion::geometry::Toolpath;
 use nurbs_motion::planner::axial::FiniteDifferences;
 use nurbs_motion::planner::presets::named;
 use nurbs_motion::planner::reach::{
-    plan_tip, run, window::WindowOptions, Begin, Planned, ReachError, ReachOptions, ReachPlan,
+    plan_tip, run, window::WindowOptions, Begin, Branch, Planned, ReachError, ReachOptions, ReachPlan, ReachStats,
 };
 use nurbs_motion::planner::verify::{verify, Report, Row};
 use nurbs_motion::planner::vpop::PathPoint;
@@ -31,6 +31,20 @@ fn rows(plan: &ReachPlan, tip: usize) -> Vec<Row> {
 
 fn check_with(tp: &Toolpath, plan: &ReachPlan, limits: &Limits) -> Report {
     verify(&mut PathCurves::new(tp), limits, &rows(plan, tp.tip_dim()))
+}
+
+/// `points` (one per period of `used`) as a plan, verified (panics on a violation).
+fn verified_points(tp: &Toolpath, points: Vec<PathPoint>, used: &Limits, stats: ReachStats, what: &str) -> ReachPlan {
+    let plan = ReachPlan {
+        motion_time: (points.len() - 1) as f64 * used.period,
+        points,
+        limits: used.clone(),
+        plan_time: 0.0,
+        stats,
+    };
+    let report = check_with(tp, &plan, used);
+    assert!(report.violations.is_empty(), "{what}: {:?}", report.violations);
+    plan
 }
 
 /// Plans and verifies (panics on a violation); the plan.
@@ -109,6 +123,30 @@ fn every_bundled_curve_and_limit_set() {
     }
 }
 
+/// A stop offered: the number of points before it, its samples and its branch.
+type Offered = (usize, Vec<PathPoint>, Branch);
+
+/// Plans `tp` with `options` (which offer stops); the limits as used, the points, and the stops
+/// offered.
+fn plan_with_stops(
+    tp: &Toolpath,
+    limits: &Limits,
+    options: &ReachOptions,
+    what: &str,
+) -> (Limits, Vec<PathPoint>, Vec<Offered>) {
+    let mut curves = PathCurves::new(tp);
+    let (mut points, mut stops) = (Vec::new(), Vec::new());
+    let (used, _, _) = run(&mut curves, limits, options, &Begin::Rest(None), &mut |p| {
+        match p {
+            Planned::Point(p) => points.push(*p),
+            Planned::Stop(s, b) => stops.push((points.len(), s.to_vec(), b.clone())),
+        }
+        Ok(())
+    })
+    .unwrap_or_else(|e| panic!("{what}: {e}"));
+    (used, points, stops)
+}
+
 fn windowed() -> ReachOptions {
     ReachOptions {
         window: Some(WindowOptions::default()),
@@ -166,16 +204,7 @@ fn offered_stops_come_to_rest_within_the_limits() {
                     stops_every: Some(every),
                     ..options
                 };
-                let mut curves = PathCurves::new(&tp);
-                let (mut points, mut stops) = (Vec::new(), Vec::new());
-                let (used, _, _) = run(&mut curves, &limits, &options, &Begin::Rest(None), &mut |p| {
-                    match p {
-                        Planned::Point(p) => points.push(*p),
-                        Planned::Stop(s, _) => stops.push((points.len(), s.to_vec())),
-                    }
-                    Ok(())
-                })
-                .unwrap_or_else(|e| panic!("{curve} {set}: {e}"));
+                let (used, points, stops) = plan_with_stops(&tp, &limits, &options, &format!("{curve} {set}"));
                 let plain = plan_tip(
                     &tp,
                     &limits,
@@ -198,7 +227,7 @@ fn offered_stops_come_to_rest_within_the_limits() {
                 // Every stop, continuing the plan's three points before it, by finite
                 // differences (the verifier's) to rest.
                 let tip = tp.tip_dim();
-                for (n, stop) in &stops {
+                for (n, stop, _) in &stops {
                     let mut fd = FiniteDifferences::new(tip, used.period);
                     for p in &points[n - 3..*n] {
                         fd.push(&p.tip[..tip], &used);
@@ -226,7 +255,7 @@ fn offered_stops_come_to_rest_within_the_limits() {
                 };
                 let mut longest = 0.0f64;
                 let mut last = 0;
-                for (n, _) in &stops {
+                for (n, _, _) in &stops {
                     let moving = (last + 1..*n).all(|k| feed(k) > 0.0);
                     if moving {
                         longest = longest.max((n - last) as f64 * used.period);
@@ -296,15 +325,7 @@ fn windows_read_a_long_stretch_as_they_go() {
         read_at_first < elements / 10,
         "{read_at_first} of {elements} read before the first points"
     );
-    let plan = ReachPlan {
-        motion_time: (points.len() - 1) as f64 * used.period,
-        points,
-        limits: used.clone(),
-        plan_time: 0.0,
-        stats,
-    };
-    let report = check_with(&tp, &plan, &used);
-    assert!(report.violations.is_empty(), "{:?}", report.violations);
+    let plan = verified_points(&tp, points, &used, stats, "windows");
     let whole = plan_verified(&tp, &limits);
     assert!(whole.motion_time >= 0.99 * plan.motion_time);
 }
@@ -437,16 +458,7 @@ fn a_plan_at_another_feed_override_continues_the_motion() {
                 stops_every: Some(0.002),
                 ..windowed()
             };
-            let mut curves = PathCurves::new(&tp);
-            let (mut points, mut branches) = (Vec::new(), Vec::new());
-            let (used, _, _) = run(&mut curves, &limits, &options, &Begin::Rest(None), &mut |p| {
-                match p {
-                    Planned::Point(p) => points.push(*p),
-                    Planned::Stop(_, b) => branches.push((points.len(), b.clone())),
-                }
-                Ok(())
-            })
-            .unwrap_or_else(|e| panic!("{curve} {set}: {e}"));
+            let (used, points, branches) = plan_with_stops(&tp, &limits, &options, &format!("{curve} {set}"));
             let last = tp.elements.len() - 1;
             let end_u = tp.elements[last].curve.view().u_max();
             let speed = |p: &PathPoint, q: &PathPoint| {
@@ -454,7 +466,7 @@ fn a_plan_at_another_feed_override_continues_the_motion() {
             };
             let picks = 8;
             for pick in 0..picks {
-                let (n, branch) = &branches[(pick * branches.len()) / picks];
+                let (n, _, branch) = &branches[(pick * branches.len()) / picks];
                 let n = *n;
                 assert_eq!(branch.before[2].u, points[n - 1].u);
                 for k in [0.5, 0.1, 1.5] {
@@ -491,15 +503,8 @@ fn a_plan_at_another_feed_override_continues_the_motion() {
                     let ratio = fd.worst_ratio(&used);
                     assert!(ratio <= 1.0 + 1e-6, "{at}: ratio {ratio}");
                     if k <= 1.0 {
-                        let joined = ReachPlan {
-                            motion_time: (n + after.len() - 1) as f64 * used.period,
-                            points: points[..n].iter().chain(&after).copied().collect(),
-                            limits: used.clone(),
-                            plan_time: 0.0,
-                            stats,
-                        };
-                        let report = check_with(&tp, &joined, &used);
-                        assert!(report.violations.is_empty(), "{at}: {:?}", report.violations);
+                        let joined = points[..n].iter().chain(&after).copied().collect();
+                        verified_points(&tp, joined, &used, stats, &at);
                     }
                     let fastest = after.windows(2).map(|w| speed(&w[0], &w[1])).fold(0.0, f64::max);
                     assert!(fastest <= used.feed * k.max(1.0) * (1.0 + 1e-6), "{at}: {fastest} mm/s");
@@ -557,13 +562,5 @@ fn windows_on_a_long_plateau_at_a_low_feed() {
     })
     .unwrap_or_else(|e| panic!("{e}"));
     assert!(stats.windows > 10, "{} windows", stats.windows);
-    let plan = ReachPlan {
-        motion_time: (points.len() - 1) as f64 * used.period,
-        points,
-        limits: used.clone(),
-        plan_time: 0.0,
-        stats,
-    };
-    let report = check_with(&tp, &plan, &used);
-    assert!(report.violations.is_empty(), "{:?}", report.violations);
+    verified_points(&tp, points, &used, stats, "at 25 mm/s");
 }
