@@ -133,11 +133,12 @@ pub struct Branch {
     pub fork: Option<Forked>,
 }
 
-/// What a plan continuing from a branch takes over ([`Begin::Moving`]): the rows the motion
-/// there was planned on, from the window's start to its frozen end, and the motion to rest it
-/// was committed with. That motion passes through every branch's state within those rows, so
-/// a plan on the same rows holds the state in its first set (a plan on rows of its own, its
-/// stations elsewhere, can miss a state the old plan reached on the edge of its sets).
+/// What a plan continuing from a branch takes over ([`Begin::Moving`]): the stretch, the rows
+/// the motion there was planned on (from the window's start to its frozen end, or the whole
+/// stretch) and that motion (its speeds are what the new plan's stations expect at least). A
+/// plan on the same rows holds the branch's state in its first set ([`Forked`]); a plan on
+/// rows of its own, its stations elsewhere, can miss a state the old plan reached on the edge
+/// of its sets.
 #[derive(Debug)]
 pub struct Fork {
     stretch: Stretch,
@@ -629,11 +630,6 @@ fn approximate_length(view: &nurbs_rtcore::CurveView, a: f64, b: f64, axes: usiz
         .sum()
 }
 
-/// A motion continued ([`Begin::Moving`]) is first linearised this far above the speed the
-/// curvature's change alone allows (the old plan, re-linearised at itself, may run well above
-/// it, and its state must lie in the first pass's sets).
-const CONTINUED_GUESS: f64 = 1.6;
-
 /// What every stretch is planned with.
 struct Planner<'o> {
     limits: Limits,
@@ -717,17 +713,9 @@ impl<'o> Planner<'o> {
     /// what the caps and the curvature allow, and a ramp from the start (and to the end, once
     /// read).
     fn first_guess(&self, stretch: &Stretch, s: f64, here: &Local) -> f64 {
+        // A motion continued (not at rest at the start) is as far into its ramp as its speed.
         let lead = self.ramp_length(stretch.start_speed);
-        // A motion continued is guessed no slower than a straight-line braking from its speed.
-        let braking = (stretch.start_speed.powi(2) - 2.0 * self.least_limits().0 * s)
-            .max(0.0)
-            .sqrt();
-        let bound = if stretch.start_speed > 0.0 {
-            CONTINUED_GUESS * self.speed_bound(here)
-        } else {
-            self.speed_bound(here)
-        };
-        let v = bound.min(self.ramp(lead + s)).max(braking);
+        let v = self.speed_bound(here).min(self.ramp(lead + s));
         if stretch.open {
             v
         } else {
