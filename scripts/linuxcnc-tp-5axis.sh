@@ -193,7 +193,10 @@ def finish():
     json.dump(result, open("$work/result.json", "w"), indent=1)
     session.switch_off()
     sys.exit(0)
-if not session.on_and_homed() or s.joints != 5:
+if not session.on_and_homed():
+    finish()
+if s.joints != 5:
+    result["errors"].append(f"run.py: {s.joints} joints, not the 5 of the 5-axis machine")
     finish()
 c.mode(linuxcnc.MODE_AUTO)
 c.wait_complete()

@@ -440,9 +440,9 @@ fn random_curves_with(options: &ReachOptions, cases: u64, least: usize) {
 /// stops at (what the machine joins on an override change): on the butterfly, the trident and
 /// the fan's tool tip at Table III's F250 (where the feed binds) and lab set 1, from eight
 /// branches spread over each plan, at 50 %, 10 % and 150 %, each continued from that very
-/// branch. The old plan's points up to the branch and the new plan after it pass the
-/// verifier's finite differences as one motion (and the verifier whole, where the override is
-/// no higher than the programmed feed); the new plan reaches the path's end; no sample runs
+/// branch. The old plan's points up to the branch and the new plan after it pass the verifier
+/// as one motion (finite differences, chord error, and the feed at the higher of the two
+/// overrides); the new plan reaches the path's end; no sample runs
 /// faster than the higher of the two feeds, and none faster than the new one past where the
 /// plan says it holds (`ReachStats::slowed_within`). The time to the first points (what an
 /// override waits for on the machine) is printed.
@@ -502,10 +502,14 @@ fn a_plan_at_another_feed_override_continues_the_motion() {
                     fd.finish(&used);
                     let ratio = fd.worst_ratio(&used);
                     assert!(ratio <= 1.0 + 1e-6, "{at}: ratio {ratio}");
-                    if k <= 1.0 {
-                        let joined = points[..n].iter().chain(&after).copied().collect();
-                        verified_points(&tp, joined, &used, stats, &at);
-                    }
+                    // The whole verifier, its feed the higher of the two (the curves program
+                    // none of their own).
+                    let joined = points[..n].iter().chain(&after).copied().collect();
+                    let higher = Limits {
+                        feed: used.feed * k.max(1.0),
+                        ..used.clone()
+                    };
+                    verified_points(&tp, joined, &higher, stats, &at);
                     let fastest = after.windows(2).map(|w| speed(&w[0], &w[1])).fold(0.0, f64::max);
                     assert!(fastest <= used.feed * k.max(1.0) * (1.0 + 1e-6), "{at}: {fastest} mm/s");
                     // Arc length from the branch (it lies `next` before the first sample after

@@ -146,7 +146,7 @@ type Committed = Result<(Option<PathPoint>, f64), Vec<(f64, f64)>>;
 /// Passes of the first window of a plan that continues a motion (an override change waits for
 /// it), on the stations its fork laid: 4-8 passes and a new grid took a median 62 ms to its
 /// first points (144 re-plans over the bundled curves, `tests/reach.rs`), 2 on the fork's
-/// stations 29 ms; the windows after it are planned as ever.
+/// stations 28-30 ms; the windows after it are planned as ever.
 const QUICK_PASSES: usize = 2;
 
 /// Share of the limits the stop after a window's committed part leaves unused.
